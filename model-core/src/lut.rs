@@ -1,0 +1,153 @@
+//! 1-D and 2-D lookup tables with linear interpolation and clamped ends, as calibration
+//! engineers know them from ECU maps. Breakpoints must be strictly increasing; that is checked
+//! once, at construction, so evaluation never fails.
+
+use crate::real::Real;
+
+/// Why a table could not be built.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LutError {
+    /// Breakpoints are not strictly increasing at this index (the axis: 0 = x, 1 = y).
+    NotIncreasing { axis: u8, index: usize },
+    /// A table needs at least two breakpoints per axis.
+    TooFewPoints,
+}
+
+/// Index of the interval holding `x` and the interpolation weight in it, clamped to the ends.
+fn locate<R: Real, const N: usize>(axis: &[R; N], x: R) -> (usize, R) {
+    if x <= axis[0] {
+        return (0, R::ZERO);
+    }
+    if x >= axis[N - 1] {
+        return (N - 2, R::ONE);
+    }
+    // Tables are small (<= 16 points): a linear scan is cheaper than bisection on the target.
+    let mut i = 0;
+    while i + 2 < N && x >= axis[i + 1] {
+        i += 1;
+    }
+    let w = (x - axis[i]) / (axis[i + 1] - axis[i]);
+    (i, w)
+}
+
+fn check_axis(axis: &[f64], which: u8) -> Result<(), LutError> {
+    if axis.len() < 2 {
+        return Err(LutError::TooFewPoints);
+    }
+    for i in 1..axis.len() {
+        // Written so NaN fails too.
+        if !(axis[i] > axis[i - 1]) {
+            return Err(LutError::NotIncreasing { axis: which, index: i });
+        }
+    }
+    Ok(())
+}
+
+/// y = f(x) by linear interpolation between `N` breakpoints, constant beyond the ends.
+#[derive(Clone, Copy, Debug)]
+pub struct Lut1<R: Real, const N: usize> {
+    x: [R; N],
+    y: [R; N],
+}
+
+impl<R: Real, const N: usize> Lut1<R, N> {
+    pub fn new(x: [f64; N], y: [f64; N]) -> Result<Self, LutError> {
+        check_axis(&x, 0)?;
+        Ok(Self { x: x.map(R::from_f64), y: y.map(R::from_f64) })
+    }
+    pub fn eval(&self, x: R) -> R {
+        let (i, w) = locate(&self.x, x);
+        self.y[i] + w * (self.y[i + 1] - self.y[i])
+    }
+    pub fn breakpoints(&self) -> &[R; N] {
+        &self.x
+    }
+    pub fn values(&self) -> &[R; N] {
+        &self.y
+    }
+}
+
+/// z = f(x, y) by bilinear interpolation on an `NX` × `NY` grid, clamped at the edges.
+/// `z[i][j]` is the value at `(x[i], y[j])`.
+#[derive(Clone, Copy, Debug)]
+pub struct Lut2<R: Real, const NX: usize, const NY: usize> {
+    x: [R; NX],
+    y: [R; NY],
+    z: [[R; NY]; NX],
+}
+
+impl<R: Real, const NX: usize, const NY: usize> Lut2<R, NX, NY> {
+    pub fn new(x: [f64; NX], y: [f64; NY], z: [[f64; NY]; NX]) -> Result<Self, LutError> {
+        check_axis(&x, 0)?;
+        check_axis(&y, 1)?;
+        Ok(Self { x: x.map(R::from_f64), y: y.map(R::from_f64), z: z.map(|row| row.map(R::from_f64)) })
+    }
+    pub fn eval(&self, x: R, y: R) -> R {
+        let (i, wx) = locate(&self.x, x);
+        let (j, wy) = locate(&self.y, y);
+        let z0 = self.z[i][j] + wy * (self.z[i][j + 1] - self.z[i][j]);
+        let z1 = self.z[i + 1][j] + wy * (self.z[i + 1][j + 1] - self.z[i + 1][j]);
+        z0 + wx * (z1 - z0)
+    }
+    pub fn x_breakpoints(&self) -> &[R; NX] {
+        &self.x
+    }
+    pub fn y_breakpoints(&self) -> &[R; NY] {
+        &self.y
+    }
+    /// The grid value at `(x[i], y[j])`; `None` outside the grid.
+    pub fn at(&self, i: usize, j: usize) -> Option<R> {
+        self.z.get(i).and_then(|row| row.get(j)).copied()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    #[test]
+    fn rejects_unsorted_and_nan_breakpoints() {
+        assert_eq!(
+            Lut1::<f32, 3>::new([0.0, 2.0, 1.0], [0.0; 3]).unwrap_err(),
+            LutError::NotIncreasing { axis: 0, index: 2 }
+        );
+        assert!(Lut1::<f32, 2>::new([0.0, f64::NAN], [0.0; 2]).is_err());
+        assert_eq!(
+            Lut2::<f64, 2, 2>::new([0.0, 1.0], [1.0, 1.0], [[0.0; 2]; 2]).unwrap_err(),
+            LutError::NotIncreasing { axis: 1, index: 1 }
+        );
+    }
+
+    #[test]
+    fn hits_breakpoints_and_clamps_ends() {
+        let t = Lut1::<f64, 3>::new([0.0, 1.0, 3.0], [10.0, 20.0, 0.0]).unwrap();
+        assert_eq!(t.eval(0.0), 10.0);
+        assert_eq!(t.eval(1.0), 20.0);
+        assert_eq!(t.eval(2.0), 10.0);
+        assert_eq!(t.eval(-5.0), 10.0);
+        assert_eq!(t.eval(9.0), 0.0);
+    }
+
+    proptest! {
+        /// A bilinear function is reproduced exactly inside the grid.
+        #[test]
+        fn lut2_reproduces_bilinear_functions(x in 0.0f64..4.0, y in -1.0f64..1.0,
+                                              a in -5.0f64..5.0, b in -5.0f64..5.0, c in -5.0f64..5.0) {
+            let xs = [0.0, 1.0, 2.5, 4.0];
+            let ys = [-1.0, 0.0, 1.0];
+            let f = |x: f64, y: f64| a * x + b * y + c;
+            let z = xs.map(|x| ys.map(|y| f(x, y)));
+            let t = Lut2::<f64, 4, 3>::new(xs, ys, z).unwrap();
+            prop_assert!((t.eval(x, y) - f(x, y)).abs() < 1e-9);
+        }
+
+        /// Interpolated values never leave the range of the table values.
+        #[test]
+        fn lut1_stays_within_table_range(x in -10.0f32..10.0) {
+            let t = Lut1::<f32, 4>::new([-2.0, 0.0, 1.0, 5.0], [3.0, -1.0, 4.0, 2.0]).unwrap();
+            let v = t.eval(x);
+            prop_assert!((-1.0..=4.0).contains(&v));
+        }
+    }
+}

@@ -1,0 +1,480 @@
+//! The number types the plants and controllers run on.
+//!
+//! Every model in this crate is written once, generic over [`Real`], and runs in three
+//! number types:
+//! - `f32`: what the target runs (Cortex-M4F single-precision FPU); transcendental functions
+//!   come from `micromath`, so host and target compute the same bits.
+//! - `f64`: the host reference (`libm`), against which the other two are measured.
+//! - [`Q32`]: signed Q32.32 fixed point with saturating arithmetic, for targets or code paths
+//!   that must be bit-exact and free of floating point.
+//!
+//! Models therefore work in engineering units (mm, ms, MPa, kPa, crank degrees, rpm) chosen so
+//! that every intermediate stays between about 1e-6 and 1e6: Q32.32 resolves 2.3e-10 and
+//! saturates at ±2.1e9.
+
+use core::fmt::Debug;
+use core::ops::{Add, AddAssign, Div, Mul, MulAssign, Neg, Sub, SubAssign};
+
+use fixed::types::I32F32;
+
+/// A real number as the models need it: field operations plus the few functions the physics
+/// uses. All functions are total: `sqrt` of a negative number is 0, division by zero saturates.
+pub trait Real:
+    Copy
+    + Debug
+    + Default
+    + PartialOrd
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Div<Output = Self>
+    + Neg<Output = Self>
+    + AddAssign
+    + SubAssign
+    + MulAssign
+{
+    const ZERO: Self;
+    const ONE: Self;
+    /// Short name for reports and benchmark labels.
+    const NAME: &'static str;
+
+    /// Converts a constant (parameters, table values). Out-of-range values saturate.
+    fn from_f64(x: f64) -> Self;
+    fn to_f64(self) -> f64;
+    fn from_f32(x: f32) -> Self {
+        Self::from_f64(x as f64)
+    }
+    fn to_f32(self) -> f32 {
+        self.to_f64() as f32
+    }
+
+    /// Square root; 0 for negative arguments (never NaN).
+    fn sqrt(self) -> Self;
+    /// Exponential; saturates instead of overflowing.
+    fn exp(self) -> Self;
+    /// Arc tangent in radians.
+    fn atan(self) -> Self;
+    /// Sine of an angle in radians.
+    fn sin(self) -> Self;
+
+    fn abs(self) -> Self {
+        if self < Self::ZERO {
+            -self
+        } else {
+            self
+        }
+    }
+    /// -1, 0 or +1 (0 at exactly zero, unlike `f32::signum`).
+    fn sign(self) -> Self {
+        if self > Self::ZERO {
+            Self::ONE
+        } else if self < Self::ZERO {
+            -Self::ONE
+        } else {
+            Self::ZERO
+        }
+    }
+    fn min(self, other: Self) -> Self {
+        if other < self {
+            other
+        } else {
+            self
+        }
+    }
+    fn max(self, other: Self) -> Self {
+        if other > self {
+            other
+        } else {
+            self
+        }
+    }
+    /// Clamps into `[lo, hi]` (expects `lo <= hi`).
+    fn clamp(self, lo: Self, hi: Self) -> Self {
+        self.max(lo).min(hi)
+    }
+}
+
+impl Real for f32 {
+    const ZERO: Self = 0.0;
+    const ONE: Self = 1.0;
+    const NAME: &'static str = "f32";
+    fn from_f64(x: f64) -> Self {
+        x as f32
+    }
+    fn to_f64(self) -> f64 {
+        self as f64
+    }
+    fn sqrt(self) -> Self {
+        // libm's sqrtf is correctly rounded; micromath's is off by up to 6 % relative
+        // (test `micromath_sqrt_error_measured`), which the orifice equations would amplify.
+        if self > 0.0 {
+            libm::sqrtf(self)
+        } else {
+            0.0
+        }
+    }
+    fn exp(self) -> Self {
+        // micromath's exp loses accuracy far from zero; split off powers of two so the
+        // polynomial only sees |r| <= ln2/2.
+        exp_by_halving(self, |r| micromath::F32Ext::exp(r))
+    }
+    fn atan(self) -> Self {
+        // micromath's own atan is off by up to 2.6e-3 rad (test `micromath_atan_error_measured`),
+        // too coarse for the vacuum actuator's arctan position map.
+        atan_series(self)
+    }
+    fn sin(self) -> Self {
+        micromath::F32Ext::sin(self)
+    }
+}
+
+impl Real for f64 {
+    const ZERO: Self = 0.0;
+    const ONE: Self = 1.0;
+    const NAME: &'static str = "f64";
+    fn from_f64(x: f64) -> Self {
+        x
+    }
+    fn to_f64(self) -> f64 {
+        self
+    }
+    fn sqrt(self) -> Self {
+        if self > 0.0 {
+            libm::sqrt(self)
+        } else {
+            0.0
+        }
+    }
+    fn exp(self) -> Self {
+        libm::exp(self)
+    }
+    fn atan(self) -> Self {
+        libm::atan(self)
+    }
+    fn sin(self) -> Self {
+        libm::sin(self)
+    }
+}
+
+/// `exp(x) = 2^k · exp(r)` with `|r| <= ln2/2`, `base` evaluating `exp(r)`.
+fn exp_by_halving(x: f32, base: impl Fn(f32) -> f32) -> f32 {
+    const LN2: f32 = core::f32::consts::LN_2;
+    if x > 88.0 {
+        return f32::MAX;
+    }
+    if x < -87.0 {
+        return 0.0;
+    }
+    let k = {
+        let q = x / LN2;
+        // round half away from zero without std
+        if q >= 0.0 {
+            (q + 0.5) as i32
+        } else {
+            (q - 0.5) as i32
+        }
+    };
+    let r = x - k as f32 * LN2;
+    let mut y = base(r);
+    let step = if k >= 0 { 2.0 } else { 0.5 };
+    for _ in 0..k.unsigned_abs() {
+        y *= step;
+    }
+    y
+}
+
+/// Signed Q32.32 fixed point with saturating arithmetic: overflow clamps to the range limits
+/// and division by zero gives the limit of the dividend's sign, so no operation can panic.
+#[derive(Clone, Copy, Debug, Default, PartialEq, PartialOrd)]
+pub struct Q32(pub I32F32);
+
+impl Q32 {
+    pub const MAX: Q32 = Q32(I32F32::MAX);
+    pub const MIN: Q32 = Q32(I32F32::MIN);
+    /// Resolution: one least significant bit.
+    pub const LSB: Q32 = Q32(I32F32::DELTA);
+    pub fn to_bits(self) -> i64 {
+        self.0.to_bits()
+    }
+    pub fn from_bits(bits: i64) -> Self {
+        Q32(I32F32::from_bits(bits))
+    }
+}
+
+impl Add for Q32 {
+    type Output = Q32;
+    fn add(self, rhs: Q32) -> Q32 {
+        Q32(self.0.saturating_add(rhs.0))
+    }
+}
+impl Sub for Q32 {
+    type Output = Q32;
+    fn sub(self, rhs: Q32) -> Q32 {
+        Q32(self.0.saturating_sub(rhs.0))
+    }
+}
+impl Mul for Q32 {
+    type Output = Q32;
+    fn mul(self, rhs: Q32) -> Q32 {
+        Q32(self.0.saturating_mul(rhs.0))
+    }
+}
+impl Div for Q32 {
+    type Output = Q32;
+    fn div(self, rhs: Q32) -> Q32 {
+        if rhs.0 == I32F32::ZERO {
+            if self.0 < I32F32::ZERO {
+                Q32::MIN
+            } else if self.0 > I32F32::ZERO {
+                Q32::MAX
+            } else {
+                Q32(I32F32::ZERO)
+            }
+        } else {
+            Q32(self.0.saturating_div(rhs.0))
+        }
+    }
+}
+impl Neg for Q32 {
+    type Output = Q32;
+    fn neg(self) -> Q32 {
+        Q32(self.0.saturating_neg())
+    }
+}
+impl AddAssign for Q32 {
+    fn add_assign(&mut self, rhs: Q32) {
+        *self = *self + rhs;
+    }
+}
+impl SubAssign for Q32 {
+    fn sub_assign(&mut self, rhs: Q32) {
+        *self = *self - rhs;
+    }
+}
+impl MulAssign for Q32 {
+    fn mul_assign(&mut self, rhs: Q32) {
+        *self = *self * rhs;
+    }
+}
+
+impl Real for Q32 {
+    const ZERO: Self = Q32(I32F32::ZERO);
+    const ONE: Self = Q32(I32F32::ONE);
+    const NAME: &'static str = "Q32.32";
+    fn from_f64(x: f64) -> Self {
+        // NaN maps to zero; out-of-range values saturate.
+        Q32(I32F32::saturating_from_num(if x.is_nan() { 0.0 } else { x }))
+    }
+    fn to_f64(self) -> f64 {
+        self.0.to_num::<f64>()
+    }
+    fn sqrt(self) -> Self {
+        if self.0 > I32F32::ZERO {
+            Q32(self.0.sqrt())
+        } else {
+            Self::ZERO
+        }
+    }
+    fn exp(self) -> Self {
+        q32_exp(self)
+    }
+    fn atan(self) -> Self {
+        atan_series(self)
+    }
+    fn sin(self) -> Self {
+        q32_sin(self)
+    }
+}
+
+fn q(x: f64) -> Q32 {
+    Q32::from_f64(x)
+}
+
+/// exp in fixed point: `2^k · exp(r)`, `|r| <= ln2/2`, Taylor series to r^9 (error < 1e-9).
+fn q32_exp(x: Q32) -> Q32 {
+    // exp(21.49) is the largest value below 2^31.
+    if x > q(21.48) {
+        return Q32::MAX;
+    }
+    if x < q(-22.2) {
+        return Q32::ZERO;
+    }
+    let ln2 = q(core::f64::consts::LN_2);
+    let mut k: i32 = 0;
+    let mut r = x;
+    let half_ln2 = q(core::f64::consts::LN_2 / 2.0);
+    while r > half_ln2 {
+        r -= ln2;
+        k += 1;
+    }
+    while r < -half_ln2 {
+        r += ln2;
+        k -= 1;
+    }
+    // Horner evaluation of sum r^n/n!, n = 0..9.
+    let mut y = Q32::ONE;
+    let mut n = 9;
+    while n >= 1 {
+        y = Q32::ONE + r * y / q(n as f64);
+        n -= 1;
+    }
+    if k >= 0 {
+        Q32(y.0.saturating_mul_int(1i64 << k))
+    } else {
+        Q32(y.0 >> (-k) as u32)
+    }
+}
+
+/// atan for f32 and Q32: octant reduction to |x| <= 1, two argument halvings
+/// `atan x = 2 atan(x / (1 + sqrt(1 + x²)))` to |x| <= 0.2, then the odd Taylor series to x^11.
+fn atan_series<R: Real>(x: R) -> R {
+    let half_pi = R::from_f64(core::f64::consts::FRAC_PI_2);
+    let neg = x < R::ZERO;
+    let mut a = x.abs();
+    let inverted = a > R::ONE;
+    if inverted {
+        a = R::ONE / a;
+    }
+    let mut scale = R::ONE;
+    for _ in 0..2 {
+        a = a / (R::ONE + (R::ONE + a * a).sqrt());
+        scale = scale + scale;
+    }
+    let a2 = a * a;
+    let mut s = R::ZERO;
+    let mut n: i32 = 11;
+    while n >= 1 {
+        let term = R::ONE / R::from_f64(n as f64);
+        let signed = if (n / 2) % 2 == 0 { term } else { -term };
+        s = signed + a2 * s;
+        n -= 2;
+    }
+    let mut y = scale * a * s;
+    if inverted {
+        y = half_pi - y;
+    }
+    if neg {
+        -y
+    } else {
+        y
+    }
+}
+
+/// sin in fixed point: reduction to [-π/2, π/2] and the Taylor series to x^13.
+fn q32_sin(x: Q32) -> Q32 {
+    let pi = q(core::f64::consts::PI);
+    let two_pi = q(2.0 * core::f64::consts::PI);
+    let half_pi = q(core::f64::consts::FRAC_PI_2);
+    // Reduce to [-π, π] by whole turns (division keeps this O(1) for large angles).
+    let turns = ((x + pi) / two_pi).0.floor();
+    let mut r = x - Q32(turns) * two_pi;
+    if r > half_pi {
+        r = pi - r;
+    } else if r < -half_pi {
+        r = -pi - r;
+    }
+    let r2 = r * r;
+    let mut s = Q32::ONE;
+    let mut n: i32 = 13;
+    while n >= 3 {
+        // s = 1 - r²/((n-1) n) · s
+        s = Q32::ONE - r2 * s / q(((n - 1) * n) as f64);
+        n -= 2;
+    }
+    r * s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        #[test]
+        fn q32_exp_matches_libm(x in -20.0f64..20.0) {
+            let y = Q32::from_f64(x).exp().to_f64();
+            let r = libm::exp(x);
+            prop_assert!((y - r).abs() <= 1e-7 * r + 1e-8, "exp({x}) = {y}, libm {r}");
+        }
+
+        #[test]
+        fn q32_atan_matches_libm(x in -1.0e4f64..1.0e4) {
+            let y = Q32::from_f64(x).atan().to_f64();
+            prop_assert!((y - libm::atan(x)).abs() < 2e-8, "atan({x}) = {y}");
+        }
+
+        #[test]
+        fn q32_sin_matches_libm(x in -100.0f64..100.0) {
+            let y = Q32::from_f64(x).sin().to_f64();
+            prop_assert!((y - libm::sin(x)).abs() < 1e-7, "sin({x}) = {y}");
+        }
+
+        #[test]
+        fn f32_exp_relative_error_small(x in -80.0f32..80.0) {
+            let y = Real::exp(x) as f64;
+            let r = libm::exp(x as f64);
+            // micromath's exp after range reduction: measured worst case about 2e-4 relative.
+            prop_assert!((y - r).abs() <= 5e-4 * r, "exp({x}) = {y}, libm {r}");
+        }
+
+        #[test]
+        fn f32_atan_error_small(x in -1.0e3f32..1.0e3) {
+            let y = Real::atan(x) as f64;
+            // f32 rounding through the reduction steps: measured worst case about 3.3e-6 rad.
+            prop_assert!((y - libm::atan(x as f64)).abs() < 1e-5, "atan({x}) = {y}");
+        }
+
+        #[test]
+        fn f32_sqrt_relative_error_small(x in 1e-6f32..1e6) {
+            let y = Real::sqrt(x) as f64;
+            let r = libm::sqrt(x as f64);
+            prop_assert!((y - r).abs() <= 1e-6 * r, "sqrt({x}) = {y}, libm {r}");
+        }
+
+        #[test]
+        fn q32_ops_never_panic(a in any::<i64>(), b in any::<i64>()) {
+            let (a, b) = (Q32::from_bits(a), Q32::from_bits(b));
+            let _ = (a + b, a - b, a * b, a / b, -a, a.sqrt(), a.exp(), a.atan(), a.sin());
+        }
+    }
+
+    #[test]
+    fn q32_saturates_and_divides_by_zero_safely() {
+        assert_eq!(Q32::MAX + Q32::ONE, Q32::MAX);
+        assert_eq!(Q32::MIN - Q32::ONE, Q32::MIN);
+        assert_eq!(Q32::ONE / Q32::ZERO, Q32::MAX);
+        assert_eq!(-Q32::ONE / Q32::ZERO, Q32::MIN);
+        assert_eq!(Q32::from_f64(-4.0).sqrt(), Q32::ZERO);
+        assert_eq!(Q32::from_f64(f64::NAN), Q32::ZERO);
+        assert_eq!(Q32::from_f64(1e30), Q32::MAX);
+    }
+
+    /// Measures micromath's own atan (not used, see `Real for f32`) so the choice stays honest.
+    #[test]
+    fn micromath_atan_error_measured() {
+        let worst = (0..20_000)
+            .map(|i| -100.0 + i as f32 * 0.01)
+            .map(|x| (micromath::F32Ext::atan(x) as f64 - libm::atan(x as f64)).abs())
+            .fold(0.0, f64::max);
+        assert!(worst > 1e-3 && worst < 5e-3, "micromath atan worst error {worst}");
+    }
+
+    #[test]
+    fn micromath_sqrt_error_measured() {
+        let worst = (1..20_000)
+            .map(|i| i as f32 * 1e-3)
+            .map(|x| {
+                let r = libm::sqrt(x as f64);
+                (micromath::F32Ext::sqrt(x) as f64 - r).abs() / r
+            })
+            .fold(0.0, f64::max);
+        assert!(worst > 1e-2 && worst < 1e-1, "micromath sqrt worst relative error {worst}");
+    }
+
+    #[test]
+    fn sqrt_of_negative_is_zero_in_every_type() {
+        assert_eq!(Real::sqrt(-1.0f32), 0.0);
+        assert_eq!(Real::sqrt(-1.0f64), 0.0);
+        assert_eq!(Real::sqrt(4.0f32), 2.0);
+    }
+}
