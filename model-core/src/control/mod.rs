@@ -1,0 +1,2 @@
+//! Controllers: setpoint, observe the plant, open-loop part plus closed-loop part, output;
+//! with enable conditions and safe default outputs. One file per controller.

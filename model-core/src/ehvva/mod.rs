@@ -1,0 +1,1 @@
+//! Electro-hydraulic camless valve actuator (Li et al. 2018). (being written)
