@@ -56,6 +56,8 @@ pub trait Real:
     fn atan(self) -> Self;
     /// Sine of an angle in radians.
     fn sin(self) -> Self;
+    /// Natural logarithm; the most negative finite value for arguments <= 0 (never NaN).
+    fn ln(self) -> Self;
 
     fn abs(self) -> Self {
         if self < Self::ZERO {
@@ -126,6 +128,13 @@ impl Real for f32 {
     fn sin(self) -> Self {
         micromath::F32Ext::sin(self)
     }
+    fn ln(self) -> Self {
+        if self > 0.0 {
+            libm::logf(self)
+        } else {
+            f32::MIN
+        }
+    }
 }
 
 impl Real for f64 {
@@ -153,6 +162,13 @@ impl Real for f64 {
     }
     fn sin(self) -> Self {
         libm::sin(self)
+    }
+    fn ln(self) -> Self {
+        if self > 0.0 {
+            libm::log(self)
+        } else {
+            f64::MIN
+        }
     }
 }
 
@@ -284,6 +300,37 @@ impl Real for Q32 {
     fn sin(self) -> Self {
         q32_sin(self)
     }
+    fn ln(self) -> Self {
+        q32_ln(self)
+    }
+}
+
+/// ln in fixed point: `x = m · 2^k` with m in [1, 2), `ln m = 2 atanh((m-1)/(m+1))` by its odd
+/// series (|z| <= 1/3, terms to z^15: error < 1e-9).
+fn q32_ln(x: Q32) -> Q32 {
+    if x <= Q32::ZERO {
+        return Q32::MIN;
+    }
+    let mut m = x;
+    let mut k: i32 = 0;
+    let two = q(2.0);
+    while m >= two {
+        m = Q32(m.0 >> 1u32);
+        k += 1;
+    }
+    while m < Q32::ONE {
+        m = Q32(m.0 << 1u32);
+        k -= 1;
+    }
+    let z = (m - Q32::ONE) / (m + Q32::ONE);
+    let z2 = z * z;
+    let mut s = Q32::ZERO;
+    let mut n: i32 = 15;
+    while n >= 1 {
+        s = Q32::ONE / q(n as f64) + z2 * s;
+        n -= 2;
+    }
+    q(2.0) * z * s + Q32(q(core::f64::consts::LN_2).0.saturating_mul_int(k as i64))
 }
 
 fn q(x: f64) -> Q32 {
@@ -404,6 +451,14 @@ mod tests {
         }
 
         #[test]
+        fn q32_ln_matches_libm(x in 1e-8f64..1e9) {
+            let y = Q32::from_f64(x).ln().to_f64();
+            // The input itself is quantized to 2.3e-10, which dominates near zero.
+            let tol = 1e-8 + 2.4e-10 / x;
+            prop_assert!((y - libm::log(x)).abs() < tol, "ln({x}) = {y}");
+        }
+
+        #[test]
         fn q32_sin_matches_libm(x in -100.0f64..100.0) {
             let y = Q32::from_f64(x).sin().to_f64();
             prop_assert!((y - libm::sin(x)).abs() < 1e-7, "sin({x}) = {y}");
@@ -434,7 +489,7 @@ mod tests {
         #[test]
         fn q32_ops_never_panic(a in any::<i64>(), b in any::<i64>()) {
             let (a, b) = (Q32::from_bits(a), Q32::from_bits(b));
-            let _ = (a + b, a - b, a * b, a / b, -a, a.sqrt(), a.exp(), a.atan(), a.sin());
+            let _ = (a + b, a - b, a * b, a / b, -a, a.sqrt(), a.exp(), a.atan(), a.sin(), a.ln());
         }
     }
 
