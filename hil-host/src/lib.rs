@@ -1,0 +1,3 @@
+//! Host tools around model-core: measured-data logs, closed-loop runs against simulated plants,
+//! identification and diagnosis.
+pub mod log;

@@ -1,0 +1,493 @@
+//! Measured-data logs in the project's CSV format (`shared/DATA-FORMAT.md`): strict reading with
+//! errors that name file, line and column; writing in the same format.
+//!
+//! A bad file never panics and never yields a partial result: `read_log` returns either the
+//! whole log or the first error found.
+
+use std::collections::BTreeMap;
+use std::fmt;
+use std::fs;
+use std::path::Path;
+
+/// The plants a log can belong to, and their columns.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Plant {
+    Vacuum,
+    Ehvva,
+    Evvt,
+    Positioner,
+}
+
+/// A column's role for its plant.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Role {
+    Input,
+    OptionalInput,
+    /// The output whose error the diagnosis reports.
+    PrimaryOutput,
+    OptionalOutput,
+}
+
+impl Plant {
+    pub const ALL: [Plant; 4] = [Plant::Vacuum, Plant::Ehvva, Plant::Evvt, Plant::Positioner];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Plant::Vacuum => "vacuum",
+            Plant::Ehvva => "ehvva",
+            Plant::Evvt => "evvt",
+            Plant::Positioner => "positioner",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<Plant> {
+        Plant::ALL.into_iter().find(|p| p.name() == name.trim())
+    }
+
+    /// The plant's columns (DATA-FORMAT.md, "Plants and their columns").
+    pub fn columns(self) -> &'static [(&'static str, Role)] {
+        use Role::*;
+        match self {
+            Plant::Vacuum => &[
+                ("duty_pct", Input),
+                ("u_batt_V", Input),
+                ("p_amb_kPa", Input),
+                ("p_tank_kPa", Input),
+                ("x_pct", PrimaryOutput),
+                ("p_act_kPa", OptionalOutput),
+            ],
+            Plant::Ehvva => &[
+                ("u_pilot", Input),
+                ("p_supply_MPa", Input),
+                ("p_back_MPa", Input),
+                ("temp_C", Input),
+                ("lift_high", Input),
+                ("snubber_on", Input),
+                ("lift_mm", PrimaryOutput),
+            ],
+            Plant::Evvt => &[
+                ("motor_cmd_rpm", Input),
+                ("engine_rpm", Input),
+                ("u_batt_V", Input),
+                ("phase_ref_deg", OptionalInput),
+                ("phase_deg", PrimaryOutput),
+            ],
+            Plant::Positioner => &[("force_N", Input), ("ref_m", OptionalInput), ("pos_m", PrimaryOutput)],
+        }
+    }
+
+    pub fn primary_output(self) -> &'static str {
+        self.columns().iter().find(|(_, r)| *r == Role::PrimaryOutput).map(|(n, _)| *n).unwrap_or("")
+    }
+}
+
+impl fmt::Display for Plant {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// The columns that are 0/1 flags (no unit suffix).
+const FLAGS: [&str; 3] = ["u_pilot", "lift_high", "snubber_on"];
+
+/// The accepted range of a column (DATA-FORMAT.md range table), `None` when unconstrained.
+pub fn column_range(name: &str) -> Option<(f64, f64)> {
+    if FLAGS.contains(&name) {
+        return Some((0.0, 1.0));
+    }
+    let exact = match name {
+        "duty_pct" => Some((0.0, 100.0)),
+        "x_pct" => Some((-5.0, 105.0)),
+        "u_batt_V" => Some((0.0, 32.0)),
+        "temp_C" => Some((-60.0, 200.0)),
+        "lift_mm" => Some((-1.0, 12.0)),
+        "phase_deg" | "phase_ref_deg" => Some((-30.0, 90.0)),
+        "engine_rpm" => Some((0.0, 12000.0)),
+        "motor_cmd_rpm" => Some((-20000.0, 20000.0)),
+        "force_N" => Some((-1e6, 1e6)),
+        "pos_m" | "ref_m" => Some((-10.0, 10.0)),
+        _ => None,
+    };
+    exact.or_else(|| {
+        if name.starts_with("p_") && name.ends_with("_kPa") {
+            Some((0.0, 400.0))
+        } else if name.starts_with("p_") && name.ends_with("_MPa") {
+            Some((0.0, 40.0))
+        } else {
+            None
+        }
+    })
+}
+
+/// What went wrong, and where.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LogError {
+    pub file: String,
+    /// 1-based line in the file, when the problem is on one line.
+    pub line: Option<usize>,
+    /// Column name (or 1-based index when the header is the problem).
+    pub column: Option<String>,
+    pub message: String,
+}
+
+impl fmt::Display for LogError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.file)?;
+        if let Some(l) = self.line {
+            write!(f, ":{l}")?;
+        }
+        if let Some(c) = &self.column {
+            write!(f, ", column {c}")?;
+        }
+        write!(f, ": {}", self.message)
+    }
+}
+
+impl std::error::Error for LogError {}
+
+/// A log read whole: metadata, columns, and the sample rate it was checked against.
+#[derive(Clone, Debug)]
+pub struct Log {
+    pub file: String,
+    pub plant: Plant,
+    /// `# key: value` lines in file order (unknown keys kept).
+    pub meta: Vec<(String, String)>,
+    /// Column name to samples; only the plant's known columns plus `t_s`.
+    pub columns: BTreeMap<String, Vec<f64>>,
+    /// Column names in file order (known ones only).
+    pub order: Vec<String>,
+    /// Sample period from the time column.
+    pub dt_s: f64,
+    /// Largest deviation of a time step from `dt_s`, in % of `dt_s`.
+    pub jitter_pct: f64,
+    /// Things the user should know that are not errors (ignored columns, jitter, unknown keys).
+    pub notices: Vec<String>,
+}
+
+impl Log {
+    pub fn len(&self) -> usize {
+        self.columns.get("t_s").map_or(0, Vec::len)
+    }
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    pub fn col(&self, name: &str) -> Option<&[f64]> {
+        self.columns.get(name).map(Vec::as_slice)
+    }
+    /// A metadata value by key.
+    pub fn meta(&self, key: &str) -> Option<&str> {
+        self.meta.iter().find(|(k, _)| k == key).map(|(_, v)| v.as_str())
+    }
+    /// A numeric metadata value; an error names the key when it is present but not a number.
+    pub fn meta_f64(&self, key: &str) -> Result<Option<f64>, LogError> {
+        match self.meta(key) {
+            None => Ok(None),
+            Some(v) => match v.trim().parse::<f64>() {
+                Ok(x) if x.is_finite() => Ok(Some(x)),
+                _ => Err(LogError {
+                    file: self.file.clone(),
+                    line: None,
+                    column: None,
+                    message: format!("metadata `{key}` is `{v}`, not a finite number"),
+                }),
+            },
+        }
+    }
+}
+
+/// Metadata keys the tools understand; others are kept and shown.
+const KNOWN_KEYS: [&str; 15] = [
+    "plant",
+    "source",
+    "sample_rate_hz",
+    "controller",
+    "kp",
+    "kv",
+    "gtau",
+    "control_period_s",
+    "force_max_N",
+    "motor_cmd_max_rpm",
+    "u_ref_V",
+    "seed",
+    "effect",
+    "experiment",
+    "note",
+];
+
+/// Reads and checks a log. `plant` overrides the file's `# plant:` metadata.
+pub fn read_log(path: &Path, plant: Option<Plant>) -> Result<Log, LogError> {
+    let file = path.display().to_string();
+    let text = fs::read_to_string(path).map_err(|e| LogError { file: file.clone(), line: None, column: None, message: format!("cannot read: {e}") })?;
+    parse_log(&file, &text, plant)
+}
+
+/// Parses log text; `file` names it in errors.
+pub fn parse_log(file: &str, text: &str, plant_override: Option<Plant>) -> Result<Log, LogError> {
+    let err = |line: Option<usize>, column: Option<String>, message: String| LogError { file: file.to_string(), line, column, message };
+    let mut meta = Vec::new();
+    let mut notices = Vec::new();
+    let mut lines = text.lines().enumerate().map(|(i, l)| (i + 1, l.trim_end_matches('\r')));
+
+    // Metadata, then the header.
+    let (header_line, header) = loop {
+        match lines.next() {
+            None => return Err(err(None, None, "no header row (file is empty or only metadata)".into())),
+            Some((n, l)) if l.trim().is_empty() => {
+                let _ = n;
+                continue;
+            }
+            Some((n, l)) if l.starts_with('#') => {
+                let body = l.trim_start_matches('#').trim();
+                match body.split_once(':') {
+                    Some((k, v)) => {
+                        let k = k.trim().to_string();
+                        if !KNOWN_KEYS.contains(&k.as_str()) {
+                            notices.push(format!("line {n}: metadata key `{k}` is not one the tools use; kept"));
+                        }
+                        meta.push((k, v.trim().to_string()));
+                    }
+                    None => notices.push(format!("line {n}: comment without `key: value`, ignored")),
+                }
+            }
+            Some((n, l)) => break (n, l),
+        }
+    };
+
+    let plant = match plant_override {
+        Some(p) => p,
+        None => {
+            let name = meta
+                .iter()
+                .find(|(k, _)| k == "plant")
+                .map(|(_, v)| v.clone())
+                .ok_or_else(|| err(None, None, "no `# plant:` metadata and no plant given (--plant)".into()))?;
+            Plant::from_name(&name).ok_or_else(|| {
+                err(None, None, format!("unknown plant `{name}` in metadata (known: vacuum, ehvva, evvt, positioner)"))
+            })?
+        }
+    };
+
+    // Header: which columns we keep.
+    let names: Vec<String> = header.split(',').map(|s| s.trim().to_string()).collect();
+    let mut keep: Vec<Option<String>> = Vec::with_capacity(names.len());
+    let known: Vec<&str> = plant.columns().iter().map(|(n, _)| *n).collect();
+    for (i, name) in names.iter().enumerate() {
+        if name.is_empty() {
+            return Err(err(Some(header_line), Some(format!("#{}", i + 1)), "empty column name in header".into()));
+        }
+        if names[..i].contains(name) {
+            return Err(err(Some(header_line), Some(name.clone()), "column appears twice in header".into()));
+        }
+        if name == "t_s" || known.contains(&name.as_str()) {
+            keep.push(Some(name.clone()));
+        } else {
+            notices.push(format!("column `{name}` is not a `{plant}` column; ignored"));
+            keep.push(None);
+        }
+    }
+    if !names.iter().any(|n| n == "t_s") {
+        return Err(err(Some(header_line), Some("t_s".into()), "required column `t_s` is missing".into()));
+    }
+    for (name, role) in plant.columns() {
+        if matches!(role, Role::Input | Role::PrimaryOutput) && !names.iter().any(|n| n == name) {
+            return Err(err(Some(header_line), Some((*name).into()), format!("required `{plant}` column `{name}` is missing")));
+        }
+    }
+
+    let mut columns: BTreeMap<String, Vec<f64>> = BTreeMap::new();
+    let order: Vec<String> = keep.iter().flatten().cloned().collect();
+    for n in &order {
+        columns.insert(n.clone(), Vec::new());
+    }
+    for (n, l) in lines {
+        if l.trim().is_empty() {
+            continue;
+        }
+        if l.starts_with('#') {
+            return Err(err(Some(n), None, "metadata line after the header".into()));
+        }
+        let cells: Vec<&str> = l.split(',').collect();
+        if cells.len() != names.len() {
+            return Err(err(Some(n), None, format!("{} cells, header has {}", cells.len(), names.len())));
+        }
+        for (cell, name) in cells.iter().zip(&keep) {
+            let Some(name) = name else { continue };
+            let v: f64 = cell
+                .trim()
+                .parse()
+                .map_err(|_| err(Some(n), Some(name.clone()), format!("`{}` is not a number", cell.trim())))?;
+            if !v.is_finite() {
+                return Err(err(Some(n), Some(name.clone()), format!("`{}` is not finite", cell.trim())));
+            }
+            if let Some((lo, hi)) = column_range(name) {
+                if v < lo || v > hi {
+                    return Err(err(Some(n), Some(name.clone()), format!("{v} is outside the column's range {lo}..{hi}")));
+                }
+                if FLAGS.contains(&name.as_str()) && v != 0.0 && v != 1.0 {
+                    return Err(err(Some(n), Some(name.clone()), format!("{v} is not a flag (0 or 1)")));
+                }
+            }
+            if let Some(col) = columns.get_mut(name) {
+                col.push(v);
+            }
+        }
+        // Strictly increasing time, checked as rows arrive so the line is known.
+        let t = &columns["t_s"];
+        if t.len() >= 2 && t[t.len() - 1] <= t[t.len() - 2] {
+            return Err(err(Some(n), Some("t_s".into()), format!("time {} does not increase (previous {})", t[t.len() - 1], t[t.len() - 2])));
+        }
+    }
+    let t = &columns["t_s"];
+    if t.len() < 2 {
+        return Err(err(None, None, format!("{} data rows; at least 2 are needed", t.len())));
+    }
+    // Uniform sampling: the median step is the period; every step within 1 %.
+    let mut steps: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+    let mut sorted = steps.clone();
+    sorted.sort_by(f64::total_cmp);
+    let dt_s = sorted[sorted.len() / 2];
+    let mut jitter_pct: f64 = 0.0;
+    for (i, s) in steps.drain(..).enumerate() {
+        let dev = (s - dt_s).abs() / dt_s * 100.0;
+        if dev > 1.0 {
+            return Err(err(
+                None,
+                Some("t_s".into()),
+                format!("not uniformly sampled: step {} s between rows {} and {} deviates {dev:.1} % from the period {dt_s} s (1 % accepted)", s, i + 1, i + 2),
+            ));
+        }
+        jitter_pct = jitter_pct.max(dev);
+    }
+    if jitter_pct > 0.01 {
+        notices.push(format!("time jitter up to {jitter_pct:.2} % of the {dt_s} s period (accepted up to 1 %)"));
+    }
+    if let Some(rate) = meta.iter().find(|(k, _)| k == "sample_rate_hz").map(|(_, v)| v.clone()) {
+        match rate.trim().parse::<f64>() {
+            Ok(hz) if hz > 0.0 && ((1.0 / hz) - dt_s).abs() / dt_s > 0.01 => {
+                notices.push(format!("metadata sample_rate_hz {hz} disagrees with the time column's {:.6} Hz; the time column is used", 1.0 / dt_s))
+            }
+            Ok(_) => {}
+            Err(_) => return Err(err(None, None, format!("metadata `sample_rate_hz` is `{rate}`, not a number"))),
+        }
+    }
+    Ok(Log { file: file.to_string(), plant, meta, columns, order, dt_s, jitter_pct, notices })
+}
+
+/// Writes a log in the same format. `columns` are (name, samples), all the same length.
+pub fn write_log(path: &Path, meta: &[(String, String)], columns: &[(&str, &[f64])]) -> std::io::Result<()> {
+    fs::write(path, format_log(meta, columns))
+}
+
+/// The text of a log (what `write_log` writes).
+pub fn format_log(meta: &[(String, String)], columns: &[(&str, &[f64])]) -> String {
+    let mut s = String::new();
+    for (k, v) in meta {
+        s.push_str(&format!("# {k}: {v}\n"));
+    }
+    s.push_str(&columns.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(","));
+    s.push('\n');
+    let n = columns.iter().map(|(_, v)| v.len()).min().unwrap_or(0);
+    for i in 0..n {
+        let row: Vec<String> = columns.iter().map(|(_, v)| format_number(v[i])).collect();
+        s.push_str(&row.join(","));
+        s.push('\n');
+    }
+    s
+}
+
+/// Shortest text that reads back to the same f64 (Rust's `{}` is round-trip exact).
+fn format_number(x: f64) -> String {
+    format!("{x}")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GOOD: &str = "# plant: positioner\n# source: test\n# sample_rate_hz: 1000\n# bench: A7\nt_s,force_N,pos_m,extra\n0.000,1.5,0.0,9\n0.001,2.5,0.001,9\n0.002,3.5,0.002,9\n";
+
+    #[test]
+    fn reads_a_good_log_and_notes_extras() {
+        let log = parse_log("a.csv", GOOD, None).unwrap();
+        assert_eq!(log.plant, Plant::Positioner);
+        assert_eq!(log.len(), 3);
+        assert_eq!(log.col("force_N").unwrap(), &[1.5, 2.5, 3.5]);
+        assert!((log.dt_s - 0.001).abs() < 1e-12);
+        assert_eq!(log.meta("bench"), Some("A7"));
+        assert!(log.notices.iter().any(|n| n.contains("`extra`")));
+        assert!(log.notices.iter().any(|n| n.contains("`bench`")));
+        assert!(log.col("extra").is_none());
+    }
+
+    fn error_of(text: &str) -> LogError {
+        parse_log("bad.csv", text, None).unwrap_err()
+    }
+
+    #[test]
+    fn errors_name_file_line_and_column() {
+        let e = error_of(&GOOD.replace("2.5,0.001", "abc,0.001"));
+        assert_eq!((e.line, e.column.as_deref()), (Some(7), Some("force_N")));
+        assert!(e.to_string().starts_with("bad.csv:7, column force_N:"), "{e}");
+
+        let e = error_of(&GOOD.replace("2.5,0.001", "NaN,0.001"));
+        assert_eq!((e.line, e.column.as_deref()), (Some(7), Some("force_N")));
+
+        let e = error_of(&GOOD.replace("0.002,3.5,0.002", "0.002,3.5,11.0"));
+        assert_eq!((e.line, e.column.as_deref()), (Some(8), Some("pos_m")));
+        assert!(e.message.contains("range"));
+
+        let e = error_of(&GOOD.replace("0.002,3.5", "0.001,3.5"));
+        assert_eq!((e.line, e.column.as_deref()), (Some(8), Some("t_s")));
+
+        let e = error_of(&GOOD.replace("t_s,force_N,pos_m,extra", "t_s,pos_m,extra").replace(",1.5,", ",").replace(",2.5,", ",").replace(",3.5,", ","));
+        assert_eq!((e.line, e.column.as_deref()), (Some(5), Some("force_N")));
+
+        let e = error_of(&GOOD.replace("0.001,2.5,0.001,9", "0.001,2.5,0.001"));
+        assert_eq!(e.line, Some(7));
+    }
+
+    #[test]
+    fn rejects_nonuniform_sampling_and_accepts_small_jitter() {
+        let e = error_of(&GOOD.replace("0.002,3.5", "0.0025,3.5"));
+        assert_eq!(e.column.as_deref(), Some("t_s"));
+        let ok = parse_log("j.csv", &GOOD.replace("0.002,3.5", "0.002005,3.5"), None).unwrap();
+        assert!(ok.jitter_pct > 0.4 && ok.jitter_pct < 0.6);
+        assert!(ok.notices.iter().any(|n| n.contains("jitter")));
+    }
+
+    #[test]
+    fn flags_must_be_zero_or_one_and_plant_must_be_known() {
+        let text = "# plant: ehvva\nt_s,u_pilot,p_supply_MPa,p_back_MPa,temp_C,lift_high,snubber_on,lift_mm\n0,0,7,1,22,1,0,0\n1e-5,0.5,7,1,22,1,0,0\n";
+        let e = error_of(text);
+        assert_eq!((e.line, e.column.as_deref()), (Some(4), Some("u_pilot")));
+        let e = error_of(&GOOD.replace("positioner", "turbine"));
+        assert!(e.message.contains("unknown plant `turbine`"));
+        let e = error_of(&GOOD.replace("# plant: positioner\n", ""));
+        assert!(e.message.contains("--plant"));
+    }
+
+    #[test]
+    fn written_logs_read_back_bit_exact() {
+        let t = [0.0, 0.01, 0.02];
+        let x = [0.1 + 0.2, 1.0 / 3.0, -0.0];
+        let f = [1e-300, 123456.789, -5.0];
+        let text = format_log(&[("plant".into(), "positioner".into())], &[("t_s", &t), ("pos_m", &x), ("force_N", &f)]);
+        let log = parse_log("w.csv", &text, None).unwrap();
+        assert_eq!(log.col("pos_m").unwrap(), &x);
+        assert_eq!(log.col("force_N").unwrap(), &f);
+    }
+
+    #[test]
+    fn reads_the_emps_benchmark_when_shared_data_is_present() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/emps/emps-estimation.csv");
+        if !path.exists() {
+            eprintln!("SKIP: {} not found (../shared is absent in a fresh clone)", path.display());
+            return;
+        }
+        let log = read_log(&path, None).unwrap();
+        assert_eq!(log.plant, Plant::Positioner);
+        assert_eq!(log.len(), 24841);
+        assert!((log.dt_s - 0.001).abs() < 1e-9);
+        assert_eq!(log.meta_f64("gtau").unwrap(), Some(35.1506518825));
+    }
+}
