@@ -1,0 +1,480 @@
+//! Bounded trust-region nonlinear least squares: the one solver behind `diagnose`, `identify
+//! evvt` and `identify ehvva` (Li 2018, eqs. (16)-(20)).
+//!
+//! Minimises J(x) = ½‖r(x)‖² subject to lo ≤ x ≤ hi. Each iteration builds the quadratic model
+//! M(h) = J + hᵀg + ½hᵀHh with g = Jᵀr and the Gauss-Newton Hessian H = JᵀJ (eq. (17)), solves
+//! it inside the trust region ‖D h‖ ≤ Δ (eq. (18)) by the Levenberg-Marquardt parameter that
+//! puts the step on the region's edge, keeps the step inside the bounds, and adapts Δ from the
+//! ratio ρ of actual to predicted decrease (eqs. (19)-(20): Δ·2 when ρ > 0.75, Δ·0.25 when
+//! ρ < 0.25; the step is rejected when the cost does not fall). D scales each parameter by its
+//! Jacobian column norm (Moré 1978), so parameters of different units are treated alike.
+//! Parameters sitting on a bound with the gradient pushing outwards are held for that step.
+//!
+//! A residual function may fail (a simulation that diverges): it returns `Err`, and the solver
+//! treats the point as infinitely costly (a rejected step, a smaller region).
+
+use std::fmt;
+
+/// Options; the defaults suit simulation-error fits of a handful of parameters.
+#[derive(Clone, Debug)]
+pub struct LsqOptions {
+    pub max_iterations: usize,
+    /// Stop when the relative cost decrease of an accepted step is below this.
+    pub cost_tolerance: f64,
+    /// Stop when the scaled step is below this relative to the scaled parameters.
+    pub step_tolerance: f64,
+    /// Relative finite-difference step for the Jacobian.
+    pub fd_step: f64,
+    /// Evaluate Jacobian columns on this many threads (simulations are independent).
+    pub threads: usize,
+}
+
+impl Default for LsqOptions {
+    fn default() -> Self {
+        Self { max_iterations: 60, cost_tolerance: 1e-10, step_tolerance: 1e-9, fd_step: 1e-6, threads: 2 }
+    }
+}
+
+/// What the solver found, with the evidence a user needs to trust it.
+#[derive(Clone, Debug)]
+pub struct LsqResult {
+    pub x: Vec<f64>,
+    /// ½‖r‖² at `x`.
+    pub cost: f64,
+    pub initial_cost: f64,
+    pub iterations: usize,
+    pub evaluations: usize,
+    /// 95 % confidence half-widths from s²(JᵀJ)⁻¹, s² = ‖r‖²/(n − p); `None` for a parameter
+    /// on a bound or not identifiable (singular JᵀJ).
+    pub ci95: Vec<Option<f64>>,
+    pub residuals: usize,
+    pub stop: StopReason,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StopReason {
+    CostConverged,
+    StepConverged,
+    MaxIterations,
+    /// The trust region shrank below any useful step.
+    RegionCollapsed,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub enum LsqError {
+    /// Bounds or start are inconsistent; the index names the parameter.
+    BadBounds { index: usize, message: String },
+    /// The residual function failed at the starting point.
+    StartFailed(String),
+    NoResiduals,
+}
+
+impl fmt::Display for LsqError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            LsqError::BadBounds { index, message } => write!(f, "parameter {index}: {message}"),
+            LsqError::StartFailed(m) => write!(f, "the model failed at the starting parameters: {m}"),
+            LsqError::NoResiduals => write!(f, "no residuals to fit"),
+        }
+    }
+}
+
+impl std::error::Error for LsqError {}
+
+/// Solves min ½‖r(x)‖², lo ≤ x ≤ hi, from `x0` (clamped into the bounds).
+/// `residual(x, out)` fills `out` (its length fixed by the first call's `n_residuals`).
+pub fn solve<F>(residual: F, x0: &[f64], lo: &[f64], hi: &[f64], n_residuals: usize, opts: &LsqOptions) -> Result<LsqResult, LsqError>
+where
+    F: Fn(&[f64], &mut [f64]) -> Result<(), String> + Sync,
+{
+    let p = x0.len();
+    if lo.len() != p || hi.len() != p {
+        return Err(LsqError::BadBounds { index: p.min(lo.len()).min(hi.len()), message: "bounds and start differ in length".into() });
+    }
+    for i in 0..p {
+        if !(lo[i] <= hi[i]) || !x0[i].is_finite() {
+            return Err(LsqError::BadBounds { index: i, message: format!("lower {} / upper {} / start {}", lo[i], hi[i], x0[i]) });
+        }
+    }
+    if n_residuals == 0 {
+        return Err(LsqError::NoResiduals);
+    }
+    let mut x: Vec<f64> = (0..p).map(|i| x0[i].clamp(lo[i], hi[i])).collect();
+    let mut r = vec![0.0; n_residuals];
+    let mut evaluations = 1;
+    residual(&x, &mut r).map_err(LsqError::StartFailed)?;
+    let mut cost = half_norm2(&r);
+    if !cost.is_finite() {
+        return Err(LsqError::StartFailed("non-finite residuals".into()));
+    }
+    let initial_cost = cost;
+    let mut jac = vec![0.0; n_residuals * p]; // column-major: column j at j*n
+    let mut scale = vec![0.0f64; p];
+    let mut delta = 0.0;
+    let mut iterations = 0;
+    let mut stop = StopReason::MaxIterations;
+    let mut r_try = vec![0.0; n_residuals];
+
+    'outer: while iterations < opts.max_iterations {
+        iterations += 1;
+        evaluations += jacobian(&residual, &x, &r, lo, hi, opts, &mut jac);
+        let h_mat = jtj(&jac, n_residuals, p);
+        let g = jtr(&jac, &r, n_residuals, p);
+        for j in 0..p {
+            scale[j] = scale[j].max(h_mat[j * p + j].sqrt()).max(1e-12);
+        }
+        if iterations == 1 {
+            let dx: f64 = x.iter().zip(&scale).map(|(xi, d)| (xi * d).powi(2)).sum::<f64>().sqrt();
+            delta = if dx > 0.0 { dx } else { 1.0 };
+        }
+        // Hold parameters on a bound whose gradient points out of the box.
+        let free: Vec<usize> = (0..p)
+            .filter(|&j| !((x[j] <= lo[j] && g[j] > 0.0) || (x[j] >= hi[j] && g[j] < 0.0)))
+            .collect();
+        if free.is_empty() {
+            stop = StopReason::StepConverged;
+            break;
+        }
+        loop {
+            let h = trust_step(&h_mat, &g, &scale, &free, p, delta);
+            // Keep the step inside the bounds.
+            let x_try: Vec<f64> = (0..p).map(|j| (x[j] + h[j]).clamp(lo[j], hi[j])).collect();
+            let step: Vec<f64> = (0..p).map(|j| x_try[j] - x[j]).collect();
+            let step_norm = norm_scaled(&step, &scale);
+            let x_norm = norm_scaled(&x, &scale);
+            if step_norm <= opts.step_tolerance * (x_norm + opts.step_tolerance) {
+                stop = StopReason::StepConverged;
+                break 'outer;
+            }
+            // Predicted decrease M(0) − M(h) = −(gᵀh + ½hᵀHh) for the step actually taken.
+            let mut predicted = 0.0;
+            for j in 0..p {
+                predicted -= g[j] * step[j];
+                for k in 0..p {
+                    predicted -= 0.5 * step[j] * h_mat[j * p + k] * step[k];
+                }
+            }
+            evaluations += 1;
+            let actual_cost = match residual(&x_try, &mut r_try) {
+                Ok(()) => half_norm2(&r_try),
+                Err(_) => f64::INFINITY,
+            };
+            let rho = if predicted > 0.0 { (cost - actual_cost) / predicted } else { -1.0 };
+            // Eq. (20).
+            if rho > 0.75 {
+                delta = delta.max(2.0 * step_norm);
+            } else if rho < 0.25 {
+                delta = 0.25 * step_norm.min(delta);
+            }
+            if actual_cost.is_finite() && actual_cost < cost {
+                let rel = (cost - actual_cost) / cost.max(f64::MIN_POSITIVE);
+                x = x_try;
+                std::mem::swap(&mut r, &mut r_try);
+                cost = actual_cost;
+                if rel < opts.cost_tolerance || cost == 0.0 {
+                    stop = StopReason::CostConverged;
+                    break 'outer;
+                }
+                break;
+            }
+            if delta < 1e-14 * (x_norm + 1e-14) {
+                stop = StopReason::RegionCollapsed;
+                break 'outer;
+            }
+        }
+    }
+
+    // Confidence intervals at the solution from a fresh Jacobian.
+    evaluations += jacobian(&residual, &x, &r, lo, hi, opts, &mut jac);
+    let h_mat = jtj(&jac, n_residuals, p);
+    let dof = n_residuals.saturating_sub(p).max(1) as f64;
+    let s2 = 2.0 * cost / dof;
+    let inv = invert_spd(&h_mat, p);
+    let ci95 = (0..p)
+        .map(|j| {
+            let on_bound = x[j] <= lo[j] || x[j] >= hi[j];
+            match (&inv, on_bound) {
+                (Some(m), false) if m[j * p + j] > 0.0 => Some(1.96 * (s2 * m[j * p + j]).sqrt()),
+                _ => None,
+            }
+        })
+        .collect();
+    Ok(LsqResult { x, cost, initial_cost, iterations, evaluations, ci95, residuals: n_residuals, stop })
+}
+
+fn half_norm2(r: &[f64]) -> f64 {
+    0.5 * r.iter().map(|v| v * v).sum::<f64>()
+}
+
+fn norm_scaled(v: &[f64], d: &[f64]) -> f64 {
+    v.iter().zip(d).map(|(a, b)| (a * b).powi(2)).sum::<f64>().sqrt()
+}
+
+/// Forward-difference Jacobian, columns spread over threads; steps point into the box.
+/// Returns the number of residual evaluations.
+fn jacobian<F>(residual: &F, x: &[f64], r0: &[f64], lo: &[f64], hi: &[f64], opts: &LsqOptions, jac: &mut [f64]) -> usize
+where
+    F: Fn(&[f64], &mut [f64]) -> Result<(), String> + Sync,
+{
+    let n = r0.len();
+    let p = x.len();
+    let threads = opts.threads.clamp(1, p.max(1));
+    let columns: Vec<(usize, &mut [f64])> = jac.chunks_mut(n).enumerate().collect();
+    let mut buckets: Vec<Vec<(usize, &mut [f64])>> = (0..threads).map(|_| Vec::new()).collect();
+    for (k, c) in columns.into_iter().enumerate() {
+        buckets[k % threads].push(c);
+    }
+    std::thread::scope(|s| {
+        for bucket in buckets {
+            s.spawn(move || {
+                let mut xp = x.to_vec();
+                let mut rp = vec![0.0; n];
+                for (j, col) in bucket {
+                    let mut h = opts.fd_step * x[j].abs().max(1e-3);
+                    if x[j] + h > hi[j] {
+                        h = -h;
+                    }
+                    if x[j] + h < lo[j] {
+                        // A degenerate box (lo == hi): the parameter cannot move.
+                        col.iter_mut().for_each(|v| *v = 0.0);
+                        continue;
+                    }
+                    xp[j] = x[j] + h;
+                    match residual(&xp, &mut rp) {
+                        Ok(()) => {
+                            for i in 0..n {
+                                let d = (rp[i] - r0[i]) / h;
+                                col[i] = if d.is_finite() { d } else { 0.0 };
+                            }
+                        }
+                        Err(_) => col.iter_mut().for_each(|v| *v = 0.0),
+                    }
+                    xp[j] = x[j];
+                }
+            });
+        }
+    });
+    p
+}
+
+fn jtj(jac: &[f64], n: usize, p: usize) -> Vec<f64> {
+    let mut h = vec![0.0; p * p];
+    for a in 0..p {
+        for b in a..p {
+            let v: f64 = jac[a * n..(a + 1) * n].iter().zip(&jac[b * n..(b + 1) * n]).map(|(x, y)| x * y).sum();
+            h[a * p + b] = v;
+            h[b * p + a] = v;
+        }
+    }
+    h
+}
+
+fn jtr(jac: &[f64], r: &[f64], n: usize, p: usize) -> Vec<f64> {
+    (0..p).map(|j| jac[j * n..(j + 1) * n].iter().zip(r).map(|(a, b)| a * b).sum()).collect()
+}
+
+/// The step minimising the model on the free parameters with ‖D h‖ ≤ Δ: the Gauss-Newton step
+/// when it fits, otherwise (H + λD²)h = −g with λ found by bisection on log λ.
+fn trust_step(h_mat: &[f64], g: &[f64], d: &[f64], free: &[usize], p: usize, delta: f64) -> Vec<f64> {
+    let m = free.len();
+    let solve_with = |lambda: f64| -> Option<Vec<f64>> {
+        let mut a = vec![0.0; m * m];
+        let mut b = vec![0.0; m];
+        for (ii, &i) in free.iter().enumerate() {
+            for (kk, &k) in free.iter().enumerate() {
+                a[ii * m + kk] = h_mat[i * p + k];
+            }
+            a[ii * m + ii] += lambda * d[i] * d[i] + 1e-12 * (h_mat[i * p + i] + 1e-300);
+            b[ii] = -g[i];
+        }
+        let sol = cholesky_solve(&mut a, &mut b, m)?;
+        let mut h = vec![0.0; p];
+        for (ii, &i) in free.iter().enumerate() {
+            h[i] = sol[ii];
+        }
+        Some(h)
+    };
+    if let Some(h) = solve_with(0.0) {
+        if norm_scaled(&h, d) <= delta {
+            return h;
+        }
+    }
+    // ‖D h(λ)‖ falls monotonically in λ: bracket and bisect in log space.
+    let (mut lo, mut hi) = (1e-12f64, 1.0f64);
+    while solve_with(hi).map_or(true, |h| norm_scaled(&h, d) > delta) && hi < 1e30 {
+        lo = hi;
+        hi *= 100.0;
+    }
+    let mut best = solve_with(hi).unwrap_or_else(|| vec![0.0; p]);
+    for _ in 0..40 {
+        let mid = (lo * hi).sqrt();
+        match solve_with(mid) {
+            Some(h) if norm_scaled(&h, d) <= delta => {
+                best = h;
+                hi = mid;
+            }
+            _ => lo = mid,
+        }
+        if hi / lo < 1.01 {
+            break;
+        }
+    }
+    best
+}
+
+/// Solves A x = b for symmetric positive definite A (row-major m×m), in place.
+fn cholesky_solve(a: &mut [f64], b: &mut [f64], m: usize) -> Option<Vec<f64>> {
+    for j in 0..m {
+        let mut s = a[j * m + j];
+        for k in 0..j {
+            s -= a[j * m + k] * a[j * m + k];
+        }
+        if !(s > 0.0) {
+            return None;
+        }
+        let l = s.sqrt();
+        a[j * m + j] = l;
+        for i in j + 1..m {
+            let mut t = a[i * m + j];
+            for k in 0..j {
+                t -= a[i * m + k] * a[j * m + k];
+            }
+            a[i * m + j] = t / l;
+        }
+    }
+    let mut y = b.to_vec();
+    for i in 0..m {
+        for k in 0..i {
+            y[i] -= a[i * m + k] * y[k];
+        }
+        y[i] /= a[i * m + i];
+    }
+    for i in (0..m).rev() {
+        for k in i + 1..m {
+            y[i] -= a[k * m + i] * y[k];
+        }
+        y[i] /= a[i * m + i];
+    }
+    Some(y)
+}
+
+/// Inverse of a symmetric positive definite matrix, `None` when singular.
+pub fn invert_spd(a: &[f64], m: usize) -> Option<Vec<f64>> {
+    let mut inv = vec![0.0; m * m];
+    for c in 0..m {
+        let mut work = a.to_vec();
+        let mut e = vec![0.0; m];
+        e[c] = 1.0;
+        let col = cholesky_solve(&mut work, &mut e, m)?;
+        for r in 0..m {
+            inv[r * m + c] = col[r];
+        }
+    }
+    Some(inv)
+}
+
+/// Ordinary linear least squares min ‖A x − y‖ by the normal equations (A column-major, n×p);
+/// `None` when A has dependent columns. For regressions such as the inverse-model fits.
+pub fn linear_lsq(a_cols: &[Vec<f64>], y: &[f64]) -> Option<Vec<f64>> {
+    let p = a_cols.len();
+    let mut ata = vec![0.0; p * p];
+    let mut aty = vec![0.0; p];
+    for i in 0..p {
+        for k in 0..p {
+            ata[i * p + k] = a_cols[i].iter().zip(&a_cols[k]).map(|(u, v)| u * v).sum();
+        }
+        aty[i] = a_cols[i].iter().zip(y).map(|(u, v)| u * v).sum();
+    }
+    cholesky_solve(&mut ata, &mut aty, p)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn opts() -> LsqOptions {
+        LsqOptions { max_iterations: 200, ..Default::default() }
+    }
+
+    #[test]
+    fn solves_rosenbrock_from_the_classic_start() {
+        let r = |x: &[f64], out: &mut [f64]| {
+            out[0] = 10.0 * (x[1] - x[0] * x[0]);
+            out[1] = 1.0 - x[0];
+            Ok(())
+        };
+        let res = solve(r, &[-1.2, 1.0], &[-5.0, -5.0], &[5.0, 5.0], 2, &opts()).unwrap();
+        assert!((res.x[0] - 1.0).abs() < 1e-6 && (res.x[1] - 1.0).abs() < 1e-6, "{:?}", res);
+        assert!(res.cost < 1e-12);
+    }
+
+    #[test]
+    fn respects_bounds_and_stops_on_the_active_one() {
+        // Unconstrained optimum x = 3; bound at 2.
+        let r = |x: &[f64], out: &mut [f64]| {
+            out[0] = x[0] - 3.0;
+            out[1] = 0.5 * (x[1] + 1.0);
+            Ok(())
+        };
+        let res = solve(r, &[0.0, 0.0], &[-1.0, -1.0], &[2.0, 1.0], 2, &opts()).unwrap();
+        assert_eq!(res.x[0], 2.0);
+        assert!((res.x[1] + 1.0).abs() < 1e-9);
+        assert!(res.ci95[0].is_none(), "a parameter on its bound has no interval");
+    }
+
+    #[test]
+    fn fits_an_exponential_and_its_confidence_interval_covers_the_truth() {
+        // y = a e^{-b t} + noise (deterministic pseudo-noise), a = 2, b = 0.7.
+        let t: Vec<f64> = (0..200).map(|k| k as f64 * 0.05).collect();
+        let noise = |k: usize| ((k as f64 * 12.9898).sin() * 43758.5453).rem_euclid(1.0) * 0.02 - 0.01;
+        let y: Vec<f64> = t.iter().enumerate().map(|(k, &t)| 2.0 * (-0.7 * t).exp() + noise(k)).collect();
+        let r = |x: &[f64], out: &mut [f64]| {
+            for k in 0..t.len() {
+                out[k] = x[0] * (-x[1] * t[k]).exp() - y[k];
+            }
+            Ok(())
+        };
+        let res = solve(r, &[1.0, 0.1], &[0.0, 0.0], &[10.0, 10.0], t.len(), &opts()).unwrap();
+        let (ca, cb) = (res.ci95[0].unwrap(), res.ci95[1].unwrap());
+        assert!((res.x[0] - 2.0).abs() < 3.0 * ca && ca < 0.02, "a {} ± {}", res.x[0], ca);
+        assert!((res.x[1] - 0.7).abs() < 3.0 * cb && cb < 0.02, "b {} ± {}", res.x[1], cb);
+        assert!(res.cost < res.initial_cost * 1e-3);
+    }
+
+    #[test]
+    fn survives_a_model_that_fails_in_part_of_the_box() {
+        // The "simulation" diverges for x > 1.5; the optimum is at 1.
+        let r = |x: &[f64], out: &mut [f64]| {
+            if x[0] > 1.5 {
+                return Err("diverged".into());
+            }
+            out[0] = x[0] - 1.0;
+            Ok(())
+        };
+        let res = solve(r, &[0.0], &[0.0], &[100.0], 1, &opts()).unwrap();
+        assert!((res.x[0] - 1.0).abs() < 1e-6);
+        assert!(matches!(
+            solve(r, &[2.0], &[0.0], &[100.0], 1, &opts()),
+            Err(LsqError::StartFailed(_))
+        ));
+    }
+
+    #[test]
+    fn bad_bounds_name_the_parameter() {
+        let r = |_: &[f64], out: &mut [f64]| {
+            out[0] = 0.0;
+            Ok(())
+        };
+        let e = solve(r, &[0.0, 0.0], &[0.0, 1.0], &[1.0, 0.0], 1, &opts()).unwrap_err();
+        assert_eq!(e, LsqError::BadBounds { index: 1, message: "lower 1 / upper 0 / start 0".into() });
+    }
+
+    #[test]
+    fn linear_lsq_recovers_a_line() {
+        let x: Vec<f64> = (0..50).map(|k| k as f64).collect();
+        let ones = vec![1.0; 50];
+        let y: Vec<f64> = x.iter().map(|x| 3.0 * x - 2.0).collect();
+        let c = linear_lsq(&[x, ones], &y).unwrap();
+        assert!((c[0] - 3.0).abs() < 1e-9 && (c[1] + 2.0).abs() < 1e-9);
+    }
+}
