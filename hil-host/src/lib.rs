@@ -2,3 +2,4 @@
 //! identification and diagnosis.
 pub mod log;
 pub mod lsq;
+pub mod residuals;
