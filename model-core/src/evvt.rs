@@ -1,1 +1,779 @@
-//! (being written)
+//! Electric cam phaser (EVVT): planetary gear set whose carrier is driven by an electric motor,
+//! ring gear driven by the timing belt at half crank speed, sun gear on the camshaft
+//! (Yang, Zhang, Song, Zhu, "LPV Model Identification of an EVVT System", ACC 2015).
+//!
+//! The identified LPV model, eq. (12): from the motor speed command (motor speed minus ring-gear
+//! speed, rpm) to the cam phase (crank degrees),
+//!
+//! ```text
+//!     G(N, V) = α(N, V) / (s (s + β(N, V)))
+//! ```
+//!
+//! with engine speed N and battery voltage V as scheduling parameters, bounded as in
+//! eqs. (13)-(14). The state is `x1` = cam phase (crank deg), `x2` = phase rate (crank deg/s):
+//! `x1' = x2`, `x2' = -β x2 + α u`. It is stepped with the exact zero-order-hold
+//! discretization [`zoh`], recomputed whenever α, β or the step changes.
+//!
+//! # The α, β table (a design, not the paper's numbers)
+//!
+//! The PDF-to-text extraction lost Table III: only fragments survive ("s(s+8.47)", "0.45",
+//! "s(s+10.6)", "s(s+1.4)") and the upper bounds `α <= 0.595`, `β <= 6.975` of eqs. (13)-(14).
+//! The extraction also drops every digit '2' throughout the text ("015" for 2015, "[1]" for
+//! [12], "nd order" for 2nd order, "centered at 5" for 25 degrees), so those fragments are not
+//! reliable either: β fragments 8.47 and 10.6 exceed the bound 6.975, which therefore probably
+//! lost a '2' itself (e.g. 26.975). We keep the bounds as given (max α = 0.595 crank-deg/(s²·rpm),
+//! max β = 6.975 1/s, both at 1400 rpm, 14 V) and designed the remaining eight points to honour
+//! everything the text states (Section III, Fig. 3, Section IV-D, Fig. 10):
+//!
+//! - higher battery voltage → larger α and β at every engine speed (more motor torque);
+//! - at 14 V, higher engine speed → larger α and β (torque-limited motor, more power at speed);
+//! - at 9.5 V, higher engine speed → smaller α and β (motor power saturates);
+//! - engine speed has less influence than voltage (at 14 V and 11.5 V speed moves α, β by about
+//!   10 %, voltage moves them 2× to 8.5×);
+//! - with one proportional gain kp = [`PAPER_DESIGN_KP_RPM_PER_DEG`] for all nine points, the
+//!   closed-loop step settling time at 800 rpm about doubles from 14 V to 9.5 V, and at 9.5 V
+//!   about halves from 1400 rpm to 800 rpm (Fig. 3 text). `tests/evvt_paper.rs` measures it.
+//!
+//! The DC velocity gain α/β (crank-deg/s per rpm) falls at low voltage (0.087 → 0.079 → 0.045 at
+//! 14 V / 800 rpm, 9.5 V / 800 rpm, 9.5 V / 1400 rpm): the motor cannot reach the commanded
+//! speed difference when its power saturates ("reduced DC gain", Section IV-D).
+//!
+//! Note on units: the kinematic gain of eq. (11) for a motor that drives the carrier directly
+//! is 12·(n_s + n_r)/n_s crank-deg/s per rpm (tens of degrees per second per rpm), about 400
+//! times the identified α/β. The paper's command signal therefore carries a scaling that the
+//! text does not give; the plant model follows the identified α/β (the brief's units), and
+//! [`PlanetaryGear`] gives the ideal kinematics for the feed-through.
+
+use crate::lut::{Lut2, LutError};
+use crate::real::Real;
+
+/// Engine speed breakpoints of the identification grid (Section IV-B), rpm.
+pub const ENGINE_SPEED_BREAKPOINTS_RPM: [f64; 3] = [800.0, 1100.0, 1400.0];
+/// Battery voltage breakpoints of the identification grid (Section IV-B), V.
+pub const BATTERY_VOLTAGE_BREAKPOINTS_V: [f64; 3] = [9.5, 11.5, 14.0];
+
+/// α(N, V), crank-deg/(s²·rpm), rows: engine speed 800/1100/1400 rpm, columns: battery
+/// voltage 9.5/11.5/14 V. Designed (see the module doc); maximum 0.595 as eq. (13).
+pub const PAPER_DESIGN_ALPHA: [[f64; 3]; 3] =
+    [[0.27, 0.36, 0.54], [0.16, 0.34, 0.57], [0.07, 0.32, 0.595]];
+/// β(N, V), 1/s, same layout as [`PAPER_DESIGN_ALPHA`]; maximum 6.975 as eq. (14).
+pub const PAPER_DESIGN_BETA: [[f64; 3]; 3] =
+    [[3.4, 4.8, 6.2], [2.4, 4.7, 6.6], [1.55, 4.6, 6.975]];
+/// The one proportional gain (motor rpm per crank degree of phase error) for which the table
+/// reproduces the Fig. 3 settling-time ratios (Section IV-A: "a well-tuned proportional
+/// controller").
+pub const PAPER_DESIGN_KP_RPM_PER_DEG: f64 = 25.0;
+
+/// Resolution of the cam phase calculation (Section IV-C: "1 crank degree").
+pub const PHASE_RESOLUTION_DEG: f64 = 1.0;
+
+/// The LPV scheduling table of eq. (12): α and β at the 3×3 grid of engine speed and battery
+/// voltage, interpolated bilinearly and clamped outside the grid.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EvvtLpvTable {
+    pub engine_speed_rpm: [f64; 3],
+    pub battery_voltage_v: [f64; 3],
+    /// `alpha[i][j]` at `engine_speed_rpm[i]`, `battery_voltage_v[j]`, crank-deg/(s²·rpm).
+    pub alpha_deg_per_s2_rpm: [[f64; 3]; 3],
+    /// `beta[i][j]`, 1/s.
+    pub beta_per_s: [[f64; 3]; 3],
+}
+
+impl EvvtLpvTable {
+    /// The designed table (module doc).
+    pub const PAPER_DESIGN: Self = Self {
+        engine_speed_rpm: ENGINE_SPEED_BREAKPOINTS_RPM,
+        battery_voltage_v: BATTERY_VOLTAGE_BREAKPOINTS_V,
+        alpha_deg_per_s2_rpm: PAPER_DESIGN_ALPHA,
+        beta_per_s: PAPER_DESIGN_BETA,
+    };
+
+    /// Builds the two lookup tables, checking that α > 0 and β >= 0 everywhere (a non-positive
+    /// α would turn the phaser around; a negative β would make it unstable).
+    pub fn build<R: Real>(&self) -> Result<(Lut2<R, 3, 3>, Lut2<R, 3, 3>), EvvtParamError> {
+        for i in 0..3 {
+            for j in 0..3 {
+                let a = self.alpha_deg_per_s2_rpm[i][j];
+                if !(a > 0.0 && a < 1.0e3) {
+                    return Err(EvvtParamError::AlphaDegPerS2Rpm { speed_index: i, voltage_index: j });
+                }
+                let b = self.beta_per_s[i][j];
+                if !(b >= 0.0 && b < 1.0e4) {
+                    return Err(EvvtParamError::BetaPerS { speed_index: i, voltage_index: j });
+                }
+            }
+        }
+        let alpha = Lut2::new(self.engine_speed_rpm, self.battery_voltage_v, self.alpha_deg_per_s2_rpm)
+            .map_err(EvvtParamError::Breakpoints)?;
+        let beta = Lut2::new(self.engine_speed_rpm, self.battery_voltage_v, self.beta_per_s)
+            .map_err(EvvtParamError::Breakpoints)?;
+        Ok((alpha, beta))
+    }
+}
+
+impl Default for EvvtLpvTable {
+    fn default() -> Self {
+        Self::PAPER_DESIGN
+    }
+}
+
+/// Why an [`EvvtParams`] (or a controller config built on its table) was rejected; each
+/// variant names the parameter.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum EvvtParamError {
+    /// The breakpoints of `engine_speed_rpm` (axis 0) or `battery_voltage_v` (axis 1).
+    Breakpoints(LutError),
+    /// `alpha_deg_per_s2_rpm[speed_index][voltage_index]` is not in (0, 1e3).
+    AlphaDegPerS2Rpm { speed_index: usize, voltage_index: usize },
+    /// `beta_per_s[speed_index][voltage_index]` is not in [0, 1e4).
+    BetaPerS { speed_index: usize, voltage_index: usize },
+    /// `phase_min_deg` / `phase_max_deg` not finite or not increasing.
+    PhaseRangeDeg,
+    /// `initial_phase_deg` outside the phase range.
+    InitialPhaseDeg,
+    /// `voltage_effect_scale` not in [0, 2].
+    VoltageEffectScale,
+    /// `nominal_voltage_v` not finite or not positive.
+    NominalVoltageV,
+    /// `engine_speed_effect_scale` not in [0, 2].
+    EngineSpeedEffectScale,
+    /// `nominal_engine_rpm` not finite or not positive.
+    NominalEngineRpm,
+    /// `advance_alpha_factor` not in (0, 4].
+    AdvanceAlphaFactor,
+    /// `belt_vibration_amplitude_deg` not in [0, 20].
+    BeltVibrationAmplitudeDeg,
+    /// `belt_vibration_order` not in [0, 16].
+    BeltVibrationOrder,
+    /// `belt_vibration_phase_rad` not finite.
+    BeltVibrationPhaseRad,
+}
+
+/// Parameters of the phaser model, plain f64 with units in the names. The four effects of the
+/// diagnosis catalogue (DATA-FORMAT.md, plant `evvt`) are fields; each has an "off" value that
+/// gives the baseline.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EvvtParams {
+    pub lpv: EvvtLpvTable,
+    /// Mechanical stops (Section IV-B: "adjustable cam phase range of 0 to 40 degree").
+    pub phase_min_deg: f64,
+    pub phase_max_deg: f64,
+    pub initial_phase_deg: f64,
+    /// Effect `supply-voltage`: α and β are looked up at
+    /// `V_nom + scale·(V − V_nom)`. 1 = the table's voltage dependence, 0 = off (frozen at
+    /// `nominal_voltage_v`).
+    pub voltage_effect_scale: f64,
+    pub nominal_voltage_v: f64,
+    /// Effect `engine-speed`: α and β are looked up at `N_nom + scale·(N − N_nom)`.
+    /// 1 = the table's speed dependence, 0 = off (frozen at `nominal_engine_rpm`).
+    pub engine_speed_effect_scale: f64,
+    pub nominal_engine_rpm: f64,
+    /// Effect `direction`: α is multiplied by this factor while the command drives the phase
+    /// towards advance (u > 0), Section IV-C: "advancing responses are slightly slower than the
+    /// retarding responses" (extra motor torque to accelerate). 1 = off (symmetric), < 1 slower
+    /// advance.
+    pub advance_alpha_factor: f64,
+    /// Effect `belt-vibration`: a phase disturbance `A·sin(2π·order·revolutions + φ0)` added to
+    /// the cam phase, locked to crank angle, so its frequency follows engine speed (Section
+    /// IV-B, the spike in Fig. 8 whose frequency "increases as the engine speed goes up").
+    /// 0 = off.
+    pub belt_vibration_amplitude_deg: f64,
+    /// Disturbance cycles per engine revolution (0.5 = once per camshaft revolution).
+    pub belt_vibration_order: f64,
+    pub belt_vibration_phase_rad: f64,
+}
+
+impl Default for EvvtParams {
+    /// The designed table, the 0..40 degree range, all effects of the catalogue at the values
+    /// the table implies: voltage and speed dependence on, direction symmetric, no belt
+    /// vibration (its order preset to 0.5 so switching it on needs only an amplitude).
+    fn default() -> Self {
+        Self {
+            lpv: EvvtLpvTable::PAPER_DESIGN,
+            phase_min_deg: 0.0,
+            phase_max_deg: 40.0,
+            initial_phase_deg: 0.0,
+            voltage_effect_scale: 1.0,
+            nominal_voltage_v: 14.0,
+            engine_speed_effect_scale: 1.0,
+            nominal_engine_rpm: 1100.0,
+            advance_alpha_factor: 1.0,
+            belt_vibration_amplitude_deg: 0.0,
+            belt_vibration_order: 0.5,
+            belt_vibration_phase_rad: 0.0,
+        }
+    }
+}
+
+impl EvvtParams {
+    /// The baseline for the diagnosis: every catalogue effect off (α, β frozen at the nominal
+    /// voltage and engine speed, symmetric, no belt vibration).
+    pub fn baseline() -> Self {
+        Self {
+            voltage_effect_scale: 0.0,
+            engine_speed_effect_scale: 0.0,
+            ..Self::default()
+        }
+    }
+
+    pub fn validate(&self) -> Result<(), EvvtParamError> {
+        let in_range = |x: f64, lo: f64, hi: f64| x >= lo && x <= hi;
+        if !(self.phase_min_deg.is_finite()
+            && self.phase_max_deg.is_finite()
+            && self.phase_max_deg > self.phase_min_deg)
+        {
+            return Err(EvvtParamError::PhaseRangeDeg);
+        }
+        if !in_range(self.initial_phase_deg, self.phase_min_deg, self.phase_max_deg) {
+            return Err(EvvtParamError::InitialPhaseDeg);
+        }
+        if !in_range(self.voltage_effect_scale, 0.0, 2.0) {
+            return Err(EvvtParamError::VoltageEffectScale);
+        }
+        if !(self.nominal_voltage_v.is_finite() && self.nominal_voltage_v > 0.0) {
+            return Err(EvvtParamError::NominalVoltageV);
+        }
+        if !in_range(self.engine_speed_effect_scale, 0.0, 2.0) {
+            return Err(EvvtParamError::EngineSpeedEffectScale);
+        }
+        if !(self.nominal_engine_rpm.is_finite() && self.nominal_engine_rpm > 0.0) {
+            return Err(EvvtParamError::NominalEngineRpm);
+        }
+        if !(self.advance_alpha_factor > 0.0 && self.advance_alpha_factor <= 4.0) {
+            return Err(EvvtParamError::AdvanceAlphaFactor);
+        }
+        if !in_range(self.belt_vibration_amplitude_deg, 0.0, 20.0) {
+            return Err(EvvtParamError::BeltVibrationAmplitudeDeg);
+        }
+        if !in_range(self.belt_vibration_order, 0.0, 16.0) {
+            return Err(EvvtParamError::BeltVibrationOrder);
+        }
+        if !self.belt_vibration_phase_rad.is_finite() {
+            return Err(EvvtParamError::BeltVibrationPhaseRad);
+        }
+        Ok(())
+    }
+}
+
+/// Exact zero-order-hold discretization of `x1' = x2`, `x2' = -β x2 + α u` over one step T:
+///
+/// ```text
+///     Ad = [[1, T φ1], [0, e^{-βT}]],   Bd = α [T² φ2, T φ1],
+///     φ1 = (1 − e^{-x})/x,   φ2 = (x − 1 + e^{-x})/x²,   x = βT
+/// ```
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Zoh<R: Real> {
+    /// Ad[0][1] = T φ1, s.
+    pub ad12_s: R,
+    /// Ad[1][1] = e^{-βT}.
+    pub ad22: R,
+    /// Bd[0] = α T² φ2, crank-deg per rpm.
+    pub bd1_deg_per_rpm: R,
+    /// Bd[1] = α T φ1, crank-deg/s per rpm.
+    pub bd2_deg_per_s_rpm: R,
+}
+
+/// Computes [`Zoh`] for `alpha` (crank-deg/(s²·rpm)), `beta` (1/s) and `t_s` (s). For
+/// βT < 2 φ1, φ2 come from their power series (nested form, 25 terms, truncation < 1e-16):
+/// no division by β, so β → 0 gives the double integrator (φ1 = 1, φ2 = 1/2) smoothly, and no
+/// cancellation in `x − 1 + e^{-x}` (which in f32 would lose most digits at βT = 0.07).
+/// Negative β or T are treated as 0 (the plant is never unstable).
+pub fn zoh<R: Real>(alpha: R, beta: R, t_s: R) -> Zoh<R> {
+    let t = t_s.max(R::ZERO);
+    let x = (beta * t).max(R::ZERO);
+    // Above βT = 2 the closed form is accurate even with f32's approximate exp (e^{-x} < 0.14
+    // enters φ2 only through 1 − φ1 > 0.57).
+    let (phi1, phi2, e) = if x < R::from_f64(2.0) {
+        // g = 1 − x/3 (1 − x/4 (1 − … x/26)); φ2 = g/2, φ1 = 1 − (x/2) g.
+        let mut g = R::ONE;
+        let mut n = 26;
+        while n >= 3 {
+            g = R::ONE - x * g / R::from_f64(n as f64);
+            n -= 1;
+        }
+        let phi2 = g / R::from_f64(2.0);
+        let phi1 = R::ONE - x * phi2;
+        // e^{-x} = 1 − x φ1, consistent with φ1 to the last bit.
+        (phi1, phi2, R::ONE - x * phi1)
+    } else {
+        let e = (-x).exp();
+        let phi1 = (R::ONE - e) / x;
+        let phi2 = (R::ONE - phi1) / x;
+        (phi1, phi2, e)
+    };
+    Zoh {
+        ad12_s: t * phi1,
+        ad22: e,
+        // α·T·(T·φ2) keeps each factor well scaled for Q32.32.
+        bd1_deg_per_rpm: alpha * t * (t * phi2),
+        bd2_deg_per_s_rpm: alpha * t * phi1,
+    }
+}
+
+/// Rounds the phase to the resolution of the cam phase calculation (round half up), the
+/// measurement the controller sees (Section IV-C: 1 crank degree). A non-positive resolution
+/// returns the phase unchanged.
+pub fn quantize_phase_deg<R: Real>(phase_deg: R, resolution_deg: R) -> R {
+    if resolution_deg <= R::ZERO {
+        return phase_deg;
+    }
+    // The phase is within a few hundred degrees, so the count fits f64 exactly.
+    let counts = libm::floor((phase_deg / resolution_deg).to_f64() + 0.5);
+    R::from_f64(counts) * resolution_deg
+}
+
+/// Planetary gear kinematics of eq. (11): `Φ = (n_s + n_r)/n_s ∫ (Ω_c − Ω_r) dt` (cam
+/// degrees), the ring gear at half crank speed (Section III). Teeth counts are not given in the
+/// paper; the default (sun 24, ring 60) is an assumption.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlanetaryGear {
+    pub sun_teeth: f64,
+    pub ring_teeth: f64,
+}
+
+impl Default for PlanetaryGear {
+    fn default() -> Self {
+        Self { sun_teeth: 24.0, ring_teeth: 60.0 }
+    }
+}
+
+impl PlanetaryGear {
+    /// (n_s + n_r)/n_s; teeth counts below 1 are taken as 1 (avoids a division by zero).
+    pub fn ratio(&self) -> f64 {
+        let s = self.sun_teeth.max(1.0);
+        (s + self.ring_teeth.max(1.0)) / s
+    }
+
+    /// Crank-degrees per second of cam phase per rpm of carrier-minus-ring speed:
+    /// ratio · 6 deg/s per rpm · 2 crank degrees per cam degree.
+    pub fn phase_rate_gain_deg_per_s_rpm(&self) -> f64 {
+        12.0 * self.ratio()
+    }
+
+    /// The ring gear runs at half crank speed (Section III).
+    pub fn ring_speed_rpm<R: Real>(engine_rpm: R) -> R {
+        engine_rpm / R::from_f64(2.0)
+    }
+
+    /// dΦ/dt of eq. (11) in crank degrees per second.
+    pub fn phase_rate_deg_per_s<R: Real>(&self, carrier_rpm: R, ring_rpm: R) -> R {
+        R::from_f64(self.phase_rate_gain_deg_per_s_rpm()) * (carrier_rpm - ring_rpm)
+    }
+
+    /// Inverse of eq. (11) for the firmware: the motor (carrier) speed that moves the phase at
+    /// `phase_rate_deg_per_s`: ring speed (holds the phase) plus the correction.
+    pub fn motor_speed_for_phase_rate_rpm<R: Real>(&self, phase_rate_deg_per_s: R, engine_rpm: R) -> R {
+        Self::ring_speed_rpm(engine_rpm)
+            + phase_rate_deg_per_s / R::from_f64(self.phase_rate_gain_deg_per_s_rpm())
+    }
+}
+
+/// The phaser plant: eq. (12) with the LPV table, exact ZOH stepping, mechanical stops and the
+/// catalogue effects.
+#[derive(Clone, Debug)]
+pub struct EvvtPlant<R: Real> {
+    alpha: Lut2<R, 3, 3>,
+    beta: Lut2<R, 3, 3>,
+    phase_min_deg: R,
+    phase_max_deg: R,
+    voltage_effect_scale: R,
+    nominal_voltage_v: R,
+    engine_speed_effect_scale: R,
+    nominal_engine_rpm: R,
+    advance_alpha_factor: R,
+    belt_amplitude_deg: R,
+    belt_order: R,
+    belt_phase_rad: R,
+    /// x1: cam phase without the belt disturbance, crank deg.
+    phase_deg: R,
+    /// x2: phase rate, crank deg/s.
+    rate_deg_per_s: R,
+    /// Belt disturbance cycle position in [0, 1).
+    belt_cycle: R,
+    /// ZOH matrices and the (α, β, T) they were computed for.
+    zoh: Zoh<R>,
+    zoh_key: (R, R, R),
+}
+
+impl<R: Real> EvvtPlant<R> {
+    pub fn new(p: &EvvtParams) -> Result<Self, EvvtParamError> {
+        p.validate()?;
+        let (alpha, beta) = p.lpv.build::<R>()?;
+        let f = R::from_f64;
+        Ok(Self {
+            alpha,
+            beta,
+            phase_min_deg: f(p.phase_min_deg),
+            phase_max_deg: f(p.phase_max_deg),
+            voltage_effect_scale: f(p.voltage_effect_scale),
+            nominal_voltage_v: f(p.nominal_voltage_v),
+            engine_speed_effect_scale: f(p.engine_speed_effect_scale),
+            nominal_engine_rpm: f(p.nominal_engine_rpm),
+            advance_alpha_factor: f(p.advance_alpha_factor),
+            belt_amplitude_deg: f(p.belt_vibration_amplitude_deg),
+            belt_order: f(p.belt_vibration_order),
+            belt_phase_rad: f(p.belt_vibration_phase_rad),
+            phase_deg: f(p.initial_phase_deg),
+            rate_deg_per_s: R::ZERO,
+            belt_cycle: R::ZERO,
+            zoh: zoh(R::ZERO, R::ZERO, R::ZERO),
+            zoh_key: (R::ZERO, R::ZERO, R::ZERO),
+        })
+    }
+
+    /// α (crank-deg/(s²·rpm)) and β (1/s) of eq. (12) at engine speed `engine_rpm` and battery
+    /// voltage `u_batt_v`, with the `supply-voltage` and `engine-speed` effect scales applied.
+    pub fn alpha_beta(&self, engine_rpm: R, u_batt_v: R) -> (R, R) {
+        let v = self.nominal_voltage_v + self.voltage_effect_scale * (u_batt_v - self.nominal_voltage_v);
+        let n = self.nominal_engine_rpm
+            + self.engine_speed_effect_scale * (engine_rpm - self.nominal_engine_rpm);
+        (self.alpha.eval(n, v), self.beta.eval(n, v))
+    }
+
+    /// Advances the plant by `dt_s` with the motor speed command `motor_cmd_rpm` (motor speed
+    /// minus ring-gear speed) held constant, and returns the cam phase (crank deg, including
+    /// the belt disturbance, not quantized).
+    pub fn step(&mut self, motor_cmd_rpm: R, engine_rpm: R, u_batt_v: R, dt_s: R) -> R {
+        let dt = dt_s.max(R::ZERO);
+        let (mut alpha, beta) = self.alpha_beta(engine_rpm, u_batt_v);
+        if motor_cmd_rpm > R::ZERO {
+            alpha *= self.advance_alpha_factor;
+        }
+        let key = (alpha, beta, dt);
+        if key != self.zoh_key {
+            self.zoh = zoh(alpha, beta, dt);
+            self.zoh_key = key;
+        }
+        let z = self.zoh;
+        let x1 = self.phase_deg + z.ad12_s * self.rate_deg_per_s + z.bd1_deg_per_rpm * motor_cmd_rpm;
+        let x2 = z.ad22 * self.rate_deg_per_s + z.bd2_deg_per_s_rpm * motor_cmd_rpm;
+        self.phase_deg = x1;
+        self.rate_deg_per_s = x2;
+        // Mechanical stops: the phase cannot pass them and the motion into the stop ends there.
+        if self.phase_deg >= self.phase_max_deg {
+            self.phase_deg = self.phase_max_deg;
+            self.rate_deg_per_s = self.rate_deg_per_s.min(R::ZERO);
+        } else if self.phase_deg <= self.phase_min_deg {
+            self.phase_deg = self.phase_min_deg;
+            self.rate_deg_per_s = self.rate_deg_per_s.max(R::ZERO);
+        }
+        self.advance_belt(engine_rpm.max(R::ZERO), dt);
+        self.phase_deg_out()
+    }
+
+    fn advance_belt(&mut self, engine_rpm: R, dt: R) {
+        self.belt_cycle += self.belt_order * engine_rpm / R::from_f64(60.0) * dt;
+        // Wrap to [0, 1): keeps the sine argument small (Q32 range, f32 precision). One step
+        // advances at most order·N·dt/60 cycles (< 1 for any realistic dt); the bound keeps the
+        // loop finite whatever the input, and an absurd step restarts the cycle.
+        let mut wraps = 0;
+        while self.belt_cycle >= R::ONE {
+            self.belt_cycle -= R::ONE;
+            wraps += 1;
+            if wraps >= 16 {
+                self.belt_cycle = R::ZERO;
+            }
+        }
+    }
+
+    /// The belt disturbance now, crank deg.
+    pub fn belt_disturbance_deg(&self) -> R {
+        if self.belt_amplitude_deg == R::ZERO {
+            return R::ZERO;
+        }
+        let two_pi = R::from_f64(2.0 * core::f64::consts::PI);
+        self.belt_amplitude_deg * (two_pi * self.belt_cycle + self.belt_phase_rad).sin()
+    }
+
+    fn phase_deg_out(&self) -> R {
+        self.phase_deg + self.belt_disturbance_deg()
+    }
+
+    /// Cam phase including the belt disturbance, crank deg.
+    pub fn phase_deg(&self) -> R {
+        self.phase_deg_out()
+    }
+
+    /// The phase as the ECU measures it: quantized to [`PHASE_RESOLUTION_DEG`].
+    pub fn measured_phase_deg(&self) -> R {
+        quantize_phase_deg(self.phase_deg_out(), R::from_f64(PHASE_RESOLUTION_DEG))
+    }
+
+    /// Phase rate (state x2), crank deg/s.
+    pub fn phase_rate_deg_per_s(&self) -> R {
+        self.rate_deg_per_s
+    }
+
+    /// Sets the phase (clamped to the stops) and zeroes the rate and the belt cycle.
+    pub fn reset(&mut self, phase_deg: R) {
+        self.phase_deg = phase_deg.clamp(self.phase_min_deg, self.phase_max_deg);
+        self.rate_deg_per_s = R::ZERO;
+        self.belt_cycle = R::ZERO;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::real::Q32;
+    use proptest::prelude::*;
+
+    /// Fine-step RK4 of the continuous model, the reference for the ZOH.
+    fn rk4(alpha: f64, beta: f64, t: f64, x0: (f64, f64), u: f64, n: usize) -> (f64, f64) {
+        let f = |x: (f64, f64)| (x.1, -beta * x.1 + alpha * u);
+        let h = t / n as f64;
+        let mut x = x0;
+        for _ in 0..n {
+            let k1 = f(x);
+            let k2 = f((x.0 + h / 2.0 * k1.0, x.1 + h / 2.0 * k1.1));
+            let k3 = f((x.0 + h / 2.0 * k2.0, x.1 + h / 2.0 * k2.1));
+            let k4 = f((x.0 + h * k3.0, x.1 + h * k3.1));
+            x.0 += h / 6.0 * (k1.0 + 2.0 * k2.0 + 2.0 * k3.0 + k4.0);
+            x.1 += h / 6.0 * (k1.1 + 2.0 * k2.1 + 2.0 * k3.1 + k4.1);
+        }
+        x
+    }
+
+    proptest! {
+        /// The ZOH step equals the continuous solution under a held input, both branches
+        /// (βT < 1 series, βT >= 1 closed form) and β = 0.
+        #[test]
+        fn zoh_matches_fine_integration(alpha in 0.01f64..2.0, beta in 0.0f64..200.0,
+                                        t in 0.0005f64..0.05, x1 in -10.0f64..40.0,
+                                        x2 in -50.0f64..50.0, u in -800.0f64..800.0) {
+            let z = zoh(alpha, beta, t);
+            let y1 = x1 + z.ad12_s * x2 + z.bd1_deg_per_rpm * u;
+            let y2 = z.ad22 * x2 + z.bd2_deg_per_s_rpm * u;
+            let (r1, r2) = rk4(alpha, beta, t, (x1, x2), u, 2000);
+            prop_assert!((y1 - r1).abs() < 1e-9 * (1.0 + r1.abs()), "x1 {y1} vs {r1}");
+            prop_assert!((y2 - r2).abs() < 1e-9 * (1.0 + r2.abs()), "x2 {y2} vs {r2}");
+        }
+
+        /// Series and closed form agree where they meet (βT = 2).
+        #[test]
+        fn zoh_continuous_across_branch(alpha in 0.05f64..1.0, t in 0.001f64..0.1) {
+            let lo = zoh(alpha, (2.0 - 1e-9) / t, t);
+            let hi = zoh(alpha, (2.0 + 1e-9) / t, t);
+            prop_assert!((lo.bd1_deg_per_rpm - hi.bd1_deg_per_rpm).abs() <= 1e-8 * hi.bd1_deg_per_rpm);
+            prop_assert!((lo.ad22 - hi.ad22).abs() < 1e-8);
+        }
+
+        /// f32 ZOH against f64 over both branches: relative error of Bd below 5e-5 (the
+        /// closed-form branch inherits micromath's exp error, damped by the form of φ2).
+        #[test]
+        fn zoh_f32_close_to_f64(alpha in 0.05f64..1.0, beta in 0.0f64..100.0, t in 0.001f64..0.05) {
+            let r = zoh(alpha, beta, t);
+            let s = zoh(alpha as f32, beta as f32, t as f32);
+            prop_assert!((s.bd1_deg_per_rpm as f64 - r.bd1_deg_per_rpm).abs() <= 5e-5 * r.bd1_deg_per_rpm);
+            prop_assert!((s.bd2_deg_per_s_rpm as f64 - r.bd2_deg_per_s_rpm).abs() <= 5e-5 * r.bd2_deg_per_s_rpm);
+            prop_assert!((s.ad22 as f64 - r.ad22).abs() <= 5e-5);
+        }
+    }
+
+    #[test]
+    fn zoh_of_zero_beta_is_the_double_integrator() {
+        let z = zoh(0.5f64, 0.0, 0.01);
+        assert_eq!(z.ad22, 1.0);
+        assert!((z.ad12_s - 0.01).abs() < 1e-15);
+        assert!((z.bd1_deg_per_rpm - 0.5 * 0.01 * 0.01 / 2.0).abs() < 1e-15);
+        assert!((z.bd2_deg_per_s_rpm - 0.5 * 0.01).abs() < 1e-15);
+        // Negative inputs are clamped, not propagated.
+        assert_eq!(zoh(0.5f64, -3.0, 0.01), z);
+    }
+
+    #[test]
+    fn zoh_in_fixed_point_matches_f64() {
+        for &(a, b) in &[(0.595, 6.975), (0.07, 1.55), (0.27, 3.4)] {
+            let r = zoh(a, b, 0.01);
+            let q = zoh(Q32::from_f64(a), Q32::from_f64(b), Q32::from_f64(0.01));
+            assert!((q.bd1_deg_per_rpm.to_f64() - r.bd1_deg_per_rpm).abs() < 1e-5 * r.bd1_deg_per_rpm);
+            assert!((q.bd2_deg_per_s_rpm.to_f64() - r.bd2_deg_per_s_rpm).abs() < 1e-6 * r.bd2_deg_per_s_rpm);
+            assert!((q.ad22.to_f64() - r.ad22).abs() < 1e-8);
+        }
+    }
+
+    #[test]
+    fn table_honours_the_papers_text() {
+        let a = PAPER_DESIGN_ALPHA;
+        let b = PAPER_DESIGN_BETA;
+        for i in 0..3 {
+            for j in 0..2 {
+                // Higher voltage → larger α and β at every speed.
+                assert!(a[i][j + 1] > a[i][j] && b[i][j + 1] > b[i][j]);
+            }
+        }
+        for i in 0..2 {
+            // At 14 V faster with speed, at 9.5 V slower with speed.
+            assert!(a[i + 1][2] > a[i][2] && b[i + 1][2] > b[i][2]);
+            assert!(a[i + 1][0] < a[i][0] && b[i + 1][0] < b[i][0]);
+        }
+        let max_a = a.iter().flatten().fold(0.0f64, |m, &x| m.max(x));
+        let max_b = b.iter().flatten().fold(0.0f64, |m, &x| m.max(x));
+        assert_eq!((max_a, max_b), (0.595, 6.975)); // eqs. (13), (14)
+        // Voltage has more influence than speed: the largest ratio over voltage at any speed
+        // exceeds the largest ratio over speed at 14 V and 11.5 V.
+        for j in 1..3 {
+            let speed_ratio = a[2][j].max(a[0][j]) / a[2][j].min(a[0][j]);
+            assert!(speed_ratio < 1.2, "speed ratio {speed_ratio} at voltage column {j}");
+        }
+        for row in a {
+            assert!(row[2] / row[0] > 1.9);
+        }
+    }
+
+    #[test]
+    fn rejects_bad_parameters_by_name() {
+        let mut p = EvvtParams::default();
+        p.lpv.beta_per_s[1][2] = -1.0;
+        assert_eq!(
+            EvvtPlant::<f32>::new(&p).unwrap_err(),
+            EvvtParamError::BetaPerS { speed_index: 1, voltage_index: 2 }
+        );
+        let mut p = EvvtParams::default();
+        p.lpv.alpha_deg_per_s2_rpm[0][0] = f64::NAN;
+        assert!(matches!(EvvtPlant::<f64>::new(&p), Err(EvvtParamError::AlphaDegPerS2Rpm { .. })));
+        let p = EvvtParams { advance_alpha_factor: 0.0, ..EvvtParams::default() };
+        assert_eq!(EvvtPlant::<f64>::new(&p).unwrap_err(), EvvtParamError::AdvanceAlphaFactor);
+        let p = EvvtParams { initial_phase_deg: 41.0, ..EvvtParams::default() };
+        assert_eq!(EvvtPlant::<f64>::new(&p).unwrap_err(), EvvtParamError::InitialPhaseDeg);
+        let mut p = EvvtParams::default();
+        p.lpv.battery_voltage_v = [9.5, 9.5, 14.0];
+        assert!(matches!(EvvtPlant::<f64>::new(&p), Err(EvvtParamError::Breakpoints(_))));
+    }
+
+    #[test]
+    fn zero_command_holds_the_phase_and_stops_clamp() {
+        let p = EvvtParams { initial_phase_deg: 20.0, ..EvvtParams::default() };
+        let mut plant = EvvtPlant::<f64>::new(&p).unwrap();
+        for _ in 0..1000 {
+            plant.step(0.0, 1100.0, 12.0, 0.01);
+        }
+        assert_eq!(plant.phase_deg(), 20.0);
+        // Full advance command for 10 s: stops at 40 with zero rate, no overshoot past it.
+        for _ in 0..1000 {
+            let y = plant.step(1000.0, 1400.0, 14.0, 0.01);
+            assert!(y <= 40.0);
+        }
+        assert_eq!(plant.phase_deg(), 40.0);
+        assert_eq!(plant.phase_rate_deg_per_s(), 0.0);
+        // Reversing leaves the stop at once.
+        plant.step(-1000.0, 1400.0, 14.0, 0.01);
+        assert!(plant.phase_deg() < 40.0 && plant.phase_rate_deg_per_s() < 0.0);
+        for _ in 0..2000 {
+            plant.step(-1000.0, 800.0, 9.5, 0.01);
+        }
+        assert_eq!((plant.phase_deg(), plant.phase_rate_deg_per_s()), (0.0, 0.0));
+    }
+
+    #[test]
+    fn steady_phase_rate_is_alpha_over_beta_times_command() {
+        let mut plant = EvvtPlant::<f64>::new(&EvvtParams { initial_phase_deg: 0.0, ..Default::default() }).unwrap();
+        for _ in 0..300 {
+            plant.step(100.0, 800.0, 14.0, 0.01);
+        }
+        let expect = 100.0 * 0.54 / 6.2;
+        assert!((plant.phase_rate_deg_per_s() - expect).abs() < 1e-3 * expect);
+    }
+
+    #[test]
+    fn effect_scales_switch_dependence_off() {
+        let base = EvvtPlant::<f64>::new(&EvvtParams::baseline()).unwrap();
+        let full = EvvtPlant::<f64>::new(&EvvtParams::default()).unwrap();
+        // Baseline: the same α, β at every operating point, the table's value at 1100 rpm, 14 V.
+        let near = |(a, b): (f64, f64), (ea, eb): (f64, f64)| (a - ea).abs() < 1e-12 && (b - eb).abs() < 1e-12;
+        for &(n, v) in &[(800.0, 9.5), (1400.0, 14.0), (1100.0, 11.5), (600.0, 16.0)] {
+            assert!(near(base.alpha_beta(n, v), (0.57, 6.6)));
+        }
+        assert!(near(full.alpha_beta(800.0, 9.5), (0.27, 3.4)));
+        assert!(near(full.alpha_beta(1400.0, 14.0), (0.595, 6.975)));
+        // Bilinear inside, clamped outside.
+        let (a, _) = full.alpha_beta(950.0, 14.0);
+        assert!((a - 0.555).abs() < 1e-12);
+        assert!(near(full.alpha_beta(3000.0, 20.0), (0.595, 6.975)));
+        assert!(near(full.alpha_beta(100.0, 5.0), (0.27, 3.4)));
+    }
+
+    #[test]
+    fn direction_effect_slows_advancing_only() {
+        let p = EvvtParams { advance_alpha_factor: 0.7, initial_phase_deg: 20.0, ..EvvtParams::default() };
+        let mut slow = EvvtPlant::<f64>::new(&p).unwrap();
+        let mut sym = EvvtPlant::<f64>::new(&EvvtParams { initial_phase_deg: 20.0, ..EvvtParams::default() }).unwrap();
+        for _ in 0..50 {
+            slow.step(100.0, 1100.0, 14.0, 0.01);
+            sym.step(100.0, 1100.0, 14.0, 0.01);
+        }
+        let ratio = (slow.phase_deg() - 20.0) / (sym.phase_deg() - 20.0);
+        assert!((ratio - 0.7).abs() < 1e-9, "advance ratio {ratio}");
+        slow.reset(20.0);
+        sym.reset(20.0);
+        for _ in 0..50 {
+            slow.step(-100.0, 1100.0, 14.0, 0.01);
+            sym.step(-100.0, 1100.0, 14.0, 0.01);
+        }
+        assert_eq!(slow.phase_deg(), sym.phase_deg());
+    }
+
+    /// Counts upward zero crossings of the belt disturbance over 2 s at two engine speeds: its
+    /// frequency is order × N / 60.
+    #[test]
+    fn belt_vibration_follows_engine_speed() {
+        for &n in &[800.0, 1400.0] {
+            let p = EvvtParams {
+                belt_vibration_amplitude_deg: 0.8,
+                belt_vibration_order: 0.5,
+                initial_phase_deg: 20.0,
+                ..EvvtParams::default()
+            };
+            let mut plant = EvvtPlant::<f32>::new(&p).unwrap();
+            let (mut prev, mut crossings, mut peak) = (0.0f32, 0, 0.0f32);
+            for _ in 0..2000 {
+                let d = plant.step(0.0, n as f32, 14.0, 0.001) - 20.0;
+                if prev < 0.0 && d >= 0.0 {
+                    crossings += 1;
+                }
+                peak = peak.max(d.abs());
+                prev = d;
+            }
+            let expected = 0.5 * n / 60.0 * 2.0;
+            assert!((crossings as f64 - expected).abs() <= 1.0, "{crossings} crossings at {n} rpm");
+            assert!((peak - 0.8).abs() < 0.01);
+        }
+        // Off: no disturbance at all.
+        let mut plant = EvvtPlant::<f64>::new(&EvvtParams { initial_phase_deg: 20.0, ..Default::default() }).unwrap();
+        for _ in 0..100 {
+            assert_eq!(plant.step(0.0, 1400.0, 14.0, 0.001), 20.0);
+        }
+    }
+
+    #[test]
+    fn quantizer_rounds_to_one_degree() {
+        assert_eq!(quantize_phase_deg(10.49f64, 1.0), 10.0);
+        assert_eq!(quantize_phase_deg(10.5f64, 1.0), 11.0);
+        assert_eq!(quantize_phase_deg(-0.6f32, 1.0), -1.0);
+        assert_eq!(quantize_phase_deg(Q32::from_f64(29.7), Q32::ONE), Q32::from_f64(30.0));
+        assert_eq!(quantize_phase_deg(3.3f64, 0.0), 3.3);
+    }
+
+    #[test]
+    fn planetary_relation_eq_11() {
+        let g = PlanetaryGear::default();
+        assert_eq!(g.ratio(), 3.5);
+        // Ring at half crank speed; carrier at ring speed holds the phase.
+        let ring = PlanetaryGear::ring_speed_rpm(1600.0f64);
+        assert_eq!(ring, 800.0);
+        assert_eq!(g.phase_rate_deg_per_s(ring, ring), 0.0);
+        // 1 rpm carrier over ring: 6 deg/s at the carrier, × 3.5 at the sun, × 2 in crank deg.
+        assert!((g.phase_rate_deg_per_s(801.0, 800.0) - 42.0).abs() < 1e-12);
+        assert!(g.phase_rate_deg_per_s(799.0, 800.0) < 0.0);
+        // Inverse: the motor speed for a requested rate reproduces the rate.
+        let m = g.motor_speed_for_phase_rate_rpm(-21.0f64, 1600.0);
+        assert!((m - 799.5).abs() < 1e-12);
+        assert!((g.phase_rate_deg_per_s(m, ring) + 21.0).abs() < 1e-12);
+        // Integrating eq. (11) for 0.5 s at +0.2 rpm difference gives 0.5 × 0.2 × 42 = 4.2 deg.
+        let mut phase = 0.0;
+        for _ in 0..500 {
+            phase += g.phase_rate_deg_per_s(ring + 0.2, ring) * 0.001;
+        }
+        assert!((phase - 4.2).abs() < 1e-9);
+    }
+}
