@@ -3,3 +3,4 @@
 pub mod log;
 pub mod lsq;
 pub mod residuals;
+pub mod signal;

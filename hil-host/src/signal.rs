@@ -1,0 +1,147 @@
+//! Signal processing for identification from measured data: Butterworth low-pass filters
+//! (cascaded second-order sections by the bilinear transform), zero-phase forward-backward
+//! filtering, central differences, and decimation (the EMPS description's "bandpass filtering"
+//! and "decimate process", Sec. 3.1-3.2).
+
+use std::f64::consts::PI;
+
+/// One biquad section, direct form II transposed.
+#[derive(Clone, Copy, Debug)]
+struct Biquad {
+    b: [f64; 3],
+    a: [f64; 2],
+}
+
+/// A Butterworth low-pass of even order as cascaded biquads.
+#[derive(Clone, Debug)]
+pub struct Butterworth {
+    sections: Vec<Biquad>,
+}
+
+impl Butterworth {
+    /// `order` is rounded up to even; `fc_hz` must lie below the Nyquist frequency.
+    pub fn lowpass(order: usize, fc_hz: f64, fs_hz: f64) -> Result<Self, String> {
+        if !(fc_hz > 0.0 && fc_hz < fs_hz / 2.0) {
+            return Err(format!("cut-off {fc_hz} Hz must lie in (0, {}) Hz", fs_hz / 2.0));
+        }
+        let pairs = order.max(2).div_ceil(2);
+        let n = 2 * pairs;
+        // Pre-warped analogue cut-off.
+        let k = (PI * fc_hz / fs_hz).tan();
+        let sections = (0..pairs)
+            .map(|i| {
+                // Pole pair angle of the analogue prototype: q = 1/(2 cos θ).
+                let theta = PI * (2 * i + 1) as f64 / (2 * n) as f64;
+                let q = 1.0 / (2.0 * theta.cos()).max(1e-12);
+                let norm = 1.0 / (1.0 + k / q + k * k);
+                let b0 = k * k * norm;
+                Biquad { b: [b0, 2.0 * b0, b0], a: [2.0 * (k * k - 1.0) * norm, (1.0 - k / q + k * k) * norm] }
+            })
+            .collect();
+        Ok(Self { sections })
+    }
+
+    /// Causal filtering, the state starting at the first sample's steady state.
+    pub fn filter(&self, x: &[f64]) -> Vec<f64> {
+        let mut y = x.to_vec();
+        for s in &self.sections {
+            let x0 = y.first().copied().unwrap_or(0.0);
+            // Steady state for a constant input x0 (unity DC gain): z1, z2 such that y = x0.
+            let mut z1 = x0 * (1.0 - s.b[0]);
+            let mut z2 = x0 * (s.b[2] - s.a[1]);
+            for v in y.iter_mut() {
+                let xin = *v;
+                let out = s.b[0] * xin + z1;
+                z1 = s.b[1] * xin - s.a[0] * out + z2;
+                z2 = s.b[2] * xin - s.a[1] * out;
+                *v = out;
+            }
+        }
+        y
+    }
+
+    /// Zero-phase filtering: forward, then backward (the magnitude response squared, no lag).
+    pub fn filtfilt(&self, x: &[f64]) -> Vec<f64> {
+        let mut y = self.filter(x);
+        y.reverse();
+        let mut z = self.filter(&y);
+        z.reverse();
+        z
+    }
+}
+
+/// Central difference dx/dt, one-sided at the ends.
+pub fn derivative(x: &[f64], dt: f64) -> Vec<f64> {
+    let n = x.len();
+    if n < 2 {
+        return vec![0.0; n];
+    }
+    (0..n)
+        .map(|i| {
+            if i == 0 {
+                (x[1] - x[0]) / dt
+            } else if i == n - 1 {
+                (x[n - 1] - x[n - 2]) / dt
+            } else {
+                (x[i + 1] - x[i - 1]) / (2.0 * dt)
+            }
+        })
+        .collect()
+}
+
+/// Keeps every `factor`-th sample (apply a low-pass below the new Nyquist first).
+pub fn downsample(x: &[f64], factor: usize) -> Vec<f64> {
+    x.iter().step_by(factor.max(1)).copied().collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sine(f: f64, fs: f64, n: usize) -> Vec<f64> {
+        (0..n).map(|k| (2.0 * PI * f * k as f64 / fs).sin()).collect()
+    }
+
+    fn amplitude(x: &[f64]) -> f64 {
+        let m = &x[x.len() / 4..3 * x.len() / 4];
+        m.iter().fold(0.0f64, |a, v| a.max(v.abs()))
+    }
+
+    #[test]
+    fn butterworth_has_minus_3db_at_cutoff_and_passes_dc() {
+        let fs = 1000.0;
+        let f = Butterworth::lowpass(4, 50.0, fs).unwrap();
+        let at_fc = amplitude(&f.filter(&sine(50.0, fs, 8000)));
+        assert!((at_fc - 0.7071).abs() < 0.01, "gain at cut-off {at_fc}");
+        let pass = amplitude(&f.filter(&sine(5.0, fs, 8000)));
+        assert!((pass - 1.0).abs() < 0.01);
+        // 4th order: -80 dB/decade, so a decade above is below 1e-4 (plus ripple margin).
+        let stop = amplitude(&f.filter(&sine(500.0, fs, 8000)));
+        assert!(stop < 1e-3, "stop band {stop}");
+        let dc = f.filter(&[3.0; 100]);
+        assert!(dc.iter().all(|v| (v - 3.0).abs() < 1e-9));
+    }
+
+    #[test]
+    fn filtfilt_has_no_lag() {
+        let fs = 1000.0;
+        let x = sine(2.0, fs, 4000);
+        let y = Butterworth::lowpass(4, 40.0, fs).unwrap().filtfilt(&x);
+        let err = x[500..3500].iter().zip(&y[500..3500]).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        assert!(err < 1e-3, "zero-phase error {err}");
+    }
+
+    #[test]
+    fn derivative_of_a_parabola_is_exact_inside() {
+        let x: Vec<f64> = (0..10).map(|k| (k as f64 * 0.1).powi(2)).collect();
+        let d = derivative(&x, 0.1);
+        for (k, v) in d.iter().enumerate().take(9).skip(1) {
+            assert!((v - 2.0 * k as f64 * 0.1).abs() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn rejects_a_cutoff_above_nyquist() {
+        assert!(Butterworth::lowpass(2, 600.0, 1000.0).is_err());
+    }
+}
