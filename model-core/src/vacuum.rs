@@ -1,1 +1,877 @@
-//! (being written)
+//! Vacuum boost-pressure actuation: PWM solenoid valve, vacuum membrane actuator (turbine
+//! wastegate, turbine or compressor bypass), vacuum tank and pump, after Thomasson, Leufvén,
+//! Criscuolo and Eriksson, "Modeling and validation of a boost pressure actuation system, for a
+//! series sequentially turbocharged SI engine", Control Eng. Practice 21 (2013) 1860-1870.
+//!
+//! Structure (paper Sections 3-4):
+//! - control signal to pressure: voltage-corrected duty, eq. (1); static map, eq. (2) (LPT and
+//!   HPT) or eq. (5) (HPC), saturated between tank and ambient pressure; first-order pressure
+//!   dynamics eq. (4) with separate rise and fall time constants (Fig. 5);
+//! - pressure to position: the force balance eq. (6) divided by the membrane area, so every
+//!   force is a pressure (eq. (7)); spring from the inverse of the static position map, linear
+//!   eq. (8) or arctan eq. (9); Dahl friction eq. (10) with alpha = 1; end stops at 0 and 100 %;
+//!   optionally a linkage clearance (the HPC stick of Figs. 10 and 12);
+//! - mass flows to the tank: compressible orifice flow eq. (3) through a duty-dependent leakage
+//!   area (Fig. 13) and the evacuation flow eq. (12); tank eq. (13); pump eq. (14).
+//!
+//! Units: pressure kPa, position % of stroke, duty %, voltage V, time s, volume L, leakage
+//! area mm², mass flow mg/s. In these units the normalized mass is ~1e-4 kPa·s²/%, flows are
+//! 1..1000 mg/s, and every intermediate stays well inside the Q32.32 range.
+//!
+//! Effects the diagnosis switches (DATA-FORMAT.md, plant `vacuum`) are the fields of
+//! [`VacuumEffects`]; [`VacuumParams::baseline`] turns all of them off.
+
+use crate::real::Real;
+
+/// Specific gas constant of air, J/(kg·K).
+pub const R_AIR_J_PER_KG_K: f64 = 287.0;
+/// Critical pressure ratio for gamma = 1.4: (2/(γ+1))^(γ/(γ-1)), eq. (3).
+const P_CRIT: f64 = 0.528_281_787_717_174_4;
+/// Largest mechanical integration step; longer calls are split (stiffest mode ~ 250 rad/s).
+const H_MAX_S: f64 = 0.0005;
+/// Cap on substeps per call so a huge `dt` cannot stall the caller.
+const MAX_SUBSTEPS: f64 = 2000.0;
+/// The arctan spring needs tan((x - a1)/a2) over the stroke; the angle is kept below this.
+const THETA_MAX_RAD: f64 = 1.5;
+
+/// Why a parameter set was rejected; the name is the offending field.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum VacuumParamError {
+    BadParameter(&'static str),
+}
+
+/// Duty-to-pressure static relation of the solenoid valve, before saturation.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum StaticPressureMap {
+    /// Eq. (2): p* = min(k1·u + p01, k2·u + p02) (LPT and HPT valves).
+    PiecewiseLinear { k1_kpa_per_pct: f64, p01_kpa: f64, k2_kpa_per_pct: f64, p02_kpa: f64 },
+    /// Eq. (5): p* = min(k1·u + p01, p_amb + k2·max(0, u − u0)³) (HPC valve); `k2` is
+    /// negative: the pressure leaves ambient at u0.
+    Cubic { k1_kpa_per_pct: f64, p01_kpa: f64, k2_kpa_per_pct3: f64, u0_pct: f64 },
+}
+
+/// Static pressure-to-position relation, identified at `p_amb_ref_kpa` (Figs. 9, 10).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum PositionMap {
+    /// Eq. (8): x = k·p + x0.
+    Linear { k_pct_per_kpa: f64, x0_pct: f64 },
+    /// Eq. (9): x = a1 + a2·atan((a3 − p)/a4).
+    Arctan { a1_pct: f64, a2_pct_per_rad: f64, a3_kpa: f64, a4_kpa: f64 },
+}
+
+/// The catalogue effects (DATA-FORMAT.md, plant `vacuum`). `false` gives the baseline.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct VacuumEffects {
+    /// `supply-voltage`: the valve sees duty·U/U_ref (eq. (1)); off: it sees the duty.
+    pub supply_voltage: bool,
+    /// `pressure-direction`: `tau_fall_s` for falling pressure (Fig. 5); off: `tau_rise_s`
+    /// both ways.
+    pub pressure_direction: bool,
+    /// `coulomb-friction`: Dahl friction of magnitude `fc_kpa` on the rod (eq. (10)).
+    pub coulomb_friction: bool,
+    /// `backlash`: a clearance of `backlash_pct` between membrane and valve.
+    pub backlash: bool,
+}
+
+impl VacuumEffects {
+    pub const NONE: Self =
+        Self { supply_voltage: false, pressure_direction: false, coulomb_friction: false, backlash: false };
+}
+
+/// One solenoid valve and its membrane actuator. Plain f64, unit in the name.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VacuumParams {
+    /// U_ref of eq. (1): the supply voltage at which the static map holds.
+    pub u_ref_v: f64,
+    pub static_map: StaticPressureMap,
+    /// Time constant of eq. (4) for rising pressure (air from ambient into the actuator).
+    pub tau_rise_s: f64,
+    /// Time constant of eq. (4) for falling pressure (air from actuator to tank).
+    pub tau_fall_s: f64,
+    pub position_map: PositionMap,
+    /// Ambient pressure at which `position_map` was identified; the membrane sees
+    /// p_amb − p_act, so the map is applied to p_amb_ref − (p_amb − p_act).
+    pub p_amb_ref_kpa: f64,
+    /// m/A_act of eq. (6) normalized as in eq. (7).
+    pub mass_kpa_s2_per_pct: f64,
+    /// b/A_act for the extending (vacuum-pulled) stroke.
+    pub damping_extend_kpa_s_per_pct: f64,
+    /// b/A_act for the retracting (spring-driven) stroke; Sec. 3.2: differs by about 2.
+    pub damping_retract_kpa_s_per_pct: f64,
+    /// Coulomb level F_c/A_act of Dahl's model eq. (10).
+    pub fc_kpa: f64,
+    /// Dahl's rest stiffness σ/A_act, eq. (10).
+    pub dahl_sigma_kpa_per_pct: f64,
+    /// Total linkage clearance between membrane and valve.
+    pub backlash_pct: f64,
+    /// Leakage area through the oscillating plunger per % effective duty (Fig. 13, right).
+    pub leak_area_mm2_per_pct: f64,
+    /// The leakage area grows up to this duty and is held beyond it (Fig. 13: linear to 80 %).
+    pub leak_duty_max_pct: f64,
+    /// Actuator chamber volume at x = 0 (eqs. (11), (12)).
+    pub volume_x0_l: f64,
+    /// Volume swept by the membrane over the full stroke (chamber shrinks as x grows).
+    pub volume_stroke_l: f64,
+    /// Gas temperature (isothermal, T_act = T_amb).
+    pub temp_amb_k: f64,
+    pub effects: VacuumEffects,
+}
+
+/// Shared by all three presets: the same solenoid valve type (Sec. 2.2) and bench.
+const U_REF_V: f64 = 12.0;
+const P_AMB_REF_KPA: f64 = 100.0;
+const TEMP_AMB_K: f64 = 293.0;
+const LEAK_AREA_MM2_PER_PCT: f64 = 0.001;
+const LEAK_DUTY_MAX_PCT: f64 = 80.0;
+
+impl VacuumParams {
+    /// Low-pressure turbine wastegate: piecewise-linear valve map eq. (2), linear position
+    /// map eq. (8), small friction (Figs. 4, 5, 9, 11, 13).
+    pub fn lpt() -> Self {
+        Self {
+            u_ref_v: U_REF_V,
+            // Kink at (122-107)/(1.0-0.4) = 25 % (Sec. 3.1); p(20 %) = 99 kPa, p(100 %) = 22 kPa:
+            // Fig. 4 spans 20..100 kPa over 20..100 % duty, pressure falling with duty.
+            static_map: StaticPressureMap::PiecewiseLinear {
+                k1_kpa_per_pct: -0.4,
+                p01_kpa: 107.0,
+                k2_kpa_per_pct: -1.0,
+                p02_kpa: 122.0,
+            },
+            // Fig. 5: steps settle in 0.1-0.3 s, rise faster than fall.
+            tau_rise_s: 0.04,
+            tau_fall_s: 0.07,
+            // x = 0 at 90 kPa (10 kPa spring preload), x = 100 % at 40 kPa (Fig. 9).
+            position_map: PositionMap::Linear { k_pct_per_kpa: -2.0, x0_pct: 180.0 },
+            p_amb_ref_kpa: P_AMB_REF_KPA,
+            // Spring 0.5 kPa/%: ω = sqrt(0.5/2e-4) = 50 rad/s, ζ = 0.7 extending (Fig. 11).
+            mass_kpa_s2_per_pct: 2.0e-4,
+            damping_extend_kpa_s_per_pct: 0.014,
+            damping_retract_kpa_s_per_pct: 0.028,
+            // Fig. 9: "a small difference between ramps up and down".
+            fc_kpa: 1.5,
+            dahl_sigma_kpa_per_pct: 3.0,
+            backlash_pct: 0.0,
+            leak_area_mm2_per_pct: LEAK_AREA_MM2_PER_PCT,
+            leak_duty_max_pct: LEAK_DUTY_MAX_PCT,
+            volume_x0_l: 0.15,
+            volume_stroke_l: 0.06,
+            temp_amb_k: TEMP_AMB_K,
+            effects: VacuumEffects {
+                supply_voltage: true,
+                pressure_direction: true,
+                coulomb_friction: true,
+                backlash: false,
+            },
+        }
+    }
+
+    /// High-pressure turbine bypass: valve map eq. (2) (Fig. 6 left), arctan position map
+    /// eq. (9) and larger friction (Fig. 10 left). Steep around 70 kPa: the actuator most
+    /// sensitive to supply voltage (Sec. 5.1).
+    pub fn hpt() -> Self {
+        Self {
+            // Kink at (123.5-102.5)/(0.95-0.25) = 30 %; 80 kPa (Fig. 16) at u_corr = 46 %.
+            static_map: StaticPressureMap::PiecewiseLinear {
+                k1_kpa_per_pct: -0.25,
+                p01_kpa: 102.5,
+                k2_kpa_per_pct: -0.95,
+                p02_kpa: 123.5,
+            },
+            tau_rise_s: 0.05,
+            tau_fall_s: 0.08,
+            // x(80 kPa) = 14 %, 5 %/kPa at 70 kPa; x = 0 at 94 kPa, 100 % at 46 kPa.
+            position_map: PositionMap::Arctan { a1_pct: 50.0, a2_pct_per_rad: 40.0, a3_kpa: 70.0, a4_kpa: 8.0 },
+            // Spring 0.2 kPa/% mid-stroke: ω = 45 rad/s.
+            mass_kpa_s2_per_pct: 1.0e-4,
+            damping_extend_kpa_s_per_pct: 0.006,
+            damping_retract_kpa_s_per_pct: 0.012,
+            fc_kpa: 4.0,
+            dahl_sigma_kpa_per_pct: 8.0,
+            ..Self::lpt()
+        }
+    }
+
+    /// High-pressure compressor bypass: cubic valve map eq. (5) (Fig. 6 right), arctan position
+    /// map, the largest friction and the linkage clearance that makes it stick on closing
+    /// (Figs. 10, 12).
+    pub fn hpc() -> Self {
+        Self {
+            // Ambient up to u0 = 40 %, cubic fall to 60 kPa at 90 %, then the steep line
+            // (both branches meet at 90 %: 420 − 4·90 = 100 − 3.2e-4·50³ = 60 kPa).
+            static_map: StaticPressureMap::Cubic {
+                k1_kpa_per_pct: -4.0,
+                p01_kpa: 420.0,
+                k2_kpa_per_pct3: -3.2e-4,
+                u0_pct: 40.0,
+            },
+            tau_rise_s: 0.05,
+            tau_fall_s: 0.085,
+            // x = 0 at 93 kPa, 100 % at 31 kPa.
+            position_map: PositionMap::Arctan { a1_pct: 50.0, a2_pct_per_rad: 38.0, a3_kpa: 62.0, a4_kpa: 8.0 },
+            mass_kpa_s2_per_pct: 1.0e-4,
+            damping_extend_kpa_s_per_pct: 0.007,
+            damping_retract_kpa_s_per_pct: 0.014,
+            fc_kpa: 5.0,
+            dahl_sigma_kpa_per_pct: 10.0,
+            // Sec. 3.2: "small linkage clearance ... causing the HPC actuator to stick at 10 %".
+            backlash_pct: 4.0,
+            effects: VacuumEffects {
+                supply_voltage: true,
+                pressure_direction: true,
+                coulomb_friction: true,
+                backlash: true,
+            },
+            ..Self::lpt()
+        }
+    }
+
+    /// The same actuator with every catalogue effect off (the diagnosis baseline).
+    pub fn baseline(&self) -> Self {
+        Self { effects: VacuumEffects::NONE, ..*self }
+    }
+
+    /// The same actuator with the given effects.
+    pub fn with_effects(&self, effects: VacuumEffects) -> Self {
+        Self { effects, ..*self }
+    }
+
+    fn validate(&self) -> Result<(), VacuumParamError> {
+        let bad = |name| Err(VacuumParamError::BadParameter(name));
+        let fin = |x: f64| x.is_finite();
+        if !(fin(self.u_ref_v) && self.u_ref_v > 0.0) {
+            return bad("u_ref_v");
+        }
+        match self.static_map {
+            StaticPressureMap::PiecewiseLinear { k1_kpa_per_pct, p01_kpa, k2_kpa_per_pct, p02_kpa } => {
+                if !(fin(k1_kpa_per_pct) && fin(p01_kpa) && fin(k2_kpa_per_pct) && fin(p02_kpa)) {
+                    return bad("static_map");
+                }
+            }
+            StaticPressureMap::Cubic { k1_kpa_per_pct, p01_kpa, k2_kpa_per_pct3, u0_pct } => {
+                // |k2|·100³ must stay far inside the Q32 range.
+                if !(fin(k1_kpa_per_pct) && fin(p01_kpa) && fin(k2_kpa_per_pct3) && k2_kpa_per_pct3.abs() < 1.0 && fin(u0_pct))
+                {
+                    return bad("static_map");
+                }
+            }
+        }
+        if !(fin(self.tau_rise_s) && self.tau_rise_s > 0.0) {
+            return bad("tau_rise_s");
+        }
+        if !(fin(self.tau_fall_s) && self.tau_fall_s > 0.0) {
+            return bad("tau_fall_s");
+        }
+        match self.position_map {
+            PositionMap::Linear { k_pct_per_kpa, x0_pct } => {
+                if !(fin(k_pct_per_kpa) && k_pct_per_kpa.abs() > 1e-3 && fin(x0_pct)) {
+                    return bad("position_map");
+                }
+            }
+            PositionMap::Arctan { a1_pct, a2_pct_per_rad, a3_kpa, a4_kpa } => {
+                let ok = fin(a1_pct) && fin(a2_pct_per_rad) && a2_pct_per_rad > 0.0 && fin(a3_kpa) && fin(a4_kpa) && a4_kpa > 0.0;
+                // The stroke 0..100 % must lie inside the map's open range a1 ± a2·π/2.
+                if !ok || (a1_pct / a2_pct_per_rad).abs() > THETA_MAX_RAD || ((100.0 - a1_pct) / a2_pct_per_rad).abs() > THETA_MAX_RAD {
+                    return bad("position_map");
+                }
+            }
+        }
+        if !(fin(self.p_amb_ref_kpa) && self.p_amb_ref_kpa > 0.0 && self.p_amb_ref_kpa < 400.0) {
+            return bad("p_amb_ref_kpa");
+        }
+        if !(fin(self.mass_kpa_s2_per_pct) && self.mass_kpa_s2_per_pct >= 1e-6) {
+            return bad("mass_kpa_s2_per_pct");
+        }
+        if !(fin(self.damping_extend_kpa_s_per_pct) && self.damping_extend_kpa_s_per_pct >= 0.0) {
+            return bad("damping_extend_kpa_s_per_pct");
+        }
+        if !(fin(self.damping_retract_kpa_s_per_pct) && self.damping_retract_kpa_s_per_pct >= 0.0) {
+            return bad("damping_retract_kpa_s_per_pct");
+        }
+        if !(fin(self.fc_kpa) && self.fc_kpa >= 0.0) {
+            return bad("fc_kpa");
+        }
+        if !(fin(self.dahl_sigma_kpa_per_pct) && self.dahl_sigma_kpa_per_pct > 0.0 && self.dahl_sigma_kpa_per_pct < 1e4) {
+            return bad("dahl_sigma_kpa_per_pct");
+        }
+        if !(fin(self.backlash_pct) && (0.0..=50.0).contains(&self.backlash_pct)) {
+            return bad("backlash_pct");
+        }
+        if !(fin(self.leak_area_mm2_per_pct) && self.leak_area_mm2_per_pct >= 0.0) {
+            return bad("leak_area_mm2_per_pct");
+        }
+        if !(fin(self.leak_duty_max_pct) && (0.0..=100.0).contains(&self.leak_duty_max_pct)) {
+            return bad("leak_duty_max_pct");
+        }
+        if !(fin(self.volume_x0_l) && self.volume_x0_l > 0.0) {
+            return bad("volume_x0_l");
+        }
+        if !(fin(self.volume_stroke_l) && self.volume_stroke_l >= 0.0 && self.volume_stroke_l < self.volume_x0_l) {
+            return bad("volume_stroke_l");
+        }
+        if !(fin(self.temp_amb_k) && self.temp_amb_k > 100.0) {
+            return bad("temp_amb_k");
+        }
+        Ok(())
+    }
+}
+
+/// Inputs of one valve + actuator (DATA-FORMAT.md columns).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VacuumInputs<R> {
+    /// Commanded PWM duty, clamped to 0..100.
+    pub duty_pct: R,
+    /// Supply voltage at the solenoid.
+    pub u_batt_v: R,
+    pub p_amb_kpa: R,
+    pub p_tank_kpa: R,
+}
+
+/// Outputs of one valve + actuator after a step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VacuumOutputs<R> {
+    /// Actuator chamber pressure (eq. (4) output).
+    pub p_act_kpa: R,
+    /// Valve position, where `x_pct` is measured (after the linkage clearance).
+    pub x_pct: R,
+    /// Membrane (rod) position.
+    pub x_membrane_pct: R,
+    /// Saturated static pressure eq. (2)/(5), the target of eq. (4).
+    pub p_static_kpa: R,
+    /// Mean mass flow into the tank over the step: plunger leakage (eq. (3), Fig. 13) plus
+    /// evacuation (eq. (12)).
+    pub flow_to_tank_mg_s: R,
+}
+
+/// Compressible orifice flow eq. (3), signed from `p_a` to `p_b`, in mg/s for an effective
+/// area in mm². `c_orifice` = 1e3/sqrt(R·T) converts kPa·mm² to mg/s.
+pub fn orifice_flow_mg_s<R: Real>(p_a_kpa: R, p_b_kpa: R, area_mm2: R, c_orifice: R) -> R {
+    let (p_up, p_down, dir) = if p_a_kpa >= p_b_kpa { (p_a_kpa, p_b_kpa, R::ONE) } else { (p_b_kpa, p_a_kpa, -R::ONE) };
+    if !(p_up > R::ZERO) || !(area_mm2 > R::ZERO) {
+        return R::ZERO;
+    }
+    let ratio = (p_down / p_up).clamp(R::from_f64(P_CRIT), R::ONE);
+    dir * c_orifice * p_up * area_mm2 * psi(ratio)
+}
+
+/// Ψ(Π) = sqrt(2γ/(γ−1)·(Π^(2/γ) − Π^((γ+1)/γ))) for γ = 1.4, i.e. sqrt(7·y¹⁰·(1 − y²))
+/// with y = Π^(1/7); Π already limited to [Π_crit, 1] (choking, eq. (3)).
+fn psi<R: Real>(ratio: R) -> R {
+    let y = (ratio.ln() / R::from_f64(7.0)).exp();
+    let y2 = y * y;
+    let y4 = y2 * y2;
+    let y10 = y4 * y4 * y2;
+    (R::from_f64(7.0) * y10 * (R::ONE - y2)).sqrt()
+}
+
+/// 1 − e^(−x) for x >= 0, accurate for small x where `1 - exp(-x)` would cancel (f32's exp
+/// is good to ~1e-7 absolute, which is 4e-6 relative at x = 0.025): Taylor series to x⁹
+/// below 0.5 (error < 3e-9 relative), the direct form above.
+fn one_minus_exp_neg<R: Real>(x: R) -> R {
+    if x < R::from_f64(0.5) {
+        // x(1 − x/2(1 − x/3(1 − ... (1 − x/9))))
+        let mut s = R::ONE;
+        let mut k = 9;
+        while k >= 2 {
+            s = R::ONE - x * s / R::from_f64(k as f64);
+            k -= 1;
+        }
+        x * s
+    } else {
+        R::ONE - (-x).exp()
+    }
+}
+
+/// tan θ for |θ| <= 1.5 without relying on the target's sin/cos: the odd Taylor series at
+/// θ/4 (error < 3e-7 relative) and two double-angle steps.
+fn tan_series<R: Real>(theta: R) -> R {
+    let z = theta / R::from_f64(4.0);
+    let z2 = z * z;
+    // tan z = z(1 + z²/3 + 2z⁴/15 + 17z⁶/315 + 62z⁸/2835 + 1382z¹⁰/155925)
+    let coeffs = [1382.0 / 155925.0, 62.0 / 2835.0, 17.0 / 315.0, 2.0 / 15.0, 1.0 / 3.0, 1.0];
+    let mut s = R::ZERO;
+    for c in coeffs {
+        s = s * z2 + R::from_f64(c);
+    }
+    let mut t = z * s;
+    for _ in 0..2 {
+        t = (t + t) / (R::ONE - t * t);
+    }
+    t
+}
+
+/// The static relations of one valve + actuator, converted once to `R`.
+#[derive(Clone, Copy, Debug)]
+struct Maps<R> {
+    static_map: StaticMapR<R>,
+    position_map: PositionMapR<R>,
+}
+
+#[derive(Clone, Copy, Debug)]
+enum StaticMapR<R> {
+    PiecewiseLinear { k1: R, p01: R, k2: R, p02: R },
+    Cubic { k1: R, p01: R, k2: R, u0: R },
+}
+
+#[derive(Clone, Copy, Debug)]
+enum PositionMapR<R> {
+    Linear { k: R, x0: R },
+    Arctan { a1: R, a2: R, a3: R, a4: R },
+}
+
+impl<R: Real> Maps<R> {
+    fn new(p: &VacuumParams) -> Self {
+        let f = R::from_f64;
+        let static_map = match p.static_map {
+            StaticPressureMap::PiecewiseLinear { k1_kpa_per_pct, p01_kpa, k2_kpa_per_pct, p02_kpa } => {
+                StaticMapR::PiecewiseLinear { k1: f(k1_kpa_per_pct), p01: f(p01_kpa), k2: f(k2_kpa_per_pct), p02: f(p02_kpa) }
+            }
+            StaticPressureMap::Cubic { k1_kpa_per_pct, p01_kpa, k2_kpa_per_pct3, u0_pct } => {
+                StaticMapR::Cubic { k1: f(k1_kpa_per_pct), p01: f(p01_kpa), k2: f(k2_kpa_per_pct3), u0: f(u0_pct) }
+            }
+        };
+        let position_map = match p.position_map {
+            PositionMap::Linear { k_pct_per_kpa, x0_pct } => PositionMapR::Linear { k: f(k_pct_per_kpa), x0: f(x0_pct) },
+            PositionMap::Arctan { a1_pct, a2_pct_per_rad, a3_kpa, a4_kpa } => {
+                PositionMapR::Arctan { a1: f(a1_pct), a2: f(a2_pct_per_rad), a3: f(a3_kpa), a4: f(a4_kpa) }
+            }
+        };
+        Self { static_map, position_map }
+    }
+
+    /// Eq. (2)/(5) before saturation, at effective duty `u`.
+    fn unsaturated_pressure(&self, u: R, p_amb: R) -> R {
+        match self.static_map {
+            StaticMapR::PiecewiseLinear { k1, p01, k2, p02 } => (k1 * u + p01).min(k2 * u + p02),
+            StaticMapR::Cubic { k1, p01, k2, u0 } => {
+                // Effective duty above 100 % only extrapolates; capped so the cube stays small.
+                let d = (u - u0).clamp(R::ZERO, R::from_f64(200.0));
+                (k1 * u + p01).min(p_amb + k2 * d * d * d)
+            }
+        }
+    }
+
+    /// Static position for the map pressure `p` (eq. (8)/(9)), not yet limited to the stroke.
+    fn position(&self, p: R) -> R {
+        match self.position_map {
+            PositionMapR::Linear { k, x0 } => k * p + x0,
+            PositionMapR::Arctan { a1, a2, a3, a4 } => a1 + a2 * ((a3 - p) / a4).atan(),
+        }
+    }
+
+    /// Inverse of `position`: the map pressure that holds the membrane at `x` with no friction.
+    fn pressure_at(&self, x: R) -> R {
+        match self.position_map {
+            PositionMapR::Linear { k, x0 } => (x - x0) / k,
+            PositionMapR::Arctan { a1, a2, a3, a4 } => {
+                let lim = R::from_f64(THETA_MAX_RAD);
+                let theta = ((x - a1) / a2).clamp(-lim, lim);
+                a3 - a4 * tan_series(theta)
+            }
+        }
+    }
+}
+
+/// Number of substeps of at most `h_max_s` in `dt_s`. The ratio is shrunk by 1e-6 first so
+/// that a step that is a whole multiple of `h_max_s` in decimal (0.001 s as f32 is
+/// 0.0010000000475) gets the same count in every number type.
+fn substeps<R: Real>(dt_s: R, h_max_s: f64) -> f64 {
+    libm::ceil(dt_s.to_f64() / h_max_s * (1.0 - 1e-6)).clamp(1.0, MAX_SUBSTEPS)
+}
+
+/// Saturation of eq. (2)/(5): between the tank (lowest reachable) and ambient pressure.
+fn saturate<R: Real>(p: R, p_tank: R, p_amb: R) -> R {
+    let lo = p_tank.min(p_amb);
+    p.clamp(lo, p_amb)
+}
+
+/// One PWM solenoid valve and its vacuum membrane actuator.
+#[derive(Clone, Copy, Debug)]
+pub struct VacuumValveActuator<R: Real> {
+    maps: Maps<R>,
+    effects: VacuumEffects,
+    u_ref_v: R,
+    tau_rise_s: R,
+    tau_fall_s: R,
+    p_amb_ref_kpa: R,
+    inv_mass: R,
+    damping_extend: R,
+    damping_retract: R,
+    fc_kpa: R,
+    sigma_over_fc: R,
+    half_backlash_pct: R,
+    leak_area_per_pct: R,
+    leak_duty_max_pct: R,
+    volume_x0_l: R,
+    volume_per_pct_l: R,
+    c_orifice: R,
+    /// mg per kPa·L at T_amb: 1e6/(R·T).
+    c_mass: R,
+    // State.
+    p_act_kpa: R,
+    x_pct: R,
+    v_pct_s: R,
+    friction_kpa: R,
+    x_valve_pct: R,
+}
+
+impl<R: Real> VacuumValveActuator<R> {
+    /// Builds the actuator at rest, vented to `p_amb_ref_kpa` (valve closed, x at the spring's
+    /// rest position). Use [`Self::settle`] to start at a steady operating point.
+    pub fn new(p: &VacuumParams) -> Result<Self, VacuumParamError> {
+        p.validate()?;
+        let f = R::from_f64;
+        let fc = if p.effects.coulomb_friction { p.fc_kpa } else { 0.0 };
+        let sigma_over_fc = if fc > 0.0 { p.dahl_sigma_kpa_per_pct / fc } else { 0.0 };
+        let half_backlash = if p.effects.backlash { 0.5 * p.backlash_pct } else { 0.0 };
+        let rt = R_AIR_J_PER_KG_K * p.temp_amb_k;
+        let maps = Maps::new(p);
+        let p_amb_ref = f(p.p_amb_ref_kpa);
+        let x0 = maps.position(p_amb_ref).clamp(R::ZERO, f(100.0));
+        Ok(Self {
+            maps,
+            effects: p.effects,
+            u_ref_v: f(p.u_ref_v),
+            tau_rise_s: f(p.tau_rise_s),
+            tau_fall_s: f(p.tau_fall_s),
+            p_amb_ref_kpa: p_amb_ref,
+            inv_mass: f(1.0 / p.mass_kpa_s2_per_pct),
+            damping_extend: f(p.damping_extend_kpa_s_per_pct),
+            damping_retract: f(p.damping_retract_kpa_s_per_pct),
+            fc_kpa: f(fc),
+            sigma_over_fc: f(sigma_over_fc),
+            half_backlash_pct: f(half_backlash),
+            leak_area_per_pct: f(p.leak_area_mm2_per_pct),
+            leak_duty_max_pct: f(p.leak_duty_max_pct),
+            volume_x0_l: f(p.volume_x0_l),
+            volume_per_pct_l: f(p.volume_stroke_l / 100.0),
+            c_orifice: f(1e3 / libm::sqrt(rt)),
+            c_mass: f(1e6 / rt),
+            p_act_kpa: p_amb_ref,
+            x_pct: x0,
+            v_pct_s: R::ZERO,
+            friction_kpa: R::ZERO,
+            x_valve_pct: x0,
+        })
+    }
+
+    /// The duty the valve acts on: eq. (1) with the `supply-voltage` effect, else the duty.
+    pub fn effective_duty_pct(&self, duty_pct: R, u_batt_v: R) -> R {
+        let u = duty_pct.clamp(R::ZERO, R::from_f64(100.0));
+        if self.effects.supply_voltage {
+            u * u_batt_v.max(R::ZERO) / self.u_ref_v
+        } else {
+            u
+        }
+    }
+
+    /// Saturated static pressure, eqs. (1), (2)/(5).
+    pub fn static_pressure_kpa(&self, inputs: &VacuumInputs<R>) -> R {
+        let u = self.effective_duty_pct(inputs.duty_pct, inputs.u_batt_v);
+        saturate(self.maps.unsaturated_pressure(u, inputs.p_amb_kpa), inputs.p_tank_kpa, inputs.p_amb_kpa)
+    }
+
+    /// Frictionless static membrane position for a chamber pressure, eqs. (7)-(9), on the
+    /// stroke 0..100 %.
+    pub fn static_position_pct(&self, p_act_kpa: R, p_amb_kpa: R) -> R {
+        let p_map = self.p_amb_ref_kpa - (p_amb_kpa - p_act_kpa);
+        self.maps.position(p_map).clamp(R::ZERO, R::from_f64(100.0))
+    }
+
+    /// Puts the actuator at the steady state of constant `inputs`: static pressure, static
+    /// position, no friction load, valve centred on the membrane.
+    pub fn settle(&mut self, inputs: &VacuumInputs<R>) {
+        self.p_act_kpa = self.static_pressure_kpa(inputs);
+        self.x_pct = self.static_position_pct(self.p_act_kpa, inputs.p_amb_kpa);
+        self.v_pct_s = R::ZERO;
+        self.friction_kpa = R::ZERO;
+        self.x_valve_pct = self.x_pct;
+    }
+
+    pub fn p_act_kpa(&self) -> R {
+        self.p_act_kpa
+    }
+    pub fn x_pct(&self) -> R {
+        self.x_valve_pct
+    }
+    pub fn x_membrane_pct(&self) -> R {
+        self.x_pct
+    }
+    /// Current friction load (Dahl state), kPa.
+    pub fn friction_kpa(&self) -> R {
+        self.friction_kpa
+    }
+
+    fn volume_l(&self, x: R) -> R {
+        self.volume_x0_l - self.volume_per_pct_l * x
+    }
+
+    /// Advances by `dt_s`. Pressure eq. (4) is integrated exactly over the step; the rod
+    /// (eqs. (6), (7), (10)) in substeps of at most 0.5 ms with the chamber pressure
+    /// interpolated across the step.
+    pub fn step(&mut self, inputs: &VacuumInputs<R>, dt_s: R) -> VacuumOutputs<R> {
+        let hundred = R::from_f64(100.0);
+        let p_amb = inputs.p_amb_kpa;
+        let p_stat = self.static_pressure_kpa(inputs);
+        if !(dt_s > R::ZERO) {
+            return self.outputs(p_stat, R::ZERO);
+        }
+        let p_old = self.p_act_kpa;
+        let x_old = self.x_pct;
+        let volume_old = self.volume_l(x_old);
+
+        // Eq. (4), exact for a constant target: p += (p_stat − p)(1 − e^(−dt/τ)).
+        let tau = if self.effects.pressure_direction && p_stat < p_old { self.tau_fall_s } else { self.tau_rise_s };
+        let p_new = p_old + (p_stat - p_old) * one_minus_exp_neg(dt_s / tau);
+        self.p_act_kpa = p_new;
+
+        let n = substeps(dt_s, H_MAX_S);
+        let n_r = R::from_f64(n);
+        let h = dt_s / n_r;
+        let dp_step = (p_new - p_old) / n_r;
+        let mut p_sub = p_old;
+        for _ in 0..(n as u32) {
+            p_sub += dp_step;
+            self.mechanics_substep(p_amb - p_sub, h, hundred);
+        }
+
+        // Mass flows into the tank. Leakage eq. (3) through the Fig. 13 area, from the chamber.
+        let u = self.effective_duty_pct(inputs.duty_pct, inputs.u_batt_v);
+        let area = self.leak_area_per_pct * u.clamp(R::ZERO, self.leak_duty_max_pct);
+        let leak = orifice_flow_mg_s(p_new, inputs.p_tank_kpa, area, self.c_orifice);
+        // Eq. (12): the chamber's mass loss d(pV)/(RT), counted only when it leaves towards the
+        // tank (a gain comes from ambient through the valve).
+        let pv_change = p_new * self.volume_l(self.x_pct) - p_old * volume_old;
+        let evacuation = (-pv_change).max(R::ZERO) * self.c_mass / dt_s;
+        self.outputs(p_stat, leak + evacuation)
+    }
+
+    /// One semi-implicit Euler step of the normalized force balance eq. (7) with mass and
+    /// damping (eq. (6)), Dahl friction (eq. (10)), end stops and the linkage clearance.
+    fn mechanics_substep(&mut self, dp_membrane_kpa: R, h: R, hundred: R) {
+        let x = self.x_pct;
+        let spring = self.p_amb_ref_kpa - self.maps.pressure_at(x);
+        let b = if self.v_pct_s >= R::ZERO { self.damping_extend } else { self.damping_retract };
+        let drive = dp_membrane_kpa - spring - self.friction_kpa;
+        // Damping implicit: stable for any b.
+        let mut v = (self.v_pct_s + h * drive * self.inv_mass) / (R::ONE + h * b * self.inv_mass);
+        let mut x_new = x + h * v;
+        if x_new <= R::ZERO {
+            x_new = R::ZERO;
+            v = v.max(R::ZERO);
+        } else if x_new >= hundred {
+            x_new = hundred;
+            v = v.min(R::ZERO);
+        }
+        // Dahl eq. (10) with α = 1 is linear in x for a fixed sign of motion:
+        // F → s·Fc + (F − s·Fc)·exp(−σ|Δx|/Fc), exact and unconditionally stable.
+        let dx = x_new - x;
+        if self.fc_kpa > R::ZERO && dx != R::ZERO {
+            let target = dx.sign() * self.fc_kpa;
+            self.friction_kpa += (target - self.friction_kpa) * one_minus_exp_neg(self.sigma_over_fc * dx.abs());
+        }
+        self.x_pct = x_new;
+        self.v_pct_s = v;
+        // Play operator: the valve moves only when the membrane takes up the clearance.
+        let lo = x_new - self.half_backlash_pct;
+        let hi = x_new + self.half_backlash_pct;
+        self.x_valve_pct = self.x_valve_pct.clamp(lo, hi).clamp(R::ZERO, hundred);
+    }
+
+    fn outputs(&self, p_stat: R, flow: R) -> VacuumOutputs<R> {
+        VacuumOutputs {
+            p_act_kpa: self.p_act_kpa,
+            x_pct: self.x_valve_pct,
+            x_membrane_pct: self.x_pct,
+            p_static_kpa: p_stat,
+            flow_to_tank_mg_s: flow,
+        }
+    }
+}
+
+/// Vacuum tank and electric pump (Section 4).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VacuumTankParams {
+    pub volume_l: f64,
+    pub temp_amb_k: f64,
+    /// Effective area of the base leakage from ambient into the tank (Sec. 3.3, eq. (3)).
+    pub base_leak_area_mm2: f64,
+    /// Eq. (14): ṁ = a1/(p_amb/p_tank + a2) + a3, limited at 0 (the pump cannot blow in).
+    pub pump_a1_mg_s: f64,
+    pub pump_a2: f64,
+    pub pump_a3_mg_s: f64,
+}
+
+impl VacuumTankParams {
+    /// Values read from Figs. 13-15: pump flow 800 mg/s at ratio 1 falling to 0 at ratio 7
+    /// (Fig. 15: 0..8e-4 kg/s over 1..7), so the tank bottoms out near p_amb/7 ≈ 15 kPa
+    /// (Fig. 14's lowest). 4 L and 0.02 mm² give a base rise of ~0.1 kPa/s at 30 kPa, with the
+    /// valves adding to the 0.2-0.5 kPa/s slopes of Fig. 14.
+    pub fn paper() -> Self {
+        Self {
+            volume_l: 4.0,
+            temp_amb_k: TEMP_AMB_K,
+            base_leak_area_mm2: 0.02,
+            pump_a1_mg_s: 1500.0,
+            pump_a2: 0.5,
+            pump_a3_mg_s: -200.0,
+        }
+    }
+
+    fn validate(&self) -> Result<(), VacuumParamError> {
+        let bad = |name| Err(VacuumParamError::BadParameter(name));
+        if !(self.volume_l.is_finite() && self.volume_l >= 0.01) {
+            return bad("volume_l");
+        }
+        if !(self.temp_amb_k.is_finite() && self.temp_amb_k > 100.0) {
+            return bad("temp_amb_k");
+        }
+        if !(self.base_leak_area_mm2.is_finite() && self.base_leak_area_mm2 >= 0.0) {
+            return bad("base_leak_area_mm2");
+        }
+        if !(self.pump_a1_mg_s.is_finite() && self.pump_a1_mg_s.abs() < 1e5) {
+            return bad("pump_a1_mg_s");
+        }
+        if !(self.pump_a2.is_finite() && self.pump_a2 > -1.0) {
+            return bad("pump_a2");
+        }
+        if !(self.pump_a3_mg_s.is_finite() && self.pump_a3_mg_s.abs() < 1e5) {
+            return bad("pump_a3_mg_s");
+        }
+        Ok(())
+    }
+}
+
+/// Isothermal vacuum tank (eq. (13)) with its pump (eq. (14)) and base leakage.
+#[derive(Clone, Copy, Debug)]
+pub struct VacuumTank<R: Real> {
+    /// kPa per mg: R·T/V.
+    c_pressure: R,
+    c_orifice: R,
+    base_leak_area_mm2: R,
+    a1: R,
+    a2: R,
+    a3: R,
+    p_tank_kpa: R,
+}
+
+/// Lowest tank pressure the model accepts (keeps p_amb/p_tank finite).
+const P_TANK_MIN_KPA: f64 = 1.0;
+/// Tank integration step limit (slowest mode ~ seconds).
+const TANK_H_MAX_S: f64 = 0.01;
+
+impl<R: Real> VacuumTank<R> {
+    pub fn new(p: &VacuumTankParams, p_tank_initial_kpa: f64) -> Result<Self, VacuumParamError> {
+        p.validate()?;
+        if !(p_tank_initial_kpa.is_finite() && (P_TANK_MIN_KPA..=400.0).contains(&p_tank_initial_kpa)) {
+            return Err(VacuumParamError::BadParameter("p_tank_initial_kpa"));
+        }
+        let rt = R_AIR_J_PER_KG_K * p.temp_amb_k;
+        let f = R::from_f64;
+        Ok(Self {
+            // kPa = R·T[J/kg] · m[mg]·1e-6 / (V[L]·1e-3) / 1e3
+            c_pressure: f(rt * 1e-6 / p.volume_l),
+            c_orifice: f(1e3 / libm::sqrt(rt)),
+            base_leak_area_mm2: f(p.base_leak_area_mm2),
+            a1: f(p.pump_a1_mg_s),
+            a2: f(p.pump_a2),
+            a3: f(p.pump_a3_mg_s),
+            p_tank_kpa: f(p_tank_initial_kpa),
+        })
+    }
+
+    pub fn p_tank_kpa(&self) -> R {
+        self.p_tank_kpa
+    }
+
+    /// Pump mass flow out of the tank, eq. (14), limited at zero beyond the pump's lowest
+    /// pressure.
+    pub fn pump_flow_mg_s(&self, p_amb_kpa: R, p_tank_kpa: R) -> R {
+        let ratio = p_amb_kpa / p_tank_kpa.max(R::from_f64(P_TANK_MIN_KPA));
+        (self.a1 / (ratio + self.a2) + self.a3).max(R::ZERO)
+    }
+
+    /// Base leakage from ambient into the tank, eq. (3).
+    pub fn base_leak_mg_s(&self, p_amb_kpa: R, p_tank_kpa: R) -> R {
+        orifice_flow_mg_s(p_amb_kpa, p_tank_kpa, self.base_leak_area_mm2, self.c_orifice)
+    }
+
+    /// Advances eq. (13) by `dt_s` with the actuators' summed flow `inflow_mg_s` (held over the
+    /// step) and returns the tank pressure. The tank is kept within [1 kPa, p_amb]: every source
+    /// is at or below ambient, so anything above is integration overshoot.
+    pub fn step(&mut self, pump_on: bool, inflow_mg_s: R, p_amb_kpa: R, dt_s: R) -> R {
+        if !(dt_s > R::ZERO) {
+            return self.p_tank_kpa;
+        }
+        let n = substeps(dt_s, TANK_H_MAX_S);
+        let h = dt_s / R::from_f64(n);
+        let p_min = R::from_f64(P_TANK_MIN_KPA);
+        for _ in 0..(n as u32) {
+            let p = self.p_tank_kpa;
+            let pump = if pump_on { self.pump_flow_mg_s(p_amb_kpa, p) } else { R::ZERO };
+            let net = inflow_mg_s + self.base_leak_mg_s(p_amb_kpa, p) - pump;
+            self.p_tank_kpa = (p + self.c_pressure * net * h).clamp(p_min, p_amb_kpa.max(p_min));
+        }
+        self.p_tank_kpa
+    }
+}
+
+/// The three actuators of the two-stage system (LPT wastegate, HPT bypass, HPC bypass)
+/// sharing one tank and pump (Figs. 1, 2).
+#[derive(Clone, Copy, Debug)]
+pub struct VacuumSystem<R: Real> {
+    pub lpt: VacuumValveActuator<R>,
+    pub hpt: VacuumValveActuator<R>,
+    pub hpc: VacuumValveActuator<R>,
+    pub tank: VacuumTank<R>,
+}
+
+/// One step's result for the whole system.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VacuumSystemOutputs<R> {
+    /// LPT, HPT, HPC.
+    pub actuators: [VacuumOutputs<R>; 3],
+    pub p_tank_kpa: R,
+    /// Pump flow at the start of the step (0 when off).
+    pub pump_flow_mg_s: R,
+}
+
+impl<R: Real> VacuumSystem<R> {
+    /// The paper's system: [`VacuumParams::lpt`], [`VacuumParams::hpt`], [`VacuumParams::hpc`]
+    /// and [`VacuumTankParams::paper`].
+    pub fn paper(p_tank_initial_kpa: f64) -> Result<Self, VacuumParamError> {
+        Self::new(&VacuumParams::lpt(), &VacuumParams::hpt(), &VacuumParams::hpc(), &VacuumTankParams::paper(), p_tank_initial_kpa)
+    }
+
+    pub fn new(
+        lpt: &VacuumParams,
+        hpt: &VacuumParams,
+        hpc: &VacuumParams,
+        tank: &VacuumTankParams,
+        p_tank_initial_kpa: f64,
+    ) -> Result<Self, VacuumParamError> {
+        Ok(Self {
+            lpt: VacuumValveActuator::new(lpt)?,
+            hpt: VacuumValveActuator::new(hpt)?,
+            hpc: VacuumValveActuator::new(hpc)?,
+            tank: VacuumTank::new(tank, p_tank_initial_kpa)?,
+        })
+    }
+
+    /// Duties in the order LPT, HPT, HPC. The actuators see the tank pressure at the start of
+    /// the step; the tank then integrates their summed flow.
+    pub fn step(&mut self, duties_pct: [R; 3], u_batt_v: R, p_amb_kpa: R, pump_on: bool, dt_s: R) -> VacuumSystemOutputs<R> {
+        let p_tank = self.tank.p_tank_kpa();
+        let input = |duty_pct| VacuumInputs { duty_pct, u_batt_v, p_amb_kpa, p_tank_kpa: p_tank };
+        let [d_lpt, d_hpt, d_hpc] = duties_pct;
+        let outs = [
+            self.lpt.step(&input(d_lpt), dt_s),
+            self.hpt.step(&input(d_hpt), dt_s),
+            self.hpc.step(&input(d_hpc), dt_s),
+        ];
+        let inflow = outs[0].flow_to_tank_mg_s + outs[1].flow_to_tank_mg_s + outs[2].flow_to_tank_mg_s;
+        let pump_flow = if pump_on { self.tank.pump_flow_mg_s(p_amb_kpa, p_tank) } else { R::ZERO };
+        let p_tank_new = self.tank.step(pump_on, inflow, p_amb_kpa, dt_s);
+        VacuumSystemOutputs { actuators: outs, p_tank_kpa: p_tank_new, pump_flow_mg_s: pump_flow }
+    }
+}
