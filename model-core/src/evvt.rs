@@ -98,7 +98,7 @@ impl EvvtLpvTable {
                     return Err(EvvtParamError::AlphaDegPerS2Rpm { speed_index: i, voltage_index: j });
                 }
                 let b = self.beta_per_s[i][j];
-                if !(b >= 0.0 && b < 1.0e4) {
+                if !(0.0..1.0e4).contains(&b) {
                     return Err(EvvtParamError::BetaPerS { speed_index: i, voltage_index: j });
                 }
             }
