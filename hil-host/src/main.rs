@@ -1,53 +1,136 @@
 //! `hil-host`: the host tools' command line.
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-fn usage() -> &'static str {
-    "usage: hil-host <command> [args]\n\
-     commands:\n  \
-       check <log.csv> [--plant P]   read a log strictly and summarise it\n"
-}
+use hil_host::diagnose::{self, report, Rules};
+use hil_host::log::{read_log, Plant};
+
+const USAGE: &str = "usage: hil-host <command> [args]
+commands:
+  check <log.csv> [--plant P]
+      read a log strictly and summarise it
+  diagnose <estimation.csv> [--validation <validation.csv>] [--plant P] [--json out.json] [--plots dir]
+      calibrate the baseline model, test its residuals, fit every catalogue effect, name the
+      cause and measure the gain on validation data (the last 30 % of the file when no
+      --validation is given)
+plants: vacuum, ehvva, evvt, positioner
+";
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    match args.first().map(String::as_str) {
+    let result = match args.first().map(String::as_str) {
         Some("check") => check(&args[1..]),
-        _ => {
-            eprint!("{}", usage());
+        Some("diagnose") => run_diagnose(&args[1..]),
+        Some("-h") | Some("--help") | Some("help") => {
+            print!("{USAGE}");
+            Ok(())
+        }
+        _ => Err(CliError::Usage("no command given".into())),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(CliError::Usage(m)) => {
+            eprintln!("error: {m}\n\n{USAGE}");
             ExitCode::from(2)
+        }
+        Err(CliError::Failed(m)) => {
+            eprintln!("error: {m}");
+            ExitCode::FAILURE
         }
     }
 }
 
-fn check(args: &[String]) -> ExitCode {
-    let Some(path) = args.first() else {
-        eprint!("{}", usage());
-        return ExitCode::from(2);
-    };
-    let plant = match args.iter().position(|a| a == "--plant").map(|i| args.get(i + 1)) {
-        None => None,
-        Some(Some(name)) => match hil_host::log::Plant::from_name(name) {
-            Some(p) => Some(p),
-            None => {
-                eprintln!("error: --plant {name}: unknown plant (known: vacuum, ehvva, evvt, positioner)");
-                return ExitCode::from(2);
+enum CliError {
+    Usage(String),
+    Failed(String),
+}
+
+/// Options of the form `--name value`, and positional arguments.
+struct Args {
+    positional: Vec<String>,
+    options: Vec<(String, String)>,
+}
+
+fn parse_args(args: &[String], known: &[&str]) -> Result<Args, CliError> {
+    let mut positional = Vec::new();
+    let mut options = Vec::new();
+    let mut it = args.iter();
+    while let Some(a) = it.next() {
+        if let Some(name) = a.strip_prefix("--") {
+            if !known.contains(&name) {
+                return Err(CliError::Usage(format!("unknown option --{name}")));
             }
-        },
-        Some(None) => {
-            eprintln!("error: --plant needs a value");
-            return ExitCode::from(2);
-        }
-    };
-    match hil_host::log::read_log(std::path::Path::new(path), plant) {
-        Ok(log) => {
-            println!("{}: plant {}, {} samples at {} s, columns {}", log.file, log.plant, log.len(), log.dt_s, log.order.join(", "));
-            for n in &log.notices {
-                println!("notice: {n}");
-            }
-            ExitCode::SUCCESS
-        }
-        Err(e) => {
-            eprintln!("error: {e}");
-            ExitCode::FAILURE
+            let v = it.next().ok_or_else(|| CliError::Usage(format!("--{name} needs a value")))?;
+            options.push((name.to_string(), v.clone()));
+        } else {
+            positional.push(a.clone());
         }
     }
+    Ok(Args { positional, options })
+}
+
+impl Args {
+    fn get(&self, name: &str) -> Option<&str> {
+        self.options.iter().rev().find(|(k, _)| k == name).map(|(_, v)| v.as_str())
+    }
+    fn plant(&self) -> Result<Option<Plant>, CliError> {
+        match self.get("plant") {
+            None => Ok(None),
+            Some(n) => Plant::from_name(n).map(Some).ok_or_else(|| CliError::Usage(format!("--plant {n}: unknown plant"))),
+        }
+    }
+}
+
+fn check(args: &[String]) -> Result<(), CliError> {
+    let a = parse_args(args, &["plant"])?;
+    let [path] = a.positional.as_slice() else {
+        return Err(CliError::Usage("check takes one log file".into()));
+    };
+    let log = read_log(Path::new(path), a.plant()?).map_err(|e| CliError::Failed(e.to_string()))?;
+    println!("{}: plant {}, {} samples at {} s, columns {}", log.file, log.plant, log.len(), log.dt_s, log.order.join(", "));
+    for n in &log.notices {
+        println!("notice: {n}");
+    }
+    Ok(())
+}
+
+fn run_diagnose(args: &[String]) -> Result<(), CliError> {
+    let a = parse_args(args, &["validation", "plant", "json", "plots"])?;
+    let [est_path] = a.positional.as_slice() else {
+        return Err(CliError::Usage("diagnose takes one estimation log (and --validation for a second)".into()));
+    };
+    let plant = a.plant()?;
+    let failed = |e: hil_host::log::LogError| CliError::Failed(e.to_string());
+    let est_full = read_log(Path::new(est_path), plant).map_err(failed)?;
+    let plant = est_full.plant;
+    let (est, val, tail) = match a.get("validation") {
+        Some(v) => {
+            let val = read_log(Path::new(v), Some(plant)).map_err(failed)?;
+            (est_full, val, false)
+        }
+        None => {
+            let (e, v) = diagnose::split_tail(&est_full, 0.3);
+            (e, v, true)
+        }
+    };
+    for n in est.notices.iter().chain(&val.notices) {
+        eprintln!("notice: {n}");
+    }
+    let family = diagnose::family_for(plant).map_err(CliError::Failed)?;
+    let mut progress = |what: &str| eprintln!("fitting {what} ...");
+    let d = diagnose::diagnose(family.as_ref(), &est, &val, tail, &Rules::default(), &mut progress).map_err(CliError::Failed)?;
+    print!("{}", report::summary(&d));
+    if let Some(out) = a.get("json") {
+        let text = serde_json::to_string_pretty(&report::to_json(&d)).map_err(|e| CliError::Failed(e.to_string()))?;
+        std::fs::write(out, text + "\n").map_err(|e| CliError::Failed(format!("{out}: {e}")))?;
+        eprintln!("report written to {out}");
+    }
+    if let Some(dir) = a.get("plots") {
+        let dir = PathBuf::from(dir);
+        let written = hil_host::plot::diagnosis_plots(&d, &dir).map_err(|e| CliError::Failed(format!("{}: {e}", dir.display())))?;
+        for w in written {
+            eprintln!("plot written to {}", w.display());
+        }
+    }
+    Ok(())
 }

@@ -16,6 +16,16 @@ struct Biquad {
 #[derive(Clone, Debug)]
 pub struct Butterworth {
     sections: Vec<Biquad>,
+    /// Samples of odd-reflection padding for `filtfilt`: about four periods of the cut-off,
+    /// enough for the start-up transient to die out before the data begins.
+    pad: usize,
+}
+
+impl Butterworth {
+    /// Samples at each end of a `filtfilt` output still touched by the padding's start-up.
+    pub fn settling_samples(&self) -> usize {
+        self.pad
+    }
 }
 
 impl Butterworth {
@@ -38,7 +48,8 @@ impl Butterworth {
                 Biquad { b: [b0, 2.0 * b0, b0], a: [2.0 * (k * k - 1.0) * norm, (1.0 - k / q + k * k) * norm] }
             })
             .collect();
-        Ok(Self { sections })
+        let pad = (4.0 * fs_hz / fc_hz).ceil() as usize;
+        Ok(Self { sections, pad })
     }
 
     /// Causal filtering, the state starting at the first sample's steady state.
@@ -61,12 +72,23 @@ impl Butterworth {
     }
 
     /// Zero-phase filtering: forward, then backward (the magnitude response squared, no lag).
+    /// Both ends are extended by odd reflection (2·x₀ − x_k), which continues the signal's
+    /// level and slope, so a record that starts or ends in motion has no edge transient.
     pub fn filtfilt(&self, x: &[f64]) -> Vec<f64> {
-        let mut y = self.filter(x);
+        let n = x.len();
+        if n < 2 {
+            return x.to_vec();
+        }
+        let pad = self.pad.min(n - 1);
+        let mut ext = Vec::with_capacity(n + 2 * pad);
+        ext.extend((1..=pad).rev().map(|k| 2.0 * x[0] - x[k]));
+        ext.extend_from_slice(x);
+        ext.extend((1..=pad).map(|k| 2.0 * x[n - 1] - x[n - 1 - k]));
+        let mut y = self.filter(&ext);
         y.reverse();
         let mut z = self.filter(&y);
         z.reverse();
-        z
+        z[pad..pad + n].to_vec()
     }
 }
 
@@ -129,6 +151,16 @@ mod tests {
         let y = Butterworth::lowpass(4, 40.0, fs).unwrap().filtfilt(&x);
         let err = x[500..3500].iter().zip(&y[500..3500]).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
         assert!(err < 1e-3, "zero-phase error {err}");
+    }
+
+    #[test]
+    fn filtfilt_of_a_ramp_has_no_edge_transient() {
+        // A record that starts and ends in motion: the filtered slope must be right at the ends.
+        let x: Vec<f64> = (0..2000).map(|k| 0.1 * k as f64 / 1000.0).collect();
+        let y = Butterworth::lowpass(4, 20.0, 1000.0).unwrap().filtfilt(&x);
+        let v = derivative(&y, 1e-3);
+        let worst = v.iter().map(|v| (v - 0.1).abs()).fold(0.0, f64::max);
+        assert!(worst < 1e-3 * 0.1, "slope off by {worst} at the edges");
     }
 
     #[test]

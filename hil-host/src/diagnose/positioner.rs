@@ -1,0 +1,166 @@
+//! The `positioner` family (EMPS-like: motor, screw, load) by the inverse dynamic model, the
+//! equation-error formulation of the EMPS description (IDIM-LS, Sec. 3):
+//!
+//!   force = M q̈ + Fv q̇ + Fc sign(q̇) + offset
+//!
+//! is linear in the parameters, so each model is one least-squares regression of the measured
+//! force on functions of the measured position: no simulation of the closed loop is needed, and
+//! the controller does not bias the estimate because position is measured with little noise.
+//! Position is filtered forward and backward (Butterworth, no lag) and differentiated by
+//! central differences; every column is then low-passed and decimated alike. The reported
+//! output is the force the model reconstructs, on the validation data.
+//!
+//! Baseline: M, Fv, offset. `coulomb-friction`: + Fc. `asymmetric-friction`: viscous and
+//! Coulomb coefficients per direction, M, Fv+, Fv−, Fc+, Fc− (EMPS description eq. (12)).
+
+use super::{Family, Fit};
+use crate::log::{Log, Plant};
+use crate::lsq::{invert_spd, linear_lsq};
+use crate::signal::{derivative, downsample, Butterworth};
+
+/// Filter settings. Defaults reproduce the published EMPS IDIM-LS estimates.
+#[derive(Clone, Debug)]
+pub struct PositionerFamily {
+    /// Position filter cut-off (rule of thumb: ≥ 5× the closed loop's highest mode).
+    pub position_cutoff_hz: f64,
+    /// Decimation factor of the parallel filter.
+    pub decimation: usize,
+    /// Speeds below this count as standing still for the sign of the velocity.
+    pub v_still_m_s: f64,
+}
+
+impl Default for PositionerFamily {
+    fn default() -> Self {
+        Self { position_cutoff_hz: 80.0, decimation: 20, v_still_m_s: 1e-4 }
+    }
+}
+
+/// Filtered motion and force, decimated.
+struct Motion {
+    acc: Vec<f64>,
+    vel: Vec<f64>,
+    force: Vec<f64>,
+    pos: Vec<f64>,
+}
+
+impl PositionerFamily {
+    fn motion(&self, log: &Log) -> Result<Motion, String> {
+        let q = log.col("pos_m").ok_or("no pos_m column")?;
+        let f = log.col("force_N").ok_or("no force_N column")?;
+        let fs = 1.0 / log.dt_s;
+        let q_filter = Butterworth::lowpass(4, self.position_cutoff_hz.min(0.4 * fs), fs)?;
+        let qf = q_filter.filtfilt(q);
+        let vel = derivative(&qf, log.dt_s);
+        let acc = derivative(&vel, log.dt_s);
+        Ok(Motion { acc, vel, force: f.to_vec(), pos: qf })
+    }
+
+    /// The decimate process applied to one column. The parallel low-pass keeps 80 % of the
+    /// new Nyquist band, as MATLAB's decimate does; sign columns are built before it and
+    /// filtered like every other column. The filter's settling span is then dropped at both
+    /// ends: a record cut out of a longer run starts in motion, and indicator columns have no
+    /// meaningful reflection.
+    fn decimate(&self, x: &[f64], fs: f64) -> Result<Vec<f64>, String> {
+        let nd = self.decimation.max(1);
+        let lp = Butterworth::lowpass(8, 0.8 * 0.5 * fs / nd as f64, fs)?;
+        let v = if nd == 1 { lp.filtfilt(x) } else { downsample(&lp.filtfilt(x), nd) };
+        let trim = lp.settling_samples().div_ceil(nd);
+        Ok(if v.len() > 4 * trim { v[trim..v.len() - trim].to_vec() } else { v })
+    }
+
+    /// The regressor columns of a model, already decimated, and their parameter names.
+    fn columns(&self, m: &Motion, effect: Option<&str>, fs: f64) -> Result<(Vec<Vec<f64>>, Vec<String>, Vec<f64>), String> {
+        let still = self.v_still_m_s;
+        let pos = |v: f64| if v > still { 1.0 } else { 0.0 };
+        let neg = |v: f64| if v < -still { 1.0 } else { 0.0 };
+        let mut cols: Vec<(String, Vec<f64>)> = vec![("M_kg".into(), m.acc.clone())];
+        match effect {
+            None | Some("coulomb-friction") => cols.push(("Fv_Ns_per_m".into(), m.vel.clone())),
+            Some("asymmetric-friction") => {
+                cols.push(("Fv_pos_Ns_per_m".into(), m.vel.iter().map(|&v| v * pos(v)).collect()));
+                cols.push(("Fv_neg_Ns_per_m".into(), m.vel.iter().map(|&v| v * neg(v)).collect()));
+            }
+            Some(other) => return Err(format!("unknown positioner effect `{other}`")),
+        }
+        match effect {
+            None => cols.push(("offset_N".into(), vec![1.0; m.acc.len()])),
+            Some("coulomb-friction") => {
+                cols.push(("Fc_N".into(), m.vel.iter().map(|&v| pos(v) - neg(v)).collect()));
+                cols.push(("offset_N".into(), vec![1.0; m.acc.len()]));
+            }
+            // Eq. (12): Fc+ sign(0+(q̇)) + Fc− sign(0−(q̇)); the two Coulomb levels absorb the
+            // offset (a separate offset would be collinear with them while the load moves).
+            Some(_) => {
+                cols.push(("Fc_pos_N".into(), m.vel.iter().map(|&v| pos(v)).collect()));
+                cols.push(("Fc_neg_N".into(), m.vel.iter().map(|&v| -neg(v)).collect()));
+            }
+        }
+        let names = cols.iter().map(|(n, _)| n.clone()).collect();
+        let data = cols.iter().map(|(_, c)| self.decimate(c, fs)).collect::<Result<_, _>>()?;
+        Ok((data, names, self.decimate(&m.force, fs)?))
+    }
+}
+
+impl Family for PositionerFamily {
+    fn plant(&self) -> Plant {
+        Plant::Positioner
+    }
+    fn output(&self) -> &'static str {
+        "force_N"
+    }
+    fn formulation(&self) -> &'static str {
+        "equation-error: inverse dynamic model (IDIM-LS) — force reconstructed from the filtered, differentiated measured position; no closed-loop simulation"
+    }
+    fn effects(&self) -> &'static [&'static str] {
+        &["coulomb-friction", "asymmetric-friction"]
+    }
+    fn nested(&self) -> &'static [(&'static str, &'static str)] {
+        &[("coulomb-friction", "asymmetric-friction")]
+    }
+
+    fn fit(&self, effect: Option<&str>, est: &Log, val: &Log) -> Result<Fit, String> {
+        let (cols, names, y) = self.columns(&self.motion(est)?, effect, 1.0 / est.dt_s)?;
+        let theta = linear_lsq(&cols, &y).ok_or("the regressors are linearly dependent (no motion in the estimation data?)")?;
+        // Confidence intervals: s² (ΦᵀΦ)⁻¹ on the decimated estimation data.
+        let p = cols.len();
+        let n = y.len();
+        let resid: Vec<f64> = (0..n).map(|i| y[i] - (0..p).map(|j| cols[j][i] * theta[j]).sum::<f64>()).collect();
+        let s2 = resid.iter().map(|r| r * r).sum::<f64>() / (n.saturating_sub(p).max(1)) as f64;
+        let mut ata = vec![0.0; p * p];
+        for a in 0..p {
+            for b in 0..p {
+                ata[a * p + b] = cols[a].iter().zip(&cols[b]).map(|(u, v)| u * v).sum();
+            }
+        }
+        let inv = invert_spd(&ata, p);
+        let ci95 = (0..p).map(|j| inv.as_ref().map(|m| 1.96 * (s2 * m[j * p + j]).sqrt())).collect();
+        let (vcols, _, vy) = self.columns(&self.motion(val)?, effect, 1.0 / val.dt_s)?;
+        let pred: Vec<f64> = (0..vy.len()).map(|i| (0..p).map(|j| vcols[j][i] * theta[j]).sum()).collect();
+        Ok(Fit::new(
+            effect.unwrap_or("baseline"),
+            names.into_iter().zip(theta).collect(),
+            ci95,
+            vy,
+            pred,
+            0,
+        ))
+    }
+
+    fn regressors(&self, val: &Log) -> Vec<(String, Vec<f64>)> {
+        let Ok(m) = self.motion(val) else { return Vec::new() };
+        let fs = 1.0 / val.dt_s;
+        let still = self.v_still_m_s;
+        let sign: Vec<f64> = m.vel.iter().map(|&v| if v > still { 1.0 } else if v < -still { -1.0 } else { 0.0 }).collect();
+        let dir_pos: Vec<f64> = m.vel.iter().map(|&v| if v > still { 1.0 } else { 0.0 }).collect();
+        [
+            ("velocity sign", sign),
+            ("direction of motion (positive)", dir_pos),
+            ("velocity", m.vel),
+            ("acceleration", m.acc),
+            ("position", m.pos),
+        ]
+        .into_iter()
+        .filter_map(|(name, x)| self.decimate(&x, fs).ok().map(|d| (name.to_string(), d)))
+        .collect()
+    }
+}
