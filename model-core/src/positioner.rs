@@ -215,7 +215,8 @@ impl<R: Real> Positioner<R> {
     /// Advances by `dt_s` under the applied force `force_n` (held over the step) and returns
     /// the position.
     pub fn step(&mut self, force_n: R, dt_s: R) -> R {
-        if !(dt_s > R::ZERO) {
+        // Written so a NaN step does nothing.
+        if dt_s.partial_cmp(&R::ZERO) != Some(core::cmp::Ordering::Greater) {
             return self.pos_m;
         }
         let drive = force_n - self.offset_n;

@@ -347,7 +347,7 @@ pub struct VacuumOutputs<R> {
 /// area in mm². `c_orifice` = 1e3/sqrt(R·T) converts kPa·mm² to mg/s.
 pub fn orifice_flow_mg_s<R: Real>(p_a_kpa: R, p_b_kpa: R, area_mm2: R, c_orifice: R) -> R {
     let (p_up, p_down, dir) = if p_a_kpa >= p_b_kpa { (p_a_kpa, p_b_kpa, R::ONE) } else { (p_b_kpa, p_a_kpa, -R::ONE) };
-    if !(p_up > R::ZERO) || !(area_mm2 > R::ZERO) {
+    if !positive(p_up) || !positive(area_mm2) {
         return R::ZERO;
     }
     let ratio = (p_down / p_up).clamp(R::from_f64(P_CRIT), R::ONE);
@@ -365,13 +365,13 @@ fn psi<R: Real>(ratio: R) -> R {
 }
 
 /// 1 − e^(−x) for x >= 0, accurate for small x where `1 - exp(-x)` would cancel (f32's exp
-/// is good to ~1e-7 absolute, which is 4e-6 relative at x = 0.025): Taylor series to x⁹
-/// below 0.5 (error < 3e-9 relative), the direct form above.
+/// loses ~1e-6 absolute): Taylor series to x¹⁶ below 1 (truncation < 3e-14), the direct
+/// form above.
 fn one_minus_exp_neg<R: Real>(x: R) -> R {
-    if x < R::from_f64(0.5) {
-        // x(1 − x/2(1 − x/3(1 − ... (1 − x/9))))
+    if x < R::ONE {
+        // x(1 − x/2(1 − x/3(1 − ... (1 − x/16))))
         let mut s = R::ONE;
-        let mut k = 9;
+        let mut k = 16;
         while k >= 2 {
             s = R::ONE - x * s / R::from_f64(k as f64);
             k -= 1;
@@ -382,13 +382,23 @@ fn one_minus_exp_neg<R: Real>(x: R) -> R {
     }
 }
 
-/// tan θ for |θ| <= 1.5 without relying on the target's sin/cos: the odd Taylor series at
-/// θ/4 (error < 3e-7 relative) and two double-angle steps.
+/// tan θ for |θ| <= 1.5 without relying on the target's sin/cos: the odd Taylor series to
+/// z¹⁵ at z = θ/4 and two double-angle steps (f64: < 1e-10 relative over the range).
 fn tan_series<R: Real>(theta: R) -> R {
     let z = theta / R::from_f64(4.0);
     let z2 = z * z;
-    // tan z = z(1 + z²/3 + 2z⁴/15 + 17z⁶/315 + 62z⁸/2835 + 1382z¹⁰/155925)
-    let coeffs = [1382.0 / 155925.0, 62.0 / 2835.0, 17.0 / 315.0, 2.0 / 15.0, 1.0 / 3.0, 1.0];
+    // tan z = z(1 + z²/3 + 2z⁴/15 + 17z⁶/315 + 62z⁸/2835 + 1382z¹⁰/155925 + 21844z¹²/6081075
+    //          + 929569z¹⁴/638512875)
+    let coeffs = [
+        929569.0 / 638512875.0,
+        21844.0 / 6081075.0,
+        1382.0 / 155925.0,
+        62.0 / 2835.0,
+        17.0 / 315.0,
+        2.0 / 15.0,
+        1.0 / 3.0,
+        1.0,
+    ];
     let mut s = R::ZERO;
     for c in coeffs {
         s = s * z2 + R::from_f64(c);
@@ -472,6 +482,11 @@ impl<R: Real> Maps<R> {
     }
 }
 
+/// `x > 0`, false for NaN too (so a NaN step or area does nothing).
+fn positive<R: Real>(x: R) -> bool {
+    x > R::ZERO
+}
+
 /// Number of substeps of at most `h_max_s` in `dt_s`. The ratio is shrunk by 1e-6 first so
 /// that a step that is a whole multiple of `h_max_s` in decimal (0.001 s as f32 is
 /// 0.0010000000475) gets the same count in every number type.
@@ -509,7 +524,7 @@ pub struct VacuumValveActuator<R: Real> {
     c_mass: R,
     // State.
     p_act_kpa: R,
-    x_pct: R,
+    x_mem_pct: R,
     v_pct_s: R,
     friction_kpa: R,
     x_valve_pct: R,
@@ -548,7 +563,7 @@ impl<R: Real> VacuumValveActuator<R> {
             c_orifice: f(1e3 / libm::sqrt(rt)),
             c_mass: f(1e6 / rt),
             p_act_kpa: p_amb_ref,
-            x_pct: x0,
+            x_mem_pct: x0,
             v_pct_s: R::ZERO,
             friction_kpa: R::ZERO,
             x_valve_pct: x0,
@@ -582,10 +597,10 @@ impl<R: Real> VacuumValveActuator<R> {
     /// position, no friction load, valve centred on the membrane.
     pub fn settle(&mut self, inputs: &VacuumInputs<R>) {
         self.p_act_kpa = self.static_pressure_kpa(inputs);
-        self.x_pct = self.static_position_pct(self.p_act_kpa, inputs.p_amb_kpa);
+        self.x_mem_pct = self.static_position_pct(self.p_act_kpa, inputs.p_amb_kpa);
         self.v_pct_s = R::ZERO;
         self.friction_kpa = R::ZERO;
-        self.x_valve_pct = self.x_pct;
+        self.x_valve_pct = self.x_mem_pct;
     }
 
     pub fn p_act_kpa(&self) -> R {
@@ -595,7 +610,7 @@ impl<R: Real> VacuumValveActuator<R> {
         self.x_valve_pct
     }
     pub fn x_membrane_pct(&self) -> R {
-        self.x_pct
+        self.x_mem_pct
     }
     /// Current friction load (Dahl state), kPa.
     pub fn friction_kpa(&self) -> R {
@@ -613,11 +628,11 @@ impl<R: Real> VacuumValveActuator<R> {
         let hundred = R::from_f64(100.0);
         let p_amb = inputs.p_amb_kpa;
         let p_stat = self.static_pressure_kpa(inputs);
-        if !(dt_s > R::ZERO) {
+        if !positive(dt_s) {
             return self.outputs(p_stat, R::ZERO);
         }
         let p_old = self.p_act_kpa;
-        let x_old = self.x_pct;
+        let x_old = self.x_mem_pct;
         let volume_old = self.volume_l(x_old);
 
         // Eq. (4), exact for a constant target: p += (p_stat − p)(1 − e^(−dt/τ)).
@@ -641,7 +656,7 @@ impl<R: Real> VacuumValveActuator<R> {
         let leak = orifice_flow_mg_s(p_new, inputs.p_tank_kpa, area, self.c_orifice);
         // Eq. (12): the chamber's mass loss d(pV)/(RT), counted only when it leaves towards the
         // tank (a gain comes from ambient through the valve).
-        let pv_change = p_new * self.volume_l(self.x_pct) - p_old * volume_old;
+        let pv_change = p_new * self.volume_l(self.x_mem_pct) - p_old * volume_old;
         let evacuation = (-pv_change).max(R::ZERO) * self.c_mass / dt_s;
         self.outputs(p_stat, leak + evacuation)
     }
@@ -649,7 +664,7 @@ impl<R: Real> VacuumValveActuator<R> {
     /// One semi-implicit Euler step of the normalized force balance eq. (7) with mass and
     /// damping (eq. (6)), Dahl friction (eq. (10)), end stops and the linkage clearance.
     fn mechanics_substep(&mut self, dp_membrane_kpa: R, h: R, hundred: R) {
-        let x = self.x_pct;
+        let x = self.x_mem_pct;
         let spring = self.p_amb_ref_kpa - self.maps.pressure_at(x);
         let b = if self.v_pct_s >= R::ZERO { self.damping_extend } else { self.damping_retract };
         let drive = dp_membrane_kpa - spring - self.friction_kpa;
@@ -670,7 +685,7 @@ impl<R: Real> VacuumValveActuator<R> {
             let target = dx.sign() * self.fc_kpa;
             self.friction_kpa += (target - self.friction_kpa) * one_minus_exp_neg(self.sigma_over_fc * dx.abs());
         }
-        self.x_pct = x_new;
+        self.x_mem_pct = x_new;
         self.v_pct_s = v;
         // Play operator: the valve moves only when the membrane takes up the clearance.
         let lo = x_new - self.half_backlash_pct;
@@ -682,7 +697,7 @@ impl<R: Real> VacuumValveActuator<R> {
         VacuumOutputs {
             p_act_kpa: self.p_act_kpa,
             x_pct: self.x_valve_pct,
-            x_membrane_pct: self.x_pct,
+            x_membrane_pct: self.x_mem_pct,
             p_static_kpa: p_stat,
             flow_to_tank_mg_s: flow,
         }
@@ -800,7 +815,7 @@ impl<R: Real> VacuumTank<R> {
     /// step) and returns the tank pressure. The tank is kept within [1 kPa, p_amb]: every source
     /// is at or below ambient, so anything above is integration overshoot.
     pub fn step(&mut self, pump_on: bool, inflow_mg_s: R, p_amb_kpa: R, dt_s: R) -> R {
-        if !(dt_s > R::ZERO) {
+        if !positive(dt_s) {
             return self.p_tank_kpa;
         }
         let n = substeps(dt_s, TANK_H_MAX_S);
@@ -873,5 +888,190 @@ impl<R: Real> VacuumSystem<R> {
         let pump_flow = if pump_on { self.tank.pump_flow_mg_s(p_amb_kpa, p_tank) } else { R::ZERO };
         let p_tank_new = self.tank.step(pump_on, inflow, p_amb_kpa, dt_s);
         VacuumSystemOutputs { actuators: outs, p_tank_kpa: p_tank_new, pump_flow_mg_s: pump_flow }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::real::Q32;
+    use proptest::prelude::*;
+
+    fn inp<R: Real>(duty: f64, u: f64, p_tank: f64) -> VacuumInputs<R> {
+        VacuumInputs {
+            duty_pct: R::from_f64(duty),
+            u_batt_v: R::from_f64(u),
+            p_amb_kpa: R::from_f64(100.0),
+            p_tank_kpa: R::from_f64(p_tank),
+        }
+    }
+
+    fn psi_reference(ratio: f64) -> f64 {
+        let r = ratio.max(P_CRIT);
+        libm::sqrt(7.0 * (libm::pow(r, 10.0 / 7.0) - libm::pow(r, 12.0 / 7.0)))
+    }
+
+    fn check_psi<R: Real>(tol: f64) {
+        for i in 0..=40 {
+            let ratio = i as f64 / 40.0;
+            let got = psi(R::from_f64(ratio.max(P_CRIT))).to_f64();
+            let want = psi_reference(ratio);
+            assert!((got - want).abs() < tol, "{}: psi({ratio}) = {got}, want {want}", R::NAME);
+        }
+    }
+
+    #[test]
+    fn orifice_flow_follows_eq3_and_chokes() {
+        // Ψ at the critical ratio for γ = 1.4 is 0.6847.
+        assert!((psi_reference(P_CRIT) - 0.6847).abs() < 1e-4);
+        check_psi::<f64>(1e-12);
+        check_psi::<f32>(2e-5);
+        check_psi::<Q32>(1e-6);
+        let c = 1e3 / libm::sqrt(R_AIR_J_PER_KG_K * 293.0);
+        // Choked: independent of the downstream pressure below 52.8 kPa for 100 kPa upstream.
+        let choked = orifice_flow_mg_s(100.0, 30.0, 0.02, c);
+        assert_eq!(choked, orifice_flow_mg_s(100.0, 10.0, 0.02, c));
+        assert!((choked - c * 100.0 * 0.02 * 0.6847).abs() < 1e-3 * choked);
+        // Unchoked flow falls to zero at equal pressures and reverses with them.
+        assert!(orifice_flow_mg_s(100.0, 80.0, 0.02, c) < choked);
+        assert_eq!(orifice_flow_mg_s(60.0, 60.0, 0.02, c), 0.0);
+        assert_eq!(orifice_flow_mg_s(40.0, 70.0, 0.02, c), -orifice_flow_mg_s(70.0, 40.0, 0.02, c));
+    }
+
+    #[test]
+    fn series_helpers_match_libm() {
+        // Error of tan relative to max(1, |tan|): the double-angle steps amplify rounding
+        // near 1.5 rad (tan = 14), where the arctan spring is steepest.
+        let mut tan_err = [0.0f64; 3];
+        for i in -30..=30 {
+            let th = 1.5 * i as f64 / 30.0;
+            let want = libm::tan(th);
+            let rel = |got: f64| (got - want).abs() / want.abs().max(1.0);
+            tan_err[0] = tan_err[0].max(rel(tan_series(th)));
+            tan_err[1] = tan_err[1].max(rel(tan_series(th as f32) as f64));
+            tan_err[2] = tan_err[2].max(rel(tan_series(Q32::from_f64(th)).to_f64()));
+        }
+        let mut exp_err = [0.0f64; 3];
+        for x in [0.0, 1e-4, 0.025, 0.3, 0.49, 0.5, 2.0, 10.0] {
+            let want = -libm::expm1(-x);
+            exp_err[0] = exp_err[0].max((one_minus_exp_neg(x) - want).abs());
+            exp_err[1] = exp_err[1].max((one_minus_exp_neg(x as f32) as f64 - want).abs());
+            exp_err[2] = exp_err[2].max((one_minus_exp_neg(Q32::from_f64(x)).to_f64() - want).abs());
+        }
+        extern crate std;
+        std::println!("tan error f64/f32/Q32 {tan_err:?}, 1 - exp(-x) error {exp_err:?}");
+        // Measured: tan 1.8e-9 / 1.1e-6 / 1.6e-8, 1 − e^(−x) 1e-20 / 1.9e-8 / 1.2e-10.
+        assert!(tan_err[0] < 5e-9 && tan_err[1] < 3e-6 && tan_err[2] < 5e-8, "{tan_err:?}");
+        assert!(exp_err[0] < 1e-13 && exp_err[1] < 1e-7 && exp_err[2] < 1e-9, "{exp_err:?}");
+    }
+
+    #[test]
+    fn supply_voltage_knob_scales_the_duty_or_not() {
+        let p = VacuumParams::lpt();
+        let on = VacuumValveActuator::<f64>::new(&p).unwrap();
+        let off = VacuumValveActuator::<f64>::new(&p.baseline()).unwrap();
+        for duty in [30.0, 50.0, 70.0] {
+            for u in [10.0, 11.0, 13.5] {
+                // Eq. (1): the valve at U sees duty·U/U_ref.
+                let seen = on.static_pressure_kpa(&inp(duty, u, 20.0));
+                let at_ref = on.static_pressure_kpa(&inp(duty * u / p.u_ref_v, p.u_ref_v, 20.0));
+                assert!((seen - at_ref).abs() < 1e-9);
+                assert_eq!(off.static_pressure_kpa(&inp(duty, u, 20.0)), off.static_pressure_kpa(&inp(duty, 12.0, 20.0)));
+            }
+            // Lower voltage, less effective duty, higher pressure (Fig. 16).
+            assert!(on.static_pressure_kpa(&inp(duty, 10.0, 20.0)) > on.static_pressure_kpa(&inp(duty, 12.0, 20.0)));
+        }
+    }
+
+    #[test]
+    fn settled_state_is_a_fixed_point() {
+        for p in [VacuumParams::lpt(), VacuumParams::hpt(), VacuumParams::hpc()] {
+            let mut a = VacuumValveActuator::<f64>::new(&p).unwrap();
+            let i = inp(60.0, 12.0, 25.0);
+            a.settle(&i);
+            let (p0, x0) = (a.p_act_kpa(), a.x_pct());
+            for _ in 0..2000 {
+                a.step(&i, 0.001);
+            }
+            assert!((a.p_act_kpa() - p0).abs() < 1e-9 && (a.x_pct() - x0).abs() < 1e-6, "{} {} vs {p0} {x0}", a.p_act_kpa(), a.x_pct());
+        }
+    }
+
+    #[test]
+    fn evacuation_flow_carries_the_chambers_mass_change() {
+        // Eq. (12): with the plunger leakage off, the mass sent to the tank during a step from
+        // ambient to low pressure equals (p0·V0 − p1·V1)/(R·T).
+        let mut p = VacuumParams::lpt();
+        p.leak_area_mm2_per_pct = 0.0;
+        let mut a = VacuumValveActuator::<f64>::new(&p).unwrap();
+        a.settle(&inp(0.0, 12.0, 20.0));
+        let volume = |x: f64| p.volume_x0_l - p.volume_stroke_l * x / 100.0;
+        let pv0 = a.p_act_kpa() * volume(a.x_membrane_pct());
+        let mut mass_mg = 0.0;
+        for _ in 0..1000 {
+            mass_mg += a.step(&inp(100.0, 12.0, 20.0), 0.001).flow_to_tank_mg_s * 0.001;
+        }
+        let pv1 = a.p_act_kpa() * volume(a.x_membrane_pct());
+        let expected = (pv0 - pv1) * 1e6 / (R_AIR_J_PER_KG_K * p.temp_amb_k);
+        assert!(a.x_membrane_pct() > 99.0, "the membrane should be at its stop");
+        assert!((mass_mg - expected).abs() < 1e-9 * expected, "{mass_mg} vs {expected} mg");
+        // Venting back does not push anything into the tank.
+        let back: f64 = (0..1000).map(|_| a.step(&inp(0.0, 12.0, 20.0), 0.001).flow_to_tank_mg_s).sum();
+        assert_eq!(back, 0.0);
+    }
+
+    proptest! {
+        /// Whatever the duty sequence: the Dahl friction never exceeds Fc, positions stay on the
+        /// stroke, the valve stays within half the clearance of the membrane, and the pressure
+        /// stays between tank and ambient.
+        #[test]
+        fn states_stay_physical(duties in proptest::collection::vec(0.0f64..100.0, 1..40), u in 8.0f64..16.0) {
+            let p = VacuumParams::hpc();
+            let mut a = VacuumValveActuator::<f64>::new(&p).unwrap();
+            for d in duties {
+                for _ in 0..50 {
+                    let o = a.step(&inp(d, u, 30.0), 0.002);
+                    prop_assert!(a.friction_kpa().abs() <= p.fc_kpa + 1e-9);
+                    prop_assert!((0.0..=100.0).contains(&o.x_membrane_pct) && (0.0..=100.0).contains(&o.x_pct));
+                    prop_assert!((o.x_pct - o.x_membrane_pct).abs() <= 0.5 * p.backlash_pct + 1e-9);
+                    prop_assert!((30.0 - 1e-9..=100.0 + 1e-9).contains(&o.p_act_kpa));
+                    prop_assert!(o.flow_to_tank_mg_s >= 0.0);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn step_size_does_not_change_the_result_much() {
+        // Logs come at 100 Hz..1 kHz: a 10 ms step (20 substeps) against 1 ms.
+        let run = |dt: f64| {
+            let mut a = VacuumValveActuator::<f64>::new(&VacuumParams::hpt()).unwrap();
+            a.settle(&inp(30.0, 12.0, 25.0));
+            let n = (2.0 / dt) as usize;
+            for _ in 0..n {
+                a.step(&inp(70.0, 12.0, 25.0), dt);
+            }
+            (a.p_act_kpa(), a.x_pct())
+        };
+        let (p1, x1) = run(0.001);
+        let (p10, x10) = run(0.01);
+        assert!((p1 - p10).abs() < 1e-6 && (x1 - x10).abs() < 0.05, "{p1} {x1} vs {p10} {x10}");
+    }
+
+    #[test]
+    fn bad_parameters_are_named() {
+        let mut p = VacuumParams::lpt();
+        p.tau_fall_s = 0.0;
+        assert_eq!(VacuumValveActuator::<f32>::new(&p).err(), Some(VacuumParamError::BadParameter("tau_fall_s")));
+        let mut p = VacuumParams::hpt();
+        p.position_map = PositionMap::Arctan { a1_pct: 50.0, a2_pct_per_rad: 20.0, a3_kpa: 70.0, a4_kpa: 8.0 };
+        assert_eq!(VacuumValveActuator::<f32>::new(&p).err(), Some(VacuumParamError::BadParameter("position_map")));
+        let mut p = VacuumParams::hpc();
+        p.volume_stroke_l = 1.0;
+        assert_eq!(VacuumValveActuator::<Q32>::new(&p).err(), Some(VacuumParamError::BadParameter("volume_stroke_l")));
+        let mut t = VacuumTankParams::paper();
+        t.volume_l = f64::NAN;
+        assert_eq!(VacuumTank::<f64>::new(&t, 50.0).err(), Some(VacuumParamError::BadParameter("volume_l")));
+        assert_eq!(VacuumTank::<f64>::new(&VacuumTankParams::paper(), 0.0).err(), Some(VacuumParamError::BadParameter("p_tank_initial_kpa")));
     }
 }
