@@ -10,13 +10,19 @@
 //!     proportional controller" the paper's closed-loop identification used (Section IV-A),
 //!     and the law the data format's closed-loop logs state;
 //!   - [`EvvtGains::Scheduled`]: PI on the phase error with kp scheduled on engine speed and
-//!     battery voltage from the LPV table. With P control the loop is `s² + βs + kp·α`, so
-//!     `kp = ωn²/α(N, V)` keeps the natural frequency (bandwidth) the same at every operating
-//!     point; where β is small (9.5 V, high speed) that would leave the loop poorly damped, so
-//!     kp is capped to keep the damping `β/(2√(kp α))` at least `min_damping`. The integral
-//!     rate ki/kp must stay below β for stability (`s³ + βs² + kpα s + kiα`, Routh).
+//!     battery voltage from the LPV table so that the loop `L = kp α/(s(s+β))` crosses over at
+//!     the same frequency ωc everywhere: `|L(jωc)| = 1` gives `kp = ωc √(ωc² + β²)/α(N, V)`.
+//!     The phase margin is then `90° − atan(ωc/β)`; where β is small (9.5 V, high engine
+//!     speed) holding ωc would leave too little, so ωc is lowered to `β·cot(PM_min)` there: the
+//!     bandwidth stays the same wherever the plant allows it. The integral rate ki/kp must stay
+//!     below β for stability (`s³ + βs² + kpα s + kiα`, Routh).
 //! - Anti-windup: conditional integration (the integrator does not move further into an
 //!   active magnitude or rate limit) and an integrator clamp at the magnitude limit.
+//! - Integral zone: the integrator only runs while |error| <= `integral_zone_deg`. On an
+//!   integrating plant a PI loop with no load ends with zero integral, so the integral of the
+//!   error over a setpoint step must vanish: every degree-second of rise would come back as
+//!   overshoot. Integrating only near the setpoint keeps the integral for what it is for
+//!   (loads: cam torque, friction, a motor speed offset) without that overshoot.
 //! - Output limits: magnitude `motor_cmd_max_rpm` and, optionally, rate
 //!   `motor_cmd_rate_max_rpm_per_s`.
 //! - Enable conditions: while cranking or below `min_engine_rpm` the command is zero (motor at
@@ -63,12 +69,14 @@ pub enum EvvtGains {
     FixedP { kp_rpm_per_deg: f64 },
     /// PI with scheduled kp (module doc).
     Scheduled {
-        /// Target kp·α = ωn², 1/s².
-        loop_gain_per_s2: f64,
-        /// Lower bound on the damping of `s² + βs + kpα`.
-        min_damping: f64,
+        /// Target crossover frequency of the P loop, rad/s.
+        crossover_rad_s: f64,
+        /// Lower bound on the P loop's phase margin, degrees (lowers the crossover at small β).
+        min_phase_margin_deg: f64,
         /// ki/kp, 1/s (0 = P only).
         integral_rate_per_s: f64,
+        /// The integrator runs only while |error| is at most this, crank degrees.
+        integral_zone_deg: f64,
     },
 }
 
@@ -106,12 +114,17 @@ impl EvvtPhaseConfig {
 }
 
 impl Default for EvvtPhaseConfig {
-    /// Scheduled PI: ωn² = 13.5 /s² (what kp = 25 gives at 800 rpm, 14 V), damping >= 0.6,
-    /// ki/kp = 0.5 /s (below the smallest β, 1.55 /s), ±1000 rpm, 20000 rpm/s, control from
-    /// 400 rpm, park at −100 rpm.
+    /// Scheduled PI: crossover 2 rad/s (about what kp = 25 gives at 800 rpm, 14 V: 2.07),
+    /// phase margin >= 55°, ki/kp = 0.5 /s (below the smallest β, 1.55 /s), integral zone
+    /// ±3 deg, ±1000 rpm, 20000 rpm/s, control from 400 rpm, park at −100 rpm.
     fn default() -> Self {
         Self {
-            gains: EvvtGains::Scheduled { loop_gain_per_s2: 13.5, min_damping: 0.6, integral_rate_per_s: 0.5 },
+            gains: EvvtGains::Scheduled {
+                crossover_rad_s: 2.0,
+                min_phase_margin_deg: 55.0,
+                integral_rate_per_s: 0.5,
+                integral_zone_deg: 3.0,
+            },
             lpv: EvvtLpvTable::PAPER_DESIGN,
             kp_min_rpm_per_deg: 2.0,
             kp_max_rpm_per_deg: 200.0,
@@ -130,9 +143,10 @@ impl Default for EvvtPhaseConfig {
 pub enum EvvtPhaseConfigError {
     Table(EvvtParamError),
     KpRpmPerDeg,
-    LoopGainPerS2,
-    MinDamping,
+    CrossoverRadS,
+    MinPhaseMarginDeg,
     IntegralRatePerS,
+    IntegralZoneDeg,
     KpBounds,
     MotorCmdMaxRpm,
     MotorCmdRateMaxRpmPerS,
@@ -170,7 +184,7 @@ pub struct EvvtPhaseOutput<R: Real> {
 #[derive(Clone, Copy, Debug)]
 enum Law<R: Real> {
     FixedP { kp: R },
-    Scheduled { loop_gain: R, four_zeta2: R, integral_rate: R },
+    Scheduled { crossover: R, max_crossover_per_beta: R, integral_rate: R, integral_zone: R },
 }
 
 /// The controller state machine.
@@ -205,20 +219,25 @@ impl<R: Real> EvvtPhaseController<R> {
                 }
                 Law::FixedP { kp: f(kp_rpm_per_deg) }
             }
-            EvvtGains::Scheduled { loop_gain_per_s2, min_damping, integral_rate_per_s } => {
-                if !(loop_gain_per_s2 > 0.0 && loop_gain_per_s2 <= 1.0e4) {
-                    return Err(E::LoopGainPerS2);
+            EvvtGains::Scheduled { crossover_rad_s, min_phase_margin_deg, integral_rate_per_s, integral_zone_deg } => {
+                if !(crossover_rad_s > 0.0 && crossover_rad_s <= 100.0) {
+                    return Err(E::CrossoverRadS);
                 }
-                if !(min_damping > 0.0 && min_damping <= 2.0) {
-                    return Err(E::MinDamping);
+                if !(min_phase_margin_deg > 0.0 && min_phase_margin_deg < 89.0) {
+                    return Err(E::MinPhaseMarginDeg);
                 }
                 if !(0.0..=100.0).contains(&integral_rate_per_s) {
                     return Err(E::IntegralRatePerS);
                 }
+                if !(0.0..=40.0).contains(&integral_zone_deg) {
+                    return Err(E::IntegralZoneDeg);
+                }
                 Law::Scheduled {
-                    loop_gain: f(loop_gain_per_s2),
-                    four_zeta2: f(4.0 * min_damping * min_damping),
+                    crossover: f(crossover_rad_s),
+                    // PM = 90° − atan(ωc/β) >= PM_min  ⇔  ωc <= β·cot(PM_min).
+                    max_crossover_per_beta: f(1.0 / libm::tan(min_phase_margin_deg.to_radians())),
                     integral_rate: f(integral_rate_per_s),
+                    integral_zone: f(integral_zone_deg),
                 }
             }
         };
@@ -265,12 +284,11 @@ impl<R: Real> EvvtPhaseController<R> {
     pub fn gains_at(&self, engine_rpm: R, u_batt_v: R) -> (R, R) {
         match self.law {
             Law::FixedP { kp } => (kp, R::ZERO),
-            Law::Scheduled { loop_gain, four_zeta2, integral_rate } => {
+            Law::Scheduled { crossover, max_crossover_per_beta, integral_rate, .. } => {
                 let alpha = self.alpha.eval(engine_rpm, u_batt_v);
                 let beta = self.beta.eval(engine_rpm, u_batt_v);
-                // kp α = min(ωn², β²/(4ζ²)).
-                let damping_cap = beta * beta / four_zeta2;
-                let kp = loop_gain.min(damping_cap) / alpha;
+                let wc = crossover.min(max_crossover_per_beta * beta);
+                let kp = wc * (wc * wc + beta * beta).sqrt() / alpha;
                 (kp.clamp(self.kp_min, self.kp_max), integral_rate)
             }
         }
@@ -314,9 +332,12 @@ impl<R: Real> EvvtPhaseController<R> {
         let setpoint = inp.setpoint_deg.clamp(self.setpoint_min, self.setpoint_max);
         let error = setpoint - inp.measured_phase_deg;
         let (kp, integral_rate) = self.gains_at(inp.engine_rpm, inp.u_batt_v);
-
-        let candidate_integral =
-            (self.integral_rpm + kp * integral_rate * error * dt).clamp(-self.cmd_max, self.cmd_max);
+        let in_zone = match self.law {
+            Law::Scheduled { integral_zone, .. } => error.abs() <= integral_zone,
+            Law::FixedP { .. } => false,
+        };
+        let integral_step = if in_zone { kp * integral_rate * error * dt } else { R::ZERO };
+        let candidate_integral = (self.integral_rpm + integral_step).clamp(-self.cmd_max, self.cmd_max);
         let unlimited = kp * error + candidate_integral;
         let mut cmd = unlimited.clamp(-self.cmd_max, self.cmd_max);
         if let Some(rate) = self.rate_max {
@@ -405,28 +426,39 @@ mod tests {
         assert_eq!(c.integral_rpm(), 0.0);
     }
 
+    /// |L(jω)| and the phase margin of `L = kp α/(s(s+β))` at the crossover.
+    fn crossover_and_margin(kp: f64, a: f64, b: f64) -> (f64, f64) {
+        // Solve ω √(ω² + β²) = kp α for ω.
+        let k = kp * a;
+        let w2 = (-b * b + (b * b * b * b + 4.0 * k * k).sqrt()) / 2.0;
+        let w = w2.sqrt();
+        (w, 90.0 - (w / b).atan().to_degrees())
+    }
+
     #[test]
-    fn schedule_keeps_loop_gain_and_caps_damping() {
+    fn schedule_holds_the_crossover_and_the_phase_margin() {
         let c = EvvtPhaseController::<f64>::new(&EvvtPhaseConfig::default()).unwrap();
-        // 800 rpm, 14 V: ωn² = 13.5 below the damping cap 6.2²/1.44 = 26.7: kp α = 13.5.
-        let (kp, ki_rate) = c.gains_at(800.0, 14.0);
-        assert!((kp * 0.54 - 13.5).abs() < 1e-9 && ki_rate == 0.5);
-        // 1400 rpm, 9.5 V: the cap β²/(4ζ²) = 1.55²/1.44 = 1.668 binds.
-        let (kp, _) = c.gains_at(1400.0, 9.5);
-        let zeta = 1.55 / (2.0 * (kp * 0.07f64).sqrt());
-        assert!((zeta - 0.6).abs() < 1e-9, "damping {zeta}");
-        // Every grid point: damping >= 0.6 and kp α <= 13.5.
-        for n in [800.0, 1100.0, 1400.0] {
-            for v in [9.5, 11.5, 14.0] {
-                let (kp, _) = c.gains_at(n, v);
+        let mut capped = 0;
+        for n in [800.0, 1100.0, 1400.0, 950.0] {
+            for v in [9.5, 11.5, 14.0, 10.0] {
+                let (kp, ki_rate) = c.gains_at(n, v);
                 let a = c.alpha.eval(n, v);
                 let b = c.beta.eval(n, v);
-                assert!(kp * a <= 13.5 + 1e-9);
-                assert!(b / (2.0 * (kp * a).sqrt()) >= 0.6 - 1e-9);
+                let (wc, pm) = crossover_and_margin(kp, a, b);
+                assert!(pm >= 55.0 - 1e-6, "{n} rpm {v} V: phase margin {pm}");
+                if b * (35.0f64).to_radians().tan() >= 2.0 {
+                    assert!((wc - 2.0).abs() < 1e-9, "{n} rpm {v} V: crossover {wc}");
+                } else {
+                    capped += 1;
+                    assert!((pm - 55.0).abs() < 1e-6 && wc < 2.0);
+                }
                 // Routh: ki/kp below β.
-                assert!(0.5 < b);
+                assert!(ki_rate < b);
             }
         }
+        // The cap binds only at low voltage and higher speed: β < 2/tan 35° = 2.86 /s
+        // (1100 rpm 9.5 V, 1400 rpm 9.5 V and 10 V).
+        assert_eq!(capped, 3);
     }
 
     #[test]
@@ -442,10 +474,15 @@ mod tests {
         );
         assert_eq!(
             bad(EvvtPhaseConfig {
-                gains: EvvtGains::Scheduled { loop_gain_per_s2: 13.5, min_damping: 0.0, integral_rate_per_s: 0.5 },
+                gains: EvvtGains::Scheduled {
+                    crossover_rad_s: 2.0,
+                    min_phase_margin_deg: 90.0,
+                    integral_rate_per_s: 0.5,
+                    integral_zone_deg: 3.0,
+                },
                 ..Default::default()
             }),
-            E::MinDamping
+            E::MinPhaseMarginDeg
         );
         assert_eq!(bad(EvvtPhaseConfig { setpoint_min_deg: 40.0, ..Default::default() }), E::SetpointRange);
     }
