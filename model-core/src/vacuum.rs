@@ -364,6 +364,64 @@ fn psi<R: Real>(ratio: R) -> R {
     (R::from_f64(7.0) * y10 * (R::ONE - y2)).sqrt()
 }
 
+/// The actuator's static relations and their inverses, for feedforward control (Sec. 5.2,
+/// 5.4: "given a desired value of wastegate position, a corresponding control signal can be
+/// calculated using the inverse of the actuator model"). Duties here are corrected duties
+/// u_corr (at U_ref); eq. (15) turns them into commands.
+#[derive(Clone, Copy, Debug)]
+pub struct VacuumStaticModel<R: Real> {
+    maps: Maps<R>,
+    p_amb_ref_kpa: R,
+}
+
+impl<R: Real> VacuumStaticModel<R> {
+    /// Needs a valve map that falls with duty (k1, k2 < 0), so that it can be inverted.
+    pub fn new(p: &VacuumParams) -> Result<Self, VacuumParamError> {
+        p.validate()?;
+        let falling = match p.static_map {
+            StaticPressureMap::PiecewiseLinear { k1_kpa_per_pct, k2_kpa_per_pct, .. } => k1_kpa_per_pct < 0.0 && k2_kpa_per_pct < 0.0,
+            StaticPressureMap::Cubic { k1_kpa_per_pct, k2_kpa_per_pct3, .. } => k1_kpa_per_pct < 0.0 && k2_kpa_per_pct3 < 0.0,
+        };
+        if !falling {
+            return Err(VacuumParamError::BadParameter("static_map"));
+        }
+        Ok(Self { maps: Maps::new(p), p_amb_ref_kpa: R::from_f64(p.p_amb_ref_kpa) })
+    }
+
+    /// Eq. (2)/(5) saturated: the static pressure at corrected duty `u_corr_pct`.
+    pub fn pressure_for_duty_kpa(&self, u_corr_pct: R, p_amb_kpa: R, p_tank_kpa: R) -> R {
+        saturate(self.maps.unsaturated_pressure(u_corr_pct, p_amb_kpa), p_tank_kpa, p_amb_kpa)
+    }
+
+    /// Inverse of eq. (2)/(5): the corrected duty whose static pressure is `p_kpa`, not limited
+    /// to 0..100 %. For a falling map, min(l1, l2) = p at u = min(u1, u2), u_i solving
+    /// l_i(u) = p. At or above ambient this is the largest duty that still vents (u0 for the
+    /// cubic map).
+    pub fn duty_for_pressure_pct(&self, p_kpa: R, p_amb_kpa: R) -> R {
+        match self.maps.static_map {
+            StaticMapR::PiecewiseLinear { k1, p01, k2, p02 } => ((p_kpa - p01) / k1).min((p_kpa - p02) / k2),
+            StaticMapR::Cubic { k1, p01, k2, u0 } => {
+                let drop = ((p_kpa - p_amb_kpa) / k2).max(R::ZERO);
+                let cube_root = if drop > R::ZERO { (drop.ln() / R::from_f64(3.0)).exp() } else { R::ZERO };
+                ((p_kpa - p01) / k1).min(u0 + cube_root)
+            }
+        }
+    }
+
+    /// Frictionless static position for a chamber pressure, eqs. (7)-(9), on the stroke.
+    pub fn position_for_pressure_pct(&self, p_act_kpa: R, p_amb_kpa: R) -> R {
+        let p_map = self.p_amb_ref_kpa - (p_amb_kpa - p_act_kpa);
+        self.maps.position(p_map).clamp(R::ZERO, R::from_f64(100.0))
+    }
+
+    /// Inverse of eq. (8)/(9): the chamber pressure that holds position `x_pct` with no
+    /// friction, at ambient `p_amb_kpa`.
+    pub fn pressure_for_position_kpa(&self, x_pct: R, p_amb_kpa: R) -> R {
+        let x = x_pct.clamp(R::ZERO, R::from_f64(100.0));
+        self.maps.pressure_at(x) + (p_amb_kpa - self.p_amb_ref_kpa)
+    }
+}
+
 /// 1 − e^(−x) for x >= 0, accurate for small x where `1 - exp(-x)` would cancel (f32's exp
 /// loses ~1e-6 absolute): Taylor series to x¹⁶ below 1 (truncation < 3e-14), the direct
 /// form above.
@@ -1056,6 +1114,35 @@ mod tests {
         let (p1, x1) = run(0.001);
         let (p10, x10) = run(0.01);
         assert!((p1 - p10).abs() < 1e-6 && (x1 - x10).abs() < 0.05, "{p1} {x1} vs {p10} {x10}");
+    }
+
+    #[test]
+    fn static_model_inverts_the_maps() {
+        for p in [VacuumParams::lpt(), VacuumParams::hpt(), VacuumParams::hpc()] {
+            let m = VacuumStaticModel::<f64>::new(&p).unwrap();
+            for p_amb in [95.0, 100.0] {
+                // Duty -> pressure -> duty on the unsaturated part of the map.
+                for i in 0..=60 {
+                    let u = 20.0 + i as f64;
+                    let pr = m.pressure_for_duty_kpa(u, p_amb, 5.0);
+                    if pr < p_amb {
+                        let back = m.duty_for_pressure_pct(pr, p_amb);
+                        assert!((back - u).abs() < 1e-9, "duty {u} -> {pr} kPa -> {back}");
+                    }
+                }
+                for i in 1..100 {
+                    let x = i as f64;
+                    let pr = m.pressure_for_position_kpa(x, p_amb);
+                    assert!((m.position_for_pressure_pct(pr, p_amb) - x).abs() < 1e-9);
+                }
+            }
+            // The controller's model agrees with the plant's.
+            let a = VacuumValveActuator::<f64>::new(&p).unwrap();
+            assert_eq!(a.static_pressure_kpa(&inp(55.0, 12.0, 20.0)), m.pressure_for_duty_kpa(55.0, 100.0, 20.0));
+        }
+        let mut rising = VacuumParams::lpt();
+        rising.static_map = StaticPressureMap::PiecewiseLinear { k1_kpa_per_pct: 0.4, p01_kpa: 20.0, k2_kpa_per_pct: -1.0, p02_kpa: 122.0 };
+        assert_eq!(VacuumStaticModel::<f64>::new(&rising).err(), Some(VacuumParamError::BadParameter("static_map")));
     }
 
     #[test]
