@@ -88,6 +88,16 @@ impl EvvtLpvTable {
         beta_per_s: PAPER_DESIGN_BETA,
     };
 
+    /// One α and one β at every grid point: the LTI model the diagnosis fits as its baseline
+    /// (then the `supply-voltage` and `engine-speed` scales have nothing to act on).
+    pub fn uniform(alpha_deg_per_s2_rpm: f64, beta_per_s: f64) -> Self {
+        Self {
+            alpha_deg_per_s2_rpm: [[alpha_deg_per_s2_rpm; 3]; 3],
+            beta_per_s: [[beta_per_s; 3]; 3],
+            ..Self::PAPER_DESIGN
+        }
+    }
+
     /// Builds the two lookup tables, checking that α > 0 and β >= 0 everywhere (a non-positive
     /// α would turn the phaser around; a negative β would make it unstable).
     pub fn build<R: Real>(&self) -> Result<(Lut2<R, 3, 3>, Lut2<R, 3, 3>), EvvtParamError> {
@@ -178,7 +188,9 @@ pub struct EvvtParams {
     /// IV-B, the spike in Fig. 8 whose frequency "increases as the engine speed goes up").
     /// 0 = off.
     pub belt_vibration_amplitude_deg: f64,
-    /// Disturbance cycles per engine revolution (0.5 = once per camshaft revolution).
+    /// Disturbance cycles per engine revolution (0.5 = once per camshaft revolution, the
+    /// default: the text puts Fig. 8's spike "near 4.5 rad/sec" at 800 rpm, which with the
+    /// extraction's lost '2' reads 42.5 rad/s, close to the camshaft's 41.9 rad/s).
     pub belt_vibration_order: f64,
     pub belt_vibration_phase_rad: f64,
 }
@@ -207,7 +219,9 @@ impl Default for EvvtParams {
 
 impl EvvtParams {
     /// The baseline for the diagnosis: every catalogue effect off (α, β frozen at the nominal
-    /// voltage and engine speed, symmetric, no belt vibration).
+    /// voltage and engine speed, symmetric, no belt vibration). With both scales 0 only the
+    /// table entry at the nominal point counts (1100 rpm, 14 V: `[1][2]`);
+    /// [`EvvtLpvTable::uniform`] sets the same value everywhere.
     pub fn baseline() -> Self {
         Self {
             voltage_effect_scale: 0.0,
@@ -691,6 +705,16 @@ mod tests {
         assert!((a - 0.555).abs() < 1e-12);
         assert!(near(full.alpha_beta(3000.0, 20.0), (0.595, 6.975)));
         assert!(near(full.alpha_beta(100.0, 5.0), (0.27, 3.4)));
+    }
+
+    #[test]
+    fn uniform_table_is_lti() {
+        let p = EvvtParams { lpv: EvvtLpvTable::uniform(0.3, 4.0), ..EvvtParams::default() };
+        let plant = EvvtPlant::<f64>::new(&p).unwrap();
+        for &(n, v) in &[(800.0, 9.5), (1234.0, 12.3), (1400.0, 14.0)] {
+            let (a, b) = plant.alpha_beta(n, v);
+            assert!((a - 0.3).abs() < 1e-12 && (b - 4.0).abs() < 1e-12);
+        }
     }
 
     #[test]

@@ -30,6 +30,9 @@
 //!   caller (sensor out of range, driver fault) gives the park command: a fixed small speed
 //!   difference towards the retard stop (0 degrees), open loop, since the phase signal may be
 //!   the faulty one.
+//!   The motor speed output is always ring speed (half the engine speed passed in, negative
+//!   readings taken as 0) plus the difference; with an engine speed sensor fault the caller
+//!   passes its best estimate (e.g. from the cam signal).
 
 use crate::evvt::{EvvtLpvTable, EvvtParamError, PlanetaryGear};
 use crate::lut::Lut2;
