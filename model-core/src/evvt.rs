@@ -18,8 +18,8 @@
 //!
 //! The PDF-to-text extraction lost Table III: only fragments survive ("s(s+8.47)", "0.45",
 //! "s(s+10.6)", "s(s+1.4)") and the upper bounds `α <= 0.595`, `β <= 6.975` of eqs. (13)-(14).
-//! The extraction also drops every digit '2' throughout the text ("015" for 2015, "[1]" for
-//! [12], "nd order" for 2nd order, "centered at 5" for 25 degrees), so those fragments are not
+//! The extraction also drops every digit '2' throughout the text ("015" for 2015, "\[1\]" for
+//! \[12\], "nd order" for 2nd order, "centered at 5" for 25 degrees), so those fragments are not
 //! reliable either: β fragments 8.47 and 10.6 exceed the bound 6.975, which therefore probably
 //! lost a '2' itself (e.g. 26.975). We keep the bounds as given (max α = 0.595 crank-deg/(s²·rpm),
 //! max β = 6.975 1/s, both at 1400 rpm, 14 V) and designed the remaining eight points to honour
@@ -277,13 +277,13 @@ impl EvvtParams {
 /// ```
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Zoh<R: Real> {
-    /// Ad[0][1] = T φ1, s.
+    /// `Ad[0][1]` = T φ1, s.
     pub ad12_s: R,
-    /// Ad[1][1] = e^{-βT}.
+    /// `Ad[1][1]` = e^{-βT}.
     pub ad22: R,
-    /// Bd[0] = α T² φ2, crank-deg per rpm.
+    /// `Bd[0]` = α T² φ2, crank-deg per rpm.
     pub bd1_deg_per_rpm: R,
-    /// Bd[1] = α T φ1, crank-deg/s per rpm.
+    /// `Bd[1]` = α T φ1, crank-deg/s per rpm.
     pub bd2_deg_per_s_rpm: R,
 }
 
