@@ -1,6 +1,7 @@
 //! Host tools around model-core: measured-data logs, closed-loop runs against simulated plants,
 //! identification and diagnosis.
 pub mod diagnose;
+pub mod generate;
 pub mod log;
 pub mod lsq;
 pub mod plot;

@@ -13,6 +13,9 @@ commands:
       calibrate the baseline model, test its residuals, fit every catalogue effect, name the
       cause and measure the gain on validation data (the last 30 % of the file when no
       --validation is given)
+  generate <plant> <effect|none> [--seed N] [--out dir]
+      write a bench-like estimation and validation log pair from the plant model with one
+      hidden effect (the truth goes to truth.json beside them, not into the logs)
 plants: vacuum, ehvva, evvt, positioner
 ";
 
@@ -21,6 +24,7 @@ fn main() -> ExitCode {
     let result = match args.first().map(String::as_str) {
         Some("check") => check(&args[1..]),
         Some("diagnose") => run_diagnose(&args[1..]),
+        Some("generate") => run_generate(&args[1..]),
         Some("-h") | Some("--help") | Some("help") => {
             print!("{USAGE}");
             Ok(())
@@ -132,5 +136,28 @@ fn run_diagnose(args: &[String]) -> Result<(), CliError> {
             eprintln!("plot written to {}", w.display());
         }
     }
+    Ok(())
+}
+
+fn run_generate(args: &[String]) -> Result<(), CliError> {
+    let a = parse_args(args, &["seed", "out"])?;
+    let [plant, effect] = a.positional.as_slice() else {
+        return Err(CliError::Usage("generate takes a plant and an effect (or none)".into()));
+    };
+    let plant = Plant::from_name(plant).ok_or_else(|| CliError::Usage(format!("unknown plant `{plant}`")))?;
+    let seed = match a.get("seed") {
+        Some(s) => s.parse::<u64>().map_err(|_| CliError::Usage(format!("--seed {s}: not a whole number")))?,
+        None => std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(1, |d| d.as_nanos() as u64),
+    };
+    let case = hil_host::generate::generate(plant, effect, seed).map_err(CliError::Failed)?;
+    let dir = PathBuf::from(a.get("out").unwrap_or("."));
+    std::fs::create_dir_all(&dir).map_err(|e| CliError::Failed(format!("{}: {e}", dir.display())))?;
+    let write = |name: &str, text: &str| std::fs::write(dir.join(name), text).map_err(|e| CliError::Failed(format!("{}: {e}", dir.join(name).display())));
+    write("estimation.csv", &case.estimation_csv)?;
+    write("validation.csv", &case.validation_csv)?;
+    let truth: serde_json::Map<String, serde_json::Value> = case.truth.iter().map(|(k, v)| (k.clone(), serde_json::json!(v))).collect();
+    let truth = serde_json::json!({"plant": plant.name(), "effect": case.effect, "seed": seed, "params": truth});
+    write("truth.json", &(serde_json::to_string_pretty(&truth).unwrap_or_default() + "\n"))?;
+    println!("seed {seed}: wrote {}/estimation.csv, validation.csv and truth.json", dir.display());
     Ok(())
 }
