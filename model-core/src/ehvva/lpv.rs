@@ -1,0 +1,282 @@
+//! Third-order LPV time-delay model, eqs. (13)-(15) of Li et al. 2018.
+//!
+//! State x = [x1, x2, x3] = [P̃mo, L + ds, L̇] (the delayed main-valve outlet pressure, the
+//! spring deflection, the velocity), input u = [ũ, 1 − ũ] with ũ(t) = u(t − td) (eq. (14)),
+//! output y = x2 − ds = L. The supply and back pressures are measured inputs (Sec. 4.2.1).
+//!
+//! ẋ = A(θ) x + B(θ) u with the affine parameter dependence
+//! A(θ) = A0 + A1 θ1 + A2 θ2, B(θ) = B3 θ3 + B4 θ4 + B5 θ5 and the scheduling vector
+//! θ = [1/τp(P̃h, T), K, P̃h/τp(P̃h, T), P̃l/τp(P̃h, T), Pl] (eq. (15)); K is the lumped damping
+//! −Cf/me − ρ |x3| / (2 me Cd(T)²) · (At³/Aorit(x2)² + Ab³/Aorib(x2)²).
+//!
+//! In this crate's units (MPa, mm, ms, kg) every force term carries 1/(1000 me) (N/kg = m/s² =
+//! 1e-3 mm/ms²): A0[2][0] = At/(1000 me), A0[2][1] = −ks/(1000 me), B5[2] = −Ab/(1000 me),
+//! and K is in 1/ms. The sign of B5 is the physical one (the back pressure on the piston
+//! bottom pushes the valve closed, eq. (1)); the printed matrix lost the minus sign.
+//!
+//! The simulation [`EhvvaLpv`] evaluates A(θ) and B(θ) from [`LpvAffine`] every sub-step and
+//! integrates with a semi-implicit Gauss-Seidel sweep (rows in the order velocity, position,
+//! pressure, each row's diagonal term implicit), which for these matrices is the same scheme as
+//! the reduced model's (see `reduced.rs`). The valve's end stops 0 ≤ L ≤ S (eq. (1)), which the
+//! linear form leaves implicit, are applied after each sub-step. The delayed input and
+//! parameters come from three delay lines: ũ and P̃h with td,VO, P̃l with td,VC, and ũ as the
+//! min (td,VO ≥ td,VC) or max of the two delayed commands, so that a rising command is delayed
+//! by td,VO and a falling one by td,VC.
+
+use super::event::EhvvaPlant;
+use super::params::{EhvvaError, EhvvaInputs, EhvvaParams};
+use super::piston::Piston;
+use super::reduced::{check_step, directional, DEFAULT_DELAY_SAMPLES};
+use super::tables::EhvvaTables;
+use crate::delay::DelayLine;
+use crate::real::Real;
+
+/// Number of scheduling parameters θ1..θ5.
+pub const N_THETA: usize = 5;
+
+/// The affine LPV data of eq. (15), for controller design: A(θ) = A0 + Σ Ai θi,
+/// B(θ) = Σ Bi θi, y = C x. Index i = 0..5 is θ(i+1); matrices not in the paper's sum are 0.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LpvAffine<R: Real> {
+    pub a0: [[R; 3]; 3],
+    pub a: [[[R; 3]; 3]; N_THETA],
+    pub b: [[[R; 2]; 3]; N_THETA],
+    pub c: [R; 3],
+}
+
+impl<R: Real> LpvAffine<R> {
+    pub fn from_params(params: &EhvvaParams) -> Result<Self, EhvvaError> {
+        params.validate()?;
+        let z = R::ZERO;
+        let o = R::ONE;
+        let per_newton = 1.0 / (1000.0 * params.mass_kg);
+        let a31 = R::from_f64(params.area_top_mm2 * per_newton);
+        let a32 = R::from_f64(-params.spring_n_per_mm * per_newton);
+        let b5 = R::from_f64(-params.area_bottom_mm2 * per_newton);
+        let zero3 = [[z; 3]; 3];
+        let zero32 = [[z; 2]; 3];
+        Ok(Self {
+            a0: [[z, z, z], [z, z, o], [a31, a32, z]],
+            a: [[[-o, z, z], [z, z, z], [z, z, z]], [[z, z, z], [z, z, z], [z, z, o]], zero3, zero3, zero3],
+            b: [zero32, zero32, [[o, z], [z, z], [z, z]], [[z, o], [z, z], [z, z]], [[z, z], [z, z], [b5, b5]]],
+            c: [z, o, z],
+        })
+    }
+
+    /// A(θ) = A0 + Σ Ai θi.
+    pub fn a_matrix(&self, theta: &[R; N_THETA]) -> [[R; 3]; 3] {
+        let mut m = self.a0;
+        for (ai, &t) in self.a.iter().zip(theta) {
+            for (row, ai_row) in m.iter_mut().zip(ai) {
+                for (e, &aij) in row.iter_mut().zip(ai_row) {
+                    *e += aij * t;
+                }
+            }
+        }
+        m
+    }
+
+    /// B(θ) = Σ Bi θi.
+    pub fn b_matrix(&self, theta: &[R; N_THETA]) -> [[R; 2]; 3] {
+        let mut m = [[R::ZERO; 2]; 3];
+        for (bi, &t) in self.b.iter().zip(theta) {
+            for (row, bi_row) in m.iter_mut().zip(bi) {
+                for (e, &bij) in row.iter_mut().zip(bi_row) {
+                    *e += bij * t;
+                }
+            }
+        }
+        m
+    }
+}
+
+/// The LPV time-delay model of eq. (15) as a simulation. `N` is the delay-line length.
+#[derive(Clone, Debug)]
+pub struct EhvvaLpv<R: Real, const N: usize = DEFAULT_DELAY_SAMPLES> {
+    affine: LpvAffine<R>,
+    piston: Piston<R>,
+    tables: EhvvaTables<R>,
+    preload: R,
+    dt: R,
+    inv_dt: R,
+    h: R,
+    substeps: usize,
+    x: [R; 3],
+    theta: [R; N_THETA],
+    u_history: DelayLine<R, N>,
+    p_high_history: DelayLine<R, N>,
+    p_low_history: DelayLine<R, N>,
+    seat_velocity: Option<R>,
+}
+
+impl<R: Real, const N: usize> EhvvaLpv<R, N> {
+    /// A model at rest (valve seated, x1 = Pl) for the operating point `inputs` (measured Ph,
+    /// Pl), stepped every `dt_ms` (≤ 0.1 ms).
+    pub fn new(params: &EhvvaParams, inputs: &EhvvaInputs<R>, dt_ms: f64) -> Result<Self, EhvvaError> {
+        let substeps = check_step(params, dt_ms, N)?;
+        let preload = R::from_f64(params.spring_preload_mm);
+        Ok(Self {
+            affine: LpvAffine::from_params(params)?,
+            piston: Piston::new(params)?,
+            tables: EhvvaTables::new(params)?,
+            preload,
+            dt: R::from_f64(dt_ms),
+            inv_dt: R::from_f64(1.0 / dt_ms),
+            h: R::from_f64(dt_ms / substeps as f64),
+            substeps,
+            x: [inputs.p_back_mpa, preload, R::ZERO],
+            theta: [R::ZERO; N_THETA],
+            u_history: DelayLine::new(R::ZERO),
+            p_high_history: DelayLine::new(inputs.p_supply_mpa),
+            p_low_history: DelayLine::new(inputs.p_back_mpa),
+            seat_velocity: None,
+        })
+    }
+
+    /// The affine matrices this model integrates.
+    pub fn affine(&self) -> &LpvAffine<R> {
+        &self.affine
+    }
+    /// The state [P̃mo, L + ds, L̇].
+    pub fn state(&self) -> [R; 3] {
+        self.x
+    }
+    /// The scheduling vector θ of the last sub-step.
+    pub fn theta(&self) -> [R; N_THETA] {
+        self.theta
+    }
+
+    /// θ of eq. (15) from the delayed command-side pressures, the current back pressure and
+    /// the state (θ2 = K needs x2, x3 and Cd(T)).
+    #[allow(clippy::too_many_arguments)]
+    pub fn scheduling(
+        &self,
+        p_high_delayed: R,
+        p_low_delayed: R,
+        p_low: R,
+        temp_c: R,
+        stroke: R,
+        snubber_on: bool,
+    ) -> [R; N_THETA] {
+        let tau = self.tables.tau_p_ms(p_high_delayed, temp_c);
+        let inv_tau = R::ONE / tau;
+        let cd = self.tables.cd(temp_c);
+        let lift = self.x[1] - self.preload;
+        let vel = self.x[2];
+        let quad = self.piston.quadratic_gain(cd, lift, vel, stroke, snubber_on);
+        let k = -(self.piston.friction + quad * vel.abs()) * self.piston.accel_per_newton;
+        [inv_tau, k, p_high_delayed * inv_tau, p_low_delayed * inv_tau, p_low]
+    }
+}
+
+impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaLpv<R, N> {
+    fn step(&mut self, u_pilot: bool, inputs: &EhvvaInputs<R>) -> R {
+        let stroke = self.piston.stroke(inputs.lift_high);
+        let (td_open, td_close) = self.tables.t_delay_pair_ms(inputs.p_supply_mpa, inputs.temp_c);
+        let open_is_longer = td_open >= td_close;
+        let d_open = td_open * self.inv_dt;
+        let d_close = td_close * self.inv_dt;
+        self.u_history.push(if u_pilot { R::ONE } else { R::ZERO });
+        self.p_high_history.push(inputs.p_supply_mpa);
+        self.p_low_history.push(inputs.p_back_mpa);
+        let inv_n = R::ONE / R::from_f64(self.substeps as f64);
+        let mut back = R::ZERO;
+        for _ in 0..self.substeps {
+            let u_delayed = directional(
+                self.u_history.get(d_open - back),
+                self.u_history.get(d_close - back),
+                open_is_longer,
+            );
+            let p_high_delayed = self.p_high_history.get(d_open - back);
+            let p_low_delayed = self.p_low_history.get(d_close - back);
+            back += inv_n;
+            self.theta = self.scheduling(
+                p_high_delayed,
+                p_low_delayed,
+                inputs.p_back_mpa,
+                inputs.temp_c,
+                stroke,
+                inputs.snubber_on,
+            );
+            let a = self.affine.a_matrix(&self.theta);
+            let b = self.affine.b_matrix(&self.theta);
+            let u = [u_delayed, R::ONE - u_delayed];
+            // Semi-implicit Gauss-Seidel sweep: velocity, position, pressure.
+            for row in [2usize, 1, 0] {
+                let mut rate = b[row][0] * u[0] + b[row][1] * u[1];
+                for col in 0..3 {
+                    if col != row {
+                        rate += a[row][col] * self.x[col];
+                    }
+                }
+                self.x[row] = (self.x[row] + self.h * rate) / (R::ONE - self.h * a[row][row]);
+            }
+            let lift = self.x[1] - self.preload;
+            let lift_before = lift - self.h * self.x[2];
+            let (lift, vel, impact) = Piston::stops(lift, self.x[2], stroke);
+            if impact.is_some() && lift_before > R::ZERO {
+                self.seat_velocity = impact;
+            }
+            self.x[1] = lift + self.preload;
+            self.x[2] = vel;
+        }
+        self.x[1] - self.preload
+    }
+
+    fn dt_ms(&self) -> R {
+        self.dt
+    }
+    fn lift_mm(&self) -> R {
+        self.x[1] - self.preload
+    }
+    fn velocity_m_s(&self) -> R {
+        self.x[2]
+    }
+    fn take_seat_velocity(&mut self) -> Option<R> {
+        self.seat_velocity.take()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn affine_form_reproduces_eq15_entries() {
+        let p = EhvvaParams::paper_default();
+        let lpv = LpvAffine::<f64>::from_params(&p).unwrap();
+        let theta = [8.0, -3.0, 60.0, 9.0, 1.5];
+        let a = lpv.a_matrix(&theta);
+        let b = lpv.b_matrix(&theta);
+        let per_n = 1.0 / (1000.0 * p.mass_kg);
+        let expect_a = [
+            [-8.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0],
+            [p.area_top_mm2 * per_n, -p.spring_n_per_mm * per_n, -3.0],
+        ];
+        let expect_b = [[60.0, 9.0], [0.0, 0.0], [-p.area_bottom_mm2 * per_n * 1.5; 2]];
+        for i in 0..3 {
+            for j in 0..3 {
+                assert!((a[i][j] - expect_a[i][j]).abs() < 1e-12, "A[{i}][{j}]");
+            }
+            for j in 0..2 {
+                assert!((b[i][j] - expect_b[i][j]).abs() < 1e-12, "B[{i}][{j}]");
+            }
+        }
+        assert_eq!(lpv.c, [0.0, 1.0, 0.0]);
+    }
+
+    #[test]
+    fn valve_at_rest_stays_at_rest() {
+        // With the pilot off the spring preload holds the valve on its seat.
+        let p = EhvvaParams::paper_default();
+        let inputs = EhvvaInputs { p_supply_mpa: 8.0, p_back_mpa: 1.0, temp_c: 22.0, lift_high: true, snubber_on: true };
+        let mut m = EhvvaLpv::<f64>::new(&p, &inputs, 0.02).unwrap();
+        for _ in 0..500 {
+            assert_eq!(m.step(false, &inputs), 0.0);
+        }
+        let th = m.theta();
+        assert!(th[0] > 5.0 && th[0] < 20.0, "1/τp = {}", th[0]);
+        assert!((th[4] - 1.0).abs() < 1e-12);
+    }
+}

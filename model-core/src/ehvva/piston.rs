@@ -1,0 +1,202 @@
+//! Actuation piston, snubbers and accumulators shared by the three EHVVA models: eq. (1)
+//! (piston with end stops), eqs. (5)-(6) (top and bottom snubbers as equivalent orifices) and
+//! eqs. (7)-(8) (accumulators).
+//!
+//! Units: lift mm, time ms, velocity mm/ms (= m/s), pressure MPa, area mm², force N
+//! (MPa·mm² = N), mass kg, so an acceleration in mm/ms² is F[N] / m[kg] / 1000.
+//! An orifice of area A passing the piston flow A_p·v drops ρ/2·(A_p v / (Cd A))²; with ρ in
+//! kg/m³ and the velocity ratio in m/s this is ρ/2·1e-6 MPa per (m/s)².
+
+use super::params::{EhvvaError, EhvvaParams};
+use crate::real::Real;
+
+/// Physical constants of the piston, snubbers and accumulators in the model's number type.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Piston<R: Real> {
+    pub area_top: R,
+    pub area_bottom: R,
+    /// 1/(1000·me): N → mm/ms².
+    pub accel_per_newton: R,
+    pub spring: R,
+    pub preload: R,
+    pub friction: R,
+    pub lift_high: R,
+    pub lift_low: R,
+    /// ρ/2·1e-6·At³ and ρ/2·1e-6·Ab³: the quadratic damping force is these times
+    /// (1/A²)·v·|v| / Cd² (eqs. (5), (6) times the piston areas).
+    half_rho_at3: R,
+    half_rho_ab3: R,
+    inv_a2_main: R,
+    area_top_orifice: R,
+    area_top_switch: R,
+    area_top_notch: R,
+    /// Ls1 scaled by the `snubber` effect gain (0 = no zone).
+    snub_top_len: R,
+    inv_a2_bottom_port: R,
+    area_bottom_notch: R,
+    area_bottom_min: R,
+    snub_bottom_len: R,
+    inv_cap_high: R,
+    inv_cap_low: R,
+    pump: R,
+    relief_high: R,
+    relief_low: R,
+}
+
+impl<R: Real> Piston<R> {
+    pub fn new(p: &EhvvaParams) -> Result<Self, EhvvaError> {
+        p.validate()?;
+        let r = R::from_f64;
+        let half_rho = 0.5 * p.density_kg_m3 * 1e-6;
+        Ok(Self {
+            area_top: r(p.area_top_mm2),
+            area_bottom: r(p.area_bottom_mm2),
+            accel_per_newton: r(1.0 / (1000.0 * p.mass_kg)),
+            spring: r(p.spring_n_per_mm),
+            preload: r(p.spring_preload_mm),
+            friction: r(p.friction_n_per_m_s),
+            lift_high: r(p.lift_high_mm),
+            lift_low: r(p.lift_low_mm),
+            half_rho_at3: r(half_rho * p.area_top_mm2 * p.area_top_mm2 * p.area_top_mm2),
+            half_rho_ab3: r(half_rho * p.area_bottom_mm2 * p.area_bottom_mm2 * p.area_bottom_mm2),
+            inv_a2_main: r(1.0 / (p.area_main_mm2 * p.area_main_mm2)),
+            area_top_orifice: r(p.area_top_orifice_mm2),
+            area_top_switch: r(p.area_top_switch_orifice_mm2),
+            area_top_notch: r(p.area_top_notch_mm2),
+            snub_top_len: r(p.snub_top_len_mm * p.effect_snubber),
+            inv_a2_bottom_port: r(1.0 / (p.area_bottom_port_mm2 * p.area_bottom_port_mm2)),
+            area_bottom_notch: r(p.area_bottom_notch_mm2),
+            area_bottom_min: r(p.area_bottom_min_mm2),
+            snub_bottom_len: r(p.snub_bottom_len_mm),
+            inv_cap_high: r(1.0 / p.cap_high_mm3_per_mpa),
+            inv_cap_low: r(1.0 / p.cap_low_mm3_per_mpa),
+            pump: r(p.pump_flow_mm3_per_ms),
+            relief_high: r(p.relief_high_mm3_per_ms_mpa),
+            relief_low: r(p.relief_low_mm3_per_ms_mpa),
+        })
+    }
+
+    /// Full stroke S: S1 (high lift) or S2 (low lift).
+    pub fn stroke(&self, lift_high: bool) -> R {
+        if lift_high {
+            self.lift_high
+        } else {
+            self.lift_low
+        }
+    }
+
+    /// 1/Aorit² of the equivalent top orifice (eq. (5)): the main valve and top port in
+    /// series with the top snubber. Opening (`closing == false`): the snubber's check valve
+    /// opens and only the main valve restricts. Closing: the notch is covered linearly over the
+    /// snubbing zone `L < Ls1`, leaving the fixed orifice plus the switch orifice when the
+    /// switch valve is off.
+    pub fn inv_a2_top(&self, lift: R, closing: bool, switch_on: bool) -> R {
+        self.inv_a2_main + self.inv_a2_top_snubber(lift, closing, switch_on)
+    }
+
+    /// 1/A² of the top snubber alone (0 while opening: the check valve bypasses it).
+    pub fn inv_a2_top_snubber(&self, lift: R, closing: bool, switch_on: bool) -> R {
+        if !closing {
+            return R::ZERO;
+        }
+        let fixed =
+            if switch_on { self.area_top_orifice } else { self.area_top_orifice + self.area_top_switch };
+        let uncovered = if lift >= self.snub_top_len {
+            R::ONE
+        } else {
+            // snub_top_len > lift >= 0 here, so the division is safe.
+            (lift / self.snub_top_len).clamp(R::ZERO, R::ONE)
+        };
+        let area = fixed + self.area_top_notch * uncovered;
+        R::ONE / (area * area)
+    }
+
+    /// 1/A² of the fully open main valve and top port.
+    pub fn inv_a2_main(&self) -> R {
+        self.inv_a2_main
+    }
+
+    /// 1/Aorib² of the equivalent bottom orifice (eq. (6)): bottom port in series with the
+    /// bottom notch, which closes linearly over the last Ls2 before full lift.
+    pub fn inv_a2_bottom(&self, lift: R, stroke: R) -> R {
+        let to_go = stroke - lift;
+        let uncovered = if to_go >= self.snub_bottom_len {
+            R::ONE
+        } else {
+            (to_go / self.snub_bottom_len).clamp(R::ZERO, R::ONE)
+        };
+        let area = self.area_bottom_min + self.area_bottom_notch * uncovered;
+        self.inv_a2_bottom_port + R::ONE / (area * area)
+    }
+
+    /// Quadratic damping gain k such that the orifice forces of eqs. (5)-(6) on the piston are
+    /// −k·|v|·v (N, v in mm/ms). This is −me·K of eq. (15) without the friction part.
+    pub fn quadratic_gain(&self, cd: R, lift: R, vel: R, stroke: R, switch_on: bool) -> R {
+        let closing = vel < R::ZERO;
+        self.quadratic_gain_with(cd, self.inv_a2_top(lift, closing, switch_on), lift, stroke)
+    }
+
+    /// As [`Self::quadratic_gain`] with the top orifice's 1/Aorit² given (the ninth-order model
+    /// meters the main valve by its spool position).
+    pub fn quadratic_gain_with(&self, cd: R, inv_a2_top: R, lift: R, stroke: R) -> R {
+        let top = self.half_rho_at3 * inv_a2_top;
+        let bottom = self.half_rho_ab3 * self.inv_a2_bottom(lift, stroke);
+        (top + bottom) / (cd * cd)
+    }
+
+    /// Pressure, spring and seat-free force on the piston (eq. (1) right side without the
+    /// velocity terms): At·P̃mo − Ab·Pl − ks(L + ds).
+    pub fn static_force(&self, p_top: R, p_low: R, lift: R) -> R {
+        self.area_top * p_top - self.area_bottom * p_low - self.spring * (lift + self.preload)
+    }
+
+    /// One semi-implicit velocity step: the static force explicitly, friction and the quadratic
+    /// orifice damping implicitly (linearised about the current |v|), so the stiff snubber
+    /// damping cannot make the step unstable whatever the orifice area.
+    pub fn velocity_step(&self, vel: R, force: R, quad_gain: R, h: R) -> R {
+        let damping = self.friction + quad_gain * vel.abs();
+        (vel + h * self.accel_per_newton * force) / (R::ONE + h * self.accel_per_newton * damping)
+    }
+
+    /// End stops of eq. (1): the seat at 0 and the lift sleeve at S stop the piston at once.
+    /// Returns the clamped lift and velocity and, when the piston hit the seat in this step,
+    /// its velocity just before (the seating velocity).
+    pub fn stops(lift: R, vel: R, stroke: R) -> (R, R, Option<R>) {
+        stops(lift, vel, stroke)
+    }
+}
+
+/// End stops at 0 and `max` for any sliding part (piston eq. (1), spools eq. (2)): clamps the
+/// position, removes the velocity into the stop, and reports the velocity of a hit on 0.
+pub(crate) fn stops<R: Real>(lift: R, vel: R, stroke: R) -> (R, R, Option<R>) {
+    {
+        if lift <= R::ZERO {
+            let impact = if vel < R::ZERO { Some(vel) } else { None };
+            (R::ZERO, vel.max(R::ZERO), impact)
+        } else if lift >= stroke {
+            (stroke, vel.min(R::ZERO), None)
+        } else {
+            (lift, vel, None)
+        }
+    }
+}
+
+impl<R: Real> Piston<R> {
+    /// dPh/dt of eq. (8): the piston draws At·v from the supply while opening; the pump
+    /// delivers a constant flow; the relief valve returns the excess above the crack pressure,
+    /// set so the steady state with the valve at rest is exactly the set-point.
+    pub fn p_high_rate(&self, p_high: R, p_set: R, vel: R) -> R {
+        let crack = p_set - self.pump / self.relief_high;
+        let relief = self.relief_high * (p_high - crack).max(R::ZERO);
+        (self.pump - relief - self.area_top * vel.max(R::ZERO)) * self.inv_cap_high
+    }
+
+    /// dPl/dt of eq. (7): the bottom chamber pushes Ab·v into the back-pressure line while
+    /// opening; the top chamber returns (At − Ab)·|v| net while closing (volume balance of the
+    /// two chambers); relief above and check-valve make-up below the set-point.
+    pub fn p_low_rate(&self, p_low: R, p_set: R, vel: R) -> R {
+        let inflow = self.area_bottom * vel.max(R::ZERO)
+            + (self.area_top - self.area_bottom) * (-vel).max(R::ZERO);
+        (inflow - self.relief_low * (p_low - p_set)) * self.inv_cap_low
+    }
+}
