@@ -117,12 +117,22 @@ pub struct VacuumParams {
     pub effects: VacuumEffects,
 }
 
-/// Shared by all three presets: the same solenoid valve type (Sec. 2.2) and bench.
+// Shared by all three presets: the same solenoid valve type (Sec. 2.2) on one bench.
+/// U_ref of eq. (1)/(15). The paper gives no number; its Fig. 4 measurements span
+/// U_syst = 10.3..11.9 V and the corrected duty axis keeps the raw one's range, so U_ref is a
+/// nominal system voltage: 12 V.
 const U_REF_V: f64 = 12.0;
+/// Sea-level bench.
 const P_AMB_REF_KPA: f64 = 100.0;
 const TEMP_AMB_K: f64 = 293.0;
+/// Fig. 13 right: the effective leakage area grows linearly to ~0.08 mm² (8e-8 m² on its
+/// 0..1e-7 m² axis) at 80 % duty; held constant beyond, where the paper's line stops fitting.
 const LEAK_AREA_MM2_PER_PCT: f64 = 0.001;
 const LEAK_DUTY_MAX_PCT: f64 = 80.0;
+/// Chamber volumes (eq. (12)): not in the paper; a ~70 mm membrane with a ~15 mm stroke
+/// sweeps about 0.06 L of a 0.15 L chamber.
+const VOLUME_X0_L: f64 = 0.15;
+const VOLUME_STROKE_L: f64 = 0.06;
 
 impl VacuumParams {
     /// Low-pressure turbine wastegate: piecewise-linear valve map eq. (2), linear position
@@ -138,24 +148,31 @@ impl VacuumParams {
                 k2_kpa_per_pct: -1.0,
                 p02_kpa: 122.0,
             },
-            // Fig. 5: steps settle in 0.1-0.3 s, rise faster than fall.
+            // Fig. 5: steps settle in 0.1-0.3 s (98 % at 3.9τ: 0.16 and 0.27 s); which way is
+            // faster the paper does not state numerically: venting from ambient (large
+            // pressure difference) is taken as the faster one.
             tau_rise_s: 0.04,
             tau_fall_s: 0.07,
             // x = 0 at 90 kPa (10 kPa spring preload), x = 100 % at 40 kPa (Fig. 9).
             position_map: PositionMap::Linear { k_pct_per_kpa: -2.0, x0_pct: 180.0 },
             p_amb_ref_kpa: P_AMB_REF_KPA,
-            // Spring 0.5 kPa/%: ω = sqrt(0.5/2e-4) = 50 rad/s, ζ = 0.7 extending (Fig. 11).
+            // Mass and damping are not given numerically; chosen so that the rod follows the
+            // pressure within a few tens of ms as in Fig. 11: spring 0.5 kPa/%,
+            // ω = sqrt(0.5/2e-4) = 50 rad/s, ζ = 0.7 extending; retracting damped twice as much
+            // (Sec. 3.2: "different, roughly by a factor of two").
             mass_kpa_s2_per_pct: 2.0e-4,
             damping_extend_kpa_s_per_pct: 0.014,
             damping_retract_kpa_s_per_pct: 0.028,
-            // Fig. 9: "a small difference between ramps up and down".
+            // Fig. 9: "a small difference between ramps up and down": 2·Fc = 3 kPa. Dahl's σ
+            // builds up the friction over Fc/σ = 0.5 % of travel (near-Coulomb, as Fig. 9's
+            // sharp corners suggest).
             fc_kpa: 1.5,
             dahl_sigma_kpa_per_pct: 3.0,
             backlash_pct: 0.0,
             leak_area_mm2_per_pct: LEAK_AREA_MM2_PER_PCT,
             leak_duty_max_pct: LEAK_DUTY_MAX_PCT,
-            volume_x0_l: 0.15,
-            volume_stroke_l: 0.06,
+            volume_x0_l: VOLUME_X0_L,
+            volume_stroke_l: VOLUME_STROKE_L,
             temp_amb_k: TEMP_AMB_K,
             effects: VacuumEffects {
                 supply_voltage: true,
@@ -186,6 +203,7 @@ impl VacuumParams {
             mass_kpa_s2_per_pct: 1.0e-4,
             damping_extend_kpa_s_per_pct: 0.006,
             damping_retract_kpa_s_per_pct: 0.012,
+            // Fig. 10: "a larger friction" than the LPT (position dependent there; one Fc here).
             fc_kpa: 4.0,
             dahl_sigma_kpa_per_pct: 8.0,
             ..Self::lpt()
