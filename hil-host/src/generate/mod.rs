@@ -6,6 +6,7 @@
 //! truth (effect and parameters) is returned separately and never written into the logs.
 //! Everything follows from the seed, so a failing case is replayed from the seed a test prints.
 
+pub mod evvt;
 pub mod positioner;
 
 use crate::log::Plant;
@@ -64,6 +65,7 @@ pub struct Case {
 /// The effects a plant's generator can hide (its catalogue plus `none`).
 pub fn effects(plant: Plant) -> &'static [&'static str] {
     match plant {
+        Plant::Evvt => &["none", "supply-voltage", "engine-speed", "direction", "belt-vibration"],
         Plant::Positioner => &["none", "coulomb-friction", "asymmetric-friction"],
         _ => &[],
     }
@@ -78,6 +80,7 @@ pub fn generate(plant: Plant, effect: &str, seed: u64) -> Result<Case, String> {
         ));
     }
     match plant {
+        Plant::Evvt => evvt::generate(effect, seed),
         Plant::Positioner => positioner::generate(effect, seed),
         other => Err(format!("no generator for plant `{other}` yet")),
     }
