@@ -13,6 +13,7 @@ extern crate std;
 
 pub mod control;
 pub mod delay;
+pub mod ecu;
 pub mod ehvva;
 pub mod evvt;
 pub mod lut;
