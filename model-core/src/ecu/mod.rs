@@ -14,3 +14,4 @@
 
 pub mod board;
 pub mod ehvva_task;
+pub mod supervisor;
