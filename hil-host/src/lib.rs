@@ -6,4 +6,5 @@ pub mod log;
 pub mod lsq;
 pub mod plot;
 pub mod residuals;
+pub mod run;
 pub mod signal;

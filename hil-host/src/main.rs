@@ -13,6 +13,10 @@ commands:
       calibrate the baseline model, test its residuals, fit every catalogue effect, name the
       cause and measure the gain on validation data (the last 30 % of the file when no
       --validation is given)
+  run [scenario.toml] [--out dir]
+      closed loop of all three actuators (model-core controllers against the plant models,
+      natively); without a file, the built-in default scenario; logs and plots go to --out
+      (default: out/<scenario name>)
   generate <plant> <effect|none> [--seed N] [--out dir]
       write a bench-like estimation and validation log pair from the plant model with one
       hidden effect (the truth goes to truth.json beside them, not into the logs)
@@ -25,6 +29,7 @@ fn main() -> ExitCode {
         Some("check") => check(&args[1..]),
         Some("diagnose") => run_diagnose(&args[1..]),
         Some("generate") => run_generate(&args[1..]),
+        Some("run") => run_scenario(&args[1..]),
         Some("-h") | Some("--help") | Some("help") => {
             print!("{USAGE}");
             Ok(())
@@ -159,5 +164,23 @@ fn run_generate(args: &[String]) -> Result<(), CliError> {
     let truth = serde_json::json!({"plant": plant.name(), "effect": case.effect, "seed": seed, "params": truth});
     write("truth.json", &(serde_json::to_string_pretty(&truth).unwrap_or_default() + "\n"))?;
     println!("seed {seed}: wrote {}/estimation.csv, validation.csv and truth.json", dir.display());
+    Ok(())
+}
+
+fn run_scenario(args: &[String]) -> Result<(), CliError> {
+    use hil_host::run::{run, Scenario};
+    let a = parse_args(args, &["out"])?;
+    let scenario = match a.positional.as_slice() {
+        [] => Scenario::default_scenario(),
+        [file] => {
+            let text = std::fs::read_to_string(file).map_err(|e| CliError::Failed(format!("{file}: {e}")))?;
+            Scenario::from_toml(Path::new(file), &text).map_err(CliError::Failed)?
+        }
+        _ => return Err(CliError::Usage("run takes at most one scenario file".into())),
+    };
+    let out = PathBuf::from(a.get("out").map(String::from).unwrap_or_else(|| format!("out/{}", scenario.name)));
+    let summary = run(&scenario, Some(&out)).map_err(CliError::Failed)?;
+    print!("{}", summary.text(&scenario.name));
+    println!("logs (DATA-FORMAT) and plots in {}", out.display());
     Ok(())
 }
