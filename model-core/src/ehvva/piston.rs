@@ -111,10 +111,6 @@ impl<R: Real> Piston<R> {
         R::ONE / (area * area)
     }
 
-    /// 1/A² of the fully open main valve and top port.
-    pub fn inv_a2_main(&self) -> R {
-        self.inv_a2_main
-    }
 
     /// 1/Aorib² of the equivalent bottom orifice (eq. (6)): bottom port in series with the
     /// bottom notch, which closes linearly over the last Ls2 before full lift.
