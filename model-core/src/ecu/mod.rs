@@ -14,4 +14,5 @@
 
 pub mod board;
 pub mod ehvva_task;
+pub mod evvt_task;
 pub mod supervisor;
