@@ -16,3 +16,4 @@ pub mod board;
 pub mod ehvva_task;
 pub mod evvt_task;
 pub mod supervisor;
+pub mod vacuum_task;
