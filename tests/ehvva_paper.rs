@@ -180,22 +180,58 @@ fn lpv_tracks_reduced_model_within_2_percent() {
     println!("worst LPV MRE {worst:.3} %");
 }
 
+fn run_lpv_in<R: Real>(p: &EhvvaParams, t: &PaperTest, measured: &Run) -> Vec<f64> {
+    let base = EhvvaInputs::<R>::from_test(t);
+    let mut m = EhvvaLpv::<R>::new(p, &base, DT_MS).unwrap();
+    let ev = ValveEvent::with_dwell(t.dwell_ms);
+    (0..measured.lift.len())
+        .map(|k| {
+            let inputs = EhvvaInputs {
+                p_supply_mpa: R::from_f64(measured.p_high[k]),
+                p_back_mpa: R::from_f64(measured.p_low[k]),
+                ..base
+            };
+            m.step(command(k, &ev), &inputs).to_f64()
+        })
+        .collect()
+}
+
+fn run_full_in<R: Real>(p: &EhvvaParams, t: &PaperTest) -> Vec<f64> {
+    let inputs = EhvvaInputs::<R>::from_test(t);
+    let mut m = EhvvaFull::<R>::new(p, &inputs, DT_MS).unwrap();
+    let ev = ValveEvent::with_dwell(t.dwell_ms);
+    let n = (ev.t_end_ms / DT_MS) as usize;
+    (0..n).map(|k| m.step(command(k, &ev), &inputs).to_f64()).collect()
+}
+
+fn max_dev(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max)
+}
+
 #[test]
 fn number_types_agree() {
+    // Largest lift deviation from the f64 run over the 15 tests of Table 1, per model.
+    // Measured (f32, Q32): reduced 4.5e-5 / 3.2e-5 mm, LPV 1.1e-4 / 1.2e-6 mm, ninth-order
+    // 4.1e-5 / 3.2e-5 mm; the asserted 1e-3 mm leaves a margin of about 10.
     let p = EhvvaParams::paper_default();
-    let mut dev_f32: f64 = 0.0;
-    let mut dev_q32: f64 = 0.0;
+    let mut dev = [[0.0f64; 2]; 3];
     for t in PAPER_TESTS.iter() {
         let r64 = run_reduced::<f64>(&p, t);
-        let r32 = run_reduced::<f32>(&p, t);
-        let rq = run_reduced::<Q32>(&p, t);
-        for k in 0..r64.lift.len() {
-            dev_f32 = dev_f32.max((r32.lift[k] - r64.lift[k]).abs());
-            dev_q32 = dev_q32.max((rq.lift[k] - r64.lift[k]).abs());
-        }
+        dev[0][0] = dev[0][0].max(max_dev(&run_reduced::<f32>(&p, t).lift, &r64.lift));
+        dev[0][1] = dev[0][1].max(max_dev(&run_reduced::<Q32>(&p, t).lift, &r64.lift));
+        let l64 = run_lpv_in::<f64>(&p, t, &r64);
+        dev[1][0] = dev[1][0].max(max_dev(&run_lpv_in::<f32>(&p, t, &r64), &l64));
+        dev[1][1] = dev[1][1].max(max_dev(&run_lpv_in::<Q32>(&p, t, &r64), &l64));
+        let f64_run = run_full_in::<f64>(&p, t);
+        dev[2][0] = dev[2][0].max(max_dev(&run_full_in::<f32>(&p, t), &f64_run));
+        dev[2][1] = dev[2][1].max(max_dev(&run_full_in::<Q32>(&p, t), &f64_run));
     }
-    println!("largest lift deviation from f64: f32 {dev_f32:.3e} mm, Q32.32 {dev_q32:.3e} mm");
-    assert!(dev_f32 < 0.05 && dev_q32 < 0.05, "f32 {dev_f32}, Q32 {dev_q32}");
+    for (name, d) in ["reduced", "LPV", "ninth-order"].iter().zip(dev) {
+        println!("{name}: largest lift deviation from f64: f32 {:.3e} mm, Q32.32 {:.3e} mm", d[0], d[1]);
+    }
+    for d in dev {
+        assert!(d[0] < 1e-3 && d[1] < 1e-3, "{dev:?}");
+    }
 }
 
 fn run_full(p: &EhvvaParams, t: &PaperTest) -> Vec<f64> {

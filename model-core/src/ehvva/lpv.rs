@@ -10,7 +10,7 @@
 //! −Cf/me − ρ |x3| / (2 me Cd(T)²) · (At³/Aorit(x2)² + Ab³/Aorib(x2)²).
 //!
 //! In this crate's units (MPa, mm, ms, kg) every force term carries 1/(1000 me) (N/kg = m/s² =
-//! 1e-3 mm/ms²): A0[2][0] = At/(1000 me), A0[2][1] = −ks/(1000 me), B5[2] = −Ab/(1000 me),
+//! 1e-3 mm/ms²): `A0[2][0] = At/(1000 me)`, `A0[2][1] = −ks/(1000 me)`, `B5[2] = −Ab/(1000 me)`,
 //! and K is in 1/ms. The sign of B5 is the physical one (the back pressure on the piston
 //! bottom pushes the valve closed, eq. (1)); the printed matrix lost the minus sign.
 //!
@@ -204,9 +204,9 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaLpv<R, N> {
             // Semi-implicit Gauss-Seidel sweep: velocity, position, pressure.
             for row in [2usize, 1, 0] {
                 let mut rate = b[row][0] * u[0] + b[row][1] * u[1];
-                for col in 0..3 {
+                for (col, (&a_rc, &x_c)) in a[row].iter().zip(self.x.iter()).enumerate() {
                     if col != row {
-                        rate += a[row][col] * self.x[col];
+                        rate += a_rc * x_c;
                     }
                 }
                 self.x[row] = (self.x[row] + self.h * rate) / (R::ONE - self.h * a[row][row]);

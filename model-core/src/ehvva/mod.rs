@@ -21,7 +21,7 @@
 //!
 //! # Units
 //! Lift mm, time ms, velocity mm/ms (= m/s), pressure MPa (gauge), area mm², force N
-//! (MPa·mm² = N), mass kg (so a[mm/ms²] = F[N] / m[kg] / 1000), flow mm³/ms (= cm³/s),
+//! (MPa·mm² = N), mass kg (so a in mm/ms² = F in N / m in kg / 1000), flow mm³/ms (= cm³/s),
 //! accumulator capacitance mm³/MPa, current A, voltage V, inductance mH (V/mH = A/ms).
 //!
 //! # Integration

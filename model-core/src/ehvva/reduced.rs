@@ -278,4 +278,42 @@ mod tests {
             assert!((yf - yq).abs() < 1e-3, "step {k}: {yf} vs {yq}");
         }
     }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(24))]
+        /// Whatever the operating point and command pattern: the lift stays within the stops,
+        /// the velocity is zero on a stop it pushes against, and the accumulator pressures stay
+        /// finite and between tank and the supply set-point plus the relief band.
+        #[test]
+        fn lift_stays_between_the_stops(
+            p_supply in 4.0f64..9.0,
+            p_back in 0.5f64..4.5,
+            temp in -40.0f64..130.0,
+            lift_high: bool,
+            snubber_on: bool,
+            pattern in proptest::collection::vec(proptest::bool::ANY, 8),
+        ) {
+            let p = EhvvaParams::paper_default();
+            let stroke = if lift_high { p.lift_high_mm } else { p.lift_low_mm };
+            // On the target number type.
+            let fi = EhvvaInputs {
+                p_supply_mpa: p_supply as f32,
+                p_back_mpa: p_back as f32,
+                temp_c: temp as f32,
+                lift_high,
+                snubber_on,
+            };
+            let mut m = EhvvaReduced::<f32>::new(&p, &fi, 0.02).unwrap();
+            for (seg, &u) in pattern.iter().enumerate() {
+                for _ in 0..(100 + 37 * seg) {
+                    let y = m.step(u, &fi) as f64;
+                    proptest::prop_assert!(y.is_finite() && (0.0..=stroke + 1e-6).contains(&y), "lift {}", y);
+                    let ph = m.p_high_mpa() as f64;
+                    let pl = m.p_low_mpa() as f64;
+                    proptest::prop_assert!(ph > 0.0 && ph < p_supply + 0.2, "Ph {}", ph);
+                    proptest::prop_assert!(pl > 0.0 && pl < p_back + 2.0, "Pl {}", pl);
+                }
+            }
+        }
+    }
 }
