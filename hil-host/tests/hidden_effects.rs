@@ -44,6 +44,15 @@ fn positioner_hidden_effects_are_found() {
     }
 }
 
+#[test]
+fn evvt_hidden_effects_are_found() {
+    for effect in effects(Plant::Evvt) {
+        for seed in CI_SEEDS {
+            check(Plant::Evvt, effect, seed);
+        }
+    }
+}
+
 /// The long sweep: `cargo test -p hil-host --release --test hidden_effects -- --ignored --nocapture`.
 #[test]
 #[ignore]
