@@ -30,7 +30,13 @@ fn test_no(n: u8) -> PaperTest {
 fn metrics(p: &EhvvaParams, t: &PaperTest) -> EventMetrics {
     let inputs = EhvvaInputs::<f64>::from_test(t);
     let mut m = EhvvaReduced::<f64>::new(p, &inputs, DT_MS).unwrap();
-    run_event(&mut m, &ValveEvent::with_dwell(t.dwell_ms), &inputs, stroke(t), |_, _| {})
+    run_event(
+        &mut m,
+        &ValveEvent::with_dwell(t.dwell_ms),
+        &inputs,
+        stroke(t),
+        |_, _| {},
+    )
 }
 
 /// Lift trace of the reduced model in number type `R`, plus the accumulator pressures before
@@ -51,7 +57,11 @@ fn run_reduced<R: Real>(p: &EhvvaParams, t: &PaperTest) -> Run {
     let mut m = EhvvaReduced::<R>::new(p, &inputs, DT_MS).unwrap();
     let ev = ValveEvent::with_dwell(t.dwell_ms);
     let n = (ev.t_end_ms / DT_MS) as usize;
-    let mut run = Run { lift: vec![], p_high: vec![], p_low: vec![] };
+    let mut run = Run {
+        lift: vec![],
+        p_high: vec![],
+        p_low: vec![],
+    };
     for k in 0..n {
         run.p_high.push(m.p_high_mpa().to_f64());
         run.p_low.push(m.p_low_mpa().to_f64());
@@ -66,7 +76,11 @@ fn run_lpv(p: &EhvvaParams, t: &PaperTest, measured: &Run) -> Vec<f64> {
     let ev = ValveEvent::with_dwell(t.dwell_ms);
     (0..measured.lift.len())
         .map(|k| {
-            let inputs = EhvvaInputs { p_supply_mpa: measured.p_high[k], p_back_mpa: measured.p_low[k], ..base };
+            let inputs = EhvvaInputs {
+                p_supply_mpa: measured.p_high[k],
+                p_back_mpa: measured.p_low[k],
+                ..base
+            };
             m.step(command(k, &ev), &inputs)
         })
         .collect()
@@ -79,7 +93,14 @@ fn times(n: usize) -> Vec<f64> {
 fn mre(t: &PaperTest, a: &[f64], b: &[f64]) -> f64 {
     let ev = ValveEvent::with_dwell(t.dwell_ms);
     let ts = times(a.len());
-    mean_relative_error_pct(&ts, a, b, ev.t_open_ms, ev.t_open_ms + ev.dwell_ms + 12.0, stroke(t))
+    mean_relative_error_pct(
+        &ts,
+        a,
+        b,
+        ev.t_open_ms,
+        ev.t_open_ms + ev.dwell_ms + 12.0,
+        stroke(t),
+    )
 }
 
 #[test]
@@ -91,12 +112,21 @@ fn table3_opening_times_within_15_percent() {
         let m = metrics(&p, &test_no(n));
         let model_ms = m.opening_time_ms().expect("valve did not open fully");
         let err = (model_ms - paper_ms) / paper_ms;
-        println!("test {n}: opening {model_ms:.2} ms, paper {paper_ms} ms ({:+.1} %)", 100.0 * err);
-        assert!(err.abs() <= 0.15, "test {n}: {model_ms:.2} ms vs {paper_ms} ms");
+        println!(
+            "test {n}: opening {model_ms:.2} ms, paper {paper_ms} ms ({:+.1} %)",
+            100.0 * err
+        );
+        assert!(
+            err.abs() <= 0.15,
+            "test {n}: {model_ms:.2} ms vs {paper_ms} ms"
+        );
     }
     // Supply pressure is the key factor (Sec. 5.3): strictly faster with Ph in both lifts.
     for ns in [[1u8, 2, 3], [4, 5, 6]] {
-        let t: Vec<f64> = ns.iter().map(|&n| metrics(&p, &test_no(n)).opening_time_ms().unwrap()).collect();
+        let t: Vec<f64> = ns
+            .iter()
+            .map(|&n| metrics(&p, &test_no(n)).opening_time_ms().unwrap())
+            .collect();
         assert!(t[0] > t[1] && t[1] > t[2], "{t:?}");
     }
 }
@@ -106,22 +136,40 @@ fn table4_temperature_trends_at_5_mpa() {
     let p = EhvvaParams::paper_default();
     let tables = EhvvaTables::<f64>::new(&p).unwrap();
     // Tests 8-11: -20, 22, 60, 100 °C.
-    let ms: Vec<EventMetrics> = [8u8, 9, 10, 11].iter().map(|&n| metrics(&p, &test_no(n))).collect();
+    let ms: Vec<EventMetrics> = [8u8, 9, 10, 11]
+        .iter()
+        .map(|&n| metrics(&p, &test_no(n)))
+        .collect();
     let temps = [-20.0, 22.0, 60.0, 100.0];
     for i in 0..3 {
         // VO delay (table, and as measured from command to 1 % lift) and VO time grow as T falls.
-        assert!(tables.t_delay_ms(5.0, temps[i], true) > tables.t_delay_ms(5.0, temps[i + 1], true));
+        assert!(
+            tables.t_delay_ms(5.0, temps[i], true) > tables.t_delay_ms(5.0, temps[i + 1], true)
+        );
         let d = |m: &EventMetrics| m.opening_delay_ms().unwrap();
         let o = |m: &EventMetrics| m.opening_time_ms().unwrap();
-        assert!(d(&ms[i]) > d(&ms[i + 1]), "VO delay at {} vs {} °C", temps[i], temps[i + 1]);
-        assert!(o(&ms[i]) > o(&ms[i + 1]), "VO time at {} vs {} °C", temps[i], temps[i + 1]);
+        assert!(
+            d(&ms[i]) > d(&ms[i + 1]),
+            "VO delay at {} vs {} °C",
+            temps[i],
+            temps[i + 1]
+        );
+        assert!(
+            o(&ms[i]) > o(&ms[i + 1]),
+            "VO time at {} vs {} °C",
+            temps[i],
+            temps[i + 1]
+        );
     }
     let vc: Vec<f64> = ms.iter().map(|m| m.closing_time_ms().unwrap()).collect();
     let vo: Vec<f64> = ms.iter().map(|m| m.opening_time_ms().unwrap()).collect();
     println!("VO time {vo:.2?} (paper 8.2 6.2 4.8 4.4), VC time {vc:.2?} (paper 4.0 3.5 3.0 2.8)");
     // VC time nearly flat above 22 °C (paper: 3.5 -> 2.8 ms, -20 %) while opening moves more at
     // the cold end; cold (-20 °C) closing is clearly slower.
-    assert!((vc[1] - vc[3]).abs() / vc[1] < 0.25, "VC 22 -> 100 °C: {vc:?}");
+    assert!(
+        (vc[1] - vc[3]).abs() / vc[1] < 0.25,
+        "VC 22 -> 100 °C: {vc:?}"
+    );
     assert!(vc[0] > 1.2 * vc[1], "VC at -20 °C not slower: {vc:?}");
     // The cold end slows the opening clearly (paper: +32 % from 22 to -20 °C). Weaker than the
     // paper: above 22 °C the model's opening moves by only ~5 % (paper 29 %), see the report.
@@ -147,22 +195,30 @@ fn snubber_switch_lowers_seating_velocity_and_adds_a_tail() {
     bare.effect_snubber = 0.0;
     let v_bare = metrics(&bare, &test_no(6)).seating_velocity_m_s.unwrap();
     println!("no snubbing zone, switch on: seating {v_bare:.3} m/s");
-    assert!(v_bare > 3.0 * v_on && v_bare > 1.4 * v_off, "no snubber: {v_bare}");
+    assert!(
+        v_bare > 3.0 * v_on && v_bare > 1.4 * v_off,
+        "no snubber: {v_bare}"
+    );
 }
 
 #[test]
 fn back_pressure_delays_full_closing() {
     let p = EhvvaParams::paper_default();
     // Tests 12-15: 8 MPa, 20 ms dwell, high lift, switch on, Pl = 1..4 MPa.
-    let full: Vec<f64> =
-        [12u8, 13, 14, 15].iter().map(|&n| metrics(&p, &test_no(n)).full_closing_ms().unwrap()).collect();
+    let full: Vec<f64> = [12u8, 13, 14, 15]
+        .iter()
+        .map(|&n| metrics(&p, &test_no(n)).full_closing_ms().unwrap())
+        .collect();
     println!("full closing {full:.2?} ms at Pl = 1..4 MPa");
     for i in 0..3 {
         assert!(full[i + 1] > full[i], "{full:?}");
     }
     let delay = full[3] - full[0];
     // Fig. 10: about 7 ms later at 4 MPa.
-    assert!((5.0..=9.0).contains(&delay), "closing delayed by {delay:.2} ms");
+    assert!(
+        (5.0..=9.0).contains(&delay),
+        "closing delayed by {delay:.2} ms"
+    );
 }
 
 #[test]
@@ -201,11 +257,16 @@ fn run_full_in<R: Real>(p: &EhvvaParams, t: &PaperTest) -> Vec<f64> {
     let mut m = EhvvaFull::<R>::new(p, &inputs, DT_MS).unwrap();
     let ev = ValveEvent::with_dwell(t.dwell_ms);
     let n = (ev.t_end_ms / DT_MS) as usize;
-    (0..n).map(|k| m.step(command(k, &ev), &inputs).to_f64()).collect()
+    (0..n)
+        .map(|k| m.step(command(k, &ev), &inputs).to_f64())
+        .collect()
 }
 
 fn max_dev(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max)
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max)
 }
 
 #[test]
@@ -227,7 +288,10 @@ fn number_types_agree() {
         dev[2][1] = dev[2][1].max(max_dev(&run_full_in::<Q32>(&p, t), &f64_run));
     }
     for (name, d) in ["reduced", "LPV", "ninth-order"].iter().zip(dev) {
-        println!("{name}: largest lift deviation from f64: f32 {:.3e} mm, Q32.32 {:.3e} mm", d[0], d[1]);
+        println!(
+            "{name}: largest lift deviation from f64: f32 {:.3e} mm, Q32.32 {:.3e} mm",
+            d[0], d[1]
+        );
     }
     for d in dev {
         assert!(d[0] < 1e-3 && d[1] < 1e-3, "{dev:?}");
@@ -283,9 +347,14 @@ fn ninth_order_actuation_chain_behaves() {
         assert!(m.main_mm() >= 0.0 && m.main_mm() <= p.valve.main_stroke_mm + 1e-12);
     }
     let i_max = p.valve.coil_voltage_v / p.valve.coil_resistance_ohm;
-    assert!(max_current > 0.9 * i_max && max_current <= i_max + 1e-9, "{max_current}");
+    assert!(
+        max_current > 0.9 * i_max && max_current <= i_max + 1e-9,
+        "{max_current}"
+    );
     assert!(main_open_k.unwrap() < first_lift_k.unwrap());
-    assert!(m.current_a() < 0.01 && m.pilot_mm() == 0.0 && m.main_mm() == 0.0 && m.lift_mm() == 0.0);
+    assert!(
+        m.current_a() < 0.01 && m.pilot_mm() == 0.0 && m.main_mm() == 0.0 && m.lift_mm() == 0.0
+    );
 }
 
 #[test]
@@ -315,21 +384,33 @@ fn effect_knobs_switch_their_effect_off() {
     let mut off = on;
     off.effect_direction_delay = 0.0;
     let tb = EhvvaTables::<f64>::new(&off).unwrap();
-    assert_eq!(tb.t_delay_ms(7.0, 22.0, true), tb.t_delay_ms(7.0, 22.0, false));
+    assert_eq!(
+        tb.t_delay_ms(7.0, 22.0, true),
+        tb.t_delay_ms(7.0, 22.0, false)
+    );
     let gap = |p: &EhvvaParams| {
         let m = metrics(p, &test_no(2));
         m.opening_delay_ms().unwrap() - m.closing_delay_ms().unwrap()
     };
-    println!("direction-delay: open-close delay gap {:.2} ms on, {:.2} ms off", gap(&on), gap(&off));
+    println!(
+        "direction-delay: open-close delay gap {:.2} ms on, {:.2} ms off",
+        gap(&on),
+        gap(&off)
+    );
     assert!(gap(&on) > gap(&off) + 0.3);
     // snubber: off, the switch valve hardly changes the seating velocity any more (its orifice
     // is then only a small part of the fully uncovered top area); on, it divides it by ~3.
     let mut off = on;
     off.effect_snubber = 0.0;
     let ratio = |p: &EhvvaParams| {
-        metrics(p, &test_no(7)).seating_velocity_m_s.unwrap() / metrics(p, &test_no(6)).seating_velocity_m_s.unwrap()
+        metrics(p, &test_no(7)).seating_velocity_m_s.unwrap()
+            / metrics(p, &test_no(6)).seating_velocity_m_s.unwrap()
     };
-    println!("snubber: seating velocity switch off/on {:.2} with the zone, {:.2} without", ratio(&on), ratio(&off));
+    println!(
+        "snubber: seating velocity switch off/on {:.2} with the zone, {:.2} without",
+        ratio(&on),
+        ratio(&off)
+    );
     assert!(ratio(&on) > 2.0 && ratio(&off) < 1.3);
 }
 
@@ -364,9 +445,13 @@ fn lpv_affine_data_matches_the_simulated_model() {
     let b = aff.b_matrix(&th);
     let u = [1.0, 0.0];
     for row in 0..3 {
-        let rate: f64 = (0..3).map(|c| a[row][c] * x1[c]).sum::<f64>() + b[row][0] * u[0] + b[row][1] * u[1];
+        let rate: f64 =
+            (0..3).map(|c| a[row][c] * x1[c]).sum::<f64>() + b[row][0] * u[0] + b[row][1] * u[1];
         let fd = (x1[row] - x0[row]) / dt;
-        assert!((rate - fd).abs() <= 0.02 * fd.abs().max(1.0), "row {row}: A x + B u = {rate}, Δx/Δt = {fd}");
+        assert!(
+            (rate - fd).abs() <= 0.02 * fd.abs().max(1.0),
+            "row {row}: A x + B u = {rate}, Δx/Δt = {fd}"
+        );
     }
     // θ1 = 1/τp, θ3 = P̃h/τp, θ5 = Pl (eq. (15)).
     assert!((th[2] / th[0] - t.p_supply_mpa).abs() < 1e-9 && (th[4] - t.p_back_mpa).abs() < 1e-12);

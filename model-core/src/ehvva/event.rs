@@ -30,7 +30,11 @@ pub struct ValveEvent {
 impl ValveEvent {
     /// The paper's event for a Table 1 dwell: command at 1 ms, run until 25 ms after closing.
     pub fn with_dwell(dwell_ms: f64) -> Self {
-        Self { t_open_ms: 1.0, dwell_ms, t_end_ms: 1.0 + dwell_ms + 25.0 }
+        Self {
+            t_open_ms: 1.0,
+            dwell_ms,
+            t_end_ms: 1.0 + dwell_ms + 25.0,
+        }
     }
 }
 
@@ -101,7 +105,13 @@ pub fn run_event<R: Real, P: EhvvaPlant<R>>(
     stroke_mm: f64,
     mut on_sample: impl FnMut(f64, f64),
 ) -> EventMetrics {
-    run_event_with(plant, event, |_| *inputs, stroke_mm, |t, y, _| on_sample(t, y))
+    run_event_with(
+        plant,
+        event,
+        |_| *inputs,
+        stroke_mm,
+        |t, y, _| on_sample(t, y),
+    )
 }
 
 /// Like [`run_event`] with inputs that vary with time (`inputs_at(t_ms)`, e.g. measured Ph
@@ -123,7 +133,11 @@ pub fn run_event_with<R: Real, P: EhvvaPlant<R>>(
         t_command_off_ms: off_ms,
         ..EventMetrics::default()
     };
-    let steps = if dt > 0.0 { libm::ceil(event.t_end_ms / dt) as usize } else { 0 };
+    let steps = if dt > 0.0 {
+        libm::ceil(event.t_end_ms / dt) as usize
+    } else {
+        0
+    };
     let mut last_t = 0.0;
     let mut last_y = plant.lift_mm().to_f64();
     let _ = plant.take_seat_velocity();

@@ -71,7 +71,8 @@ impl<R: Real> Spool<R> {
     fn step(&self, x: R, v: R, force: R, quad_gain: R, h: R) -> (R, R) {
         let f = force - self.spring * (x + self.preload);
         let damping = self.friction + quad_gain * v.abs();
-        let v = (v + h * self.accel_per_newton * f) / (R::ONE + h * self.accel_per_newton * damping);
+        let v =
+            (v + h * self.accel_per_newton * f) / (R::ONE + h * self.accel_per_newton * damping);
         let (x, v, _) = stops(x + h * v, v, self.stroke);
         (x, v)
     }
@@ -124,7 +125,11 @@ pub struct EhvvaFull<R: Real, const N: usize = DEFAULT_DELAY_SAMPLES> {
 impl<R: Real, const N: usize> EhvvaFull<R, N> {
     /// A model at rest (coil off, spools and valve on their seats, accumulators at their
     /// set-points) for `inputs`, stepped every `dt_ms` (≤ 0.1 ms).
-    pub fn new(params: &EhvvaParams, inputs: &EhvvaInputs<R>, dt_ms: f64) -> Result<Self, EhvvaError> {
+    pub fn new(
+        params: &EhvvaParams,
+        inputs: &EhvvaInputs<R>,
+        dt_ms: f64,
+    ) -> Result<Self, EhvvaError> {
         let substeps = check_step(params, dt_ms, N)?;
         let v = &params.valve;
         let positive: [(f64, &'static str); 9] = [
@@ -143,7 +148,10 @@ impl<R: Real, const N: usize> EhvvaFull<R, N> {
                 return Err(EhvvaError::InvalidParameter(name));
             }
         }
-        if !(v.main_overlap_mm.is_finite() && v.main_overlap_mm >= 0.0 && v.main_overlap_mm < v.main_stroke_mm) {
+        if !(v.main_overlap_mm.is_finite()
+            && v.main_overlap_mm >= 0.0
+            && v.main_overlap_mm < v.main_stroke_mm)
+        {
             return Err(EhvvaError::InvalidParameter("valve.main_overlap_mm"));
         }
         if !(v.pilot_delay_fraction.is_finite() && (0.0..=1.0).contains(&v.pilot_delay_fraction)) {
@@ -260,9 +268,11 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaFull<R, N> {
         let t1_close = (R::ONE - self.pilot_fraction) * pure_close * self.inv_dt;
 
         // Newest samples of the delayed signals, from the state at the start of the step.
-        self.pilot_history.push(self.p_high * (self.xp * self.inv_pilot_stroke).clamp(R::ZERO, R::ONE));
+        self.pilot_history
+            .push(self.p_high * (self.xp * self.inv_pilot_stroke).clamp(R::ZERO, R::ONE));
         let s_now = self.main_opening();
-        self.main_p_history.push(self.p_low + (self.p_high - self.p_low) * s_now);
+        self.main_p_history
+            .push(self.p_low + (self.p_high - self.p_low) * s_now);
         self.main_s_history.push(s_now);
 
         let u_volts = if u_pilot { self.coil_voltage } else { R::ZERO };
@@ -291,7 +301,8 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaFull<R, N> {
             // Eq. (3): coil current (implicit Euler) and magnet force.
             let hl = self.h * self.inv_inductance;
             self.current = (self.current + hl * u_volts) / (R::ONE + hl * self.coil_resistance);
-            let f_mag = self.force_const * self.current * self.current / (R::ONE + self.xp * self.inv_force_gap);
+            let f_mag = self.force_const * self.current * self.current
+                / (R::ONE + self.xp * self.inv_force_gap);
             // Eq. (2): pilot spool.
             let (xp, vp) = self.pilot.step(self.xp, self.vp, f_mag, R::ZERO, self.h);
             self.xp = xp;
@@ -299,15 +310,21 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaFull<R, N> {
             // Eqs. (4), (9): main spool pushed by the delayed pilot pressure, damped by the
             // pilot orifice it fills and empties through.
             let quad = self.main_quad / cd2;
-            let (xm, vm) = self.main.step(self.xm, self.vm, self.main_area * p_pilot, quad, self.h);
+            let (xm, vm) = self
+                .main
+                .step(self.xm, self.vm, self.main_area * p_pilot, quad, self.h);
             self.xm = xm;
             self.vm = vm;
             // Eq. (9) line 5 with eq. (5): main valve metering in series with the top snubber.
             let closing = self.vel < R::ZERO;
             let frac = if closing { R::ONE - s_main } else { s_main }.max(s_min);
             let inv_a2_top = self.inv_a2_main_full / (frac * frac)
-                + self.piston.inv_a2_top_snubber(self.lift, closing, inputs.snubber_on);
-            let k = self.piston.quadratic_gain_with(cd, inv_a2_top, self.lift, stroke);
+                + self
+                    .piston
+                    .inv_a2_top_snubber(self.lift, closing, inputs.snubber_on);
+            let k = self
+                .piston
+                .quadratic_gain_with(cd, inv_a2_top, self.lift, stroke);
             let force = self.piston.static_force(p_main, self.p_low, self.lift);
             let vel = self.piston.velocity_step(self.vel, force, k, self.h);
             let (lift, vel, impact) = Piston::stops(self.lift + self.h * vel, vel, stroke);
@@ -315,7 +332,9 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaFull<R, N> {
                 self.seat_velocity = impact;
             }
             // Eqs. (7)-(8).
-            let dph = self.piston.p_high_rate(self.p_high, inputs.p_supply_mpa, vel);
+            let dph = self
+                .piston
+                .p_high_rate(self.p_high, inputs.p_supply_mpa, vel);
             let dpl = self.piston.p_low_rate(self.p_low, inputs.p_back_mpa, vel);
             self.p_high += self.h * dph;
             self.p_low += self.h * dpl;

@@ -57,8 +57,20 @@ impl<R: Real> LpvAffine<R> {
         let zero32 = [[z; 2]; 3];
         Ok(Self {
             a0: [[z, z, z], [z, z, o], [a31, a32, z]],
-            a: [[[-o, z, z], [z, z, z], [z, z, z]], [[z, z, z], [z, z, z], [z, z, o]], zero3, zero3, zero3],
-            b: [zero32, zero32, [[o, z], [z, z], [z, z]], [[z, o], [z, z], [z, z]], [[z, z], [z, z], [b5, b5]]],
+            a: [
+                [[-o, z, z], [z, z, z], [z, z, z]],
+                [[z, z, z], [z, z, z], [z, z, o]],
+                zero3,
+                zero3,
+                zero3,
+            ],
+            b: [
+                zero32,
+                zero32,
+                [[o, z], [z, z], [z, z]],
+                [[z, o], [z, z], [z, z]],
+                [[z, z], [z, z], [b5, b5]],
+            ],
             c: [z, o, z],
         })
     }
@@ -112,7 +124,11 @@ pub struct EhvvaLpv<R: Real, const N: usize = DEFAULT_DELAY_SAMPLES> {
 impl<R: Real, const N: usize> EhvvaLpv<R, N> {
     /// A model at rest (valve seated, x1 = Pl) for the operating point `inputs` (measured Ph,
     /// Pl), stepped every `dt_ms` (≤ 0.1 ms).
-    pub fn new(params: &EhvvaParams, inputs: &EhvvaInputs<R>, dt_ms: f64) -> Result<Self, EhvvaError> {
+    pub fn new(
+        params: &EhvvaParams,
+        inputs: &EhvvaInputs<R>,
+        dt_ms: f64,
+    ) -> Result<Self, EhvvaError> {
         let substeps = check_step(params, dt_ms, N)?;
         let preload = R::from_f64(params.spring_preload_mm);
         Ok(Self {
@@ -163,16 +179,26 @@ impl<R: Real, const N: usize> EhvvaLpv<R, N> {
         let cd = self.tables.cd(temp_c);
         let lift = self.x[1] - self.preload;
         let vel = self.x[2];
-        let quad = self.piston.quadratic_gain(cd, lift, vel, stroke, snubber_on);
+        let quad = self
+            .piston
+            .quadratic_gain(cd, lift, vel, stroke, snubber_on);
         let k = -(self.piston.friction + quad * vel.abs()) * self.piston.accel_per_newton;
-        [inv_tau, k, p_high_delayed * inv_tau, p_low_delayed * inv_tau, p_low]
+        [
+            inv_tau,
+            k,
+            p_high_delayed * inv_tau,
+            p_low_delayed * inv_tau,
+            p_low,
+        ]
     }
 }
 
 impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaLpv<R, N> {
     fn step(&mut self, u_pilot: bool, inputs: &EhvvaInputs<R>) -> R {
         let stroke = self.piston.stroke(inputs.lift_high);
-        let (td_open, td_close) = self.tables.t_delay_pair_ms(inputs.p_supply_mpa, inputs.temp_c);
+        let (td_open, td_close) = self
+            .tables
+            .t_delay_pair_ms(inputs.p_supply_mpa, inputs.temp_c);
         let open_is_longer = td_open >= td_close;
         let d_open = td_open * self.inv_dt;
         let d_close = td_close * self.inv_dt;
@@ -254,7 +280,11 @@ mod tests {
             [0.0, 0.0, 1.0],
             [p.area_top_mm2 * per_n, -p.spring_n_per_mm * per_n, -3.0],
         ];
-        let expect_b = [[60.0, 9.0], [0.0, 0.0], [-p.area_bottom_mm2 * per_n * 1.5; 2]];
+        let expect_b = [
+            [60.0, 9.0],
+            [0.0, 0.0],
+            [-p.area_bottom_mm2 * per_n * 1.5; 2],
+        ];
         for i in 0..3 {
             for j in 0..3 {
                 assert!((a[i][j] - expect_a[i][j]).abs() < 1e-12, "A[{i}][{j}]");
@@ -270,7 +300,13 @@ mod tests {
     fn valve_at_rest_stays_at_rest() {
         // With the pilot off the spring preload holds the valve on its seat.
         let p = EhvvaParams::paper_default();
-        let inputs = EhvvaInputs { p_supply_mpa: 8.0, p_back_mpa: 1.0, temp_c: 22.0, lift_high: true, snubber_on: true };
+        let inputs = EhvvaInputs {
+            p_supply_mpa: 8.0,
+            p_back_mpa: 1.0,
+            temp_c: 22.0,
+            lift_high: true,
+            snubber_on: true,
+        };
         let mut m = EhvvaLpv::<f64>::new(&p, &inputs, 0.02).unwrap();
         for _ in 0..500 {
             assert_eq!(m.step(false, &inputs), 0.0);

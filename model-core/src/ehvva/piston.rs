@@ -99,8 +99,11 @@ impl<R: Real> Piston<R> {
         if !closing {
             return R::ZERO;
         }
-        let fixed =
-            if switch_on { self.area_top_orifice } else { self.area_top_orifice + self.area_top_switch };
+        let fixed = if switch_on {
+            self.area_top_orifice
+        } else {
+            self.area_top_orifice + self.area_top_switch
+        };
         let uncovered = if lift >= self.snub_top_len {
             R::ONE
         } else {
@@ -110,7 +113,6 @@ impl<R: Real> Piston<R> {
         let area = fixed + self.area_top_notch * uncovered;
         R::ONE / (area * area)
     }
-
 
     /// 1/Aorib² of the equivalent bottom orifice (eq. (6)): bottom port in series with the
     /// bottom notch, which closes linearly over the last Ls2 before full lift.

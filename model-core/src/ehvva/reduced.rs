@@ -52,7 +52,10 @@ pub(crate) fn check_step(params: &EhvvaParams, dt_ms: f64, n: usize) -> Result<u
     let capacity_ms = (n.saturating_sub(1)) as f64 * dt_ms;
     // One extra step: the delayed value is interpolated up to one step ahead.
     if capacity_ms < needed_ms + dt_ms {
-        return Err(EhvvaError::DelayLineTooShort { capacity_ms, needed_ms });
+        return Err(EhvvaError::DelayLineTooShort {
+            capacity_ms,
+            needed_ms,
+        });
     }
     let sub = libm::ceil(dt_ms / MAX_SUBSTEP_MS) as usize;
     Ok(sub.clamp(1, MAX_SUBSTEPS))
@@ -89,7 +92,11 @@ pub struct EhvvaReduced<R: Real, const N: usize = DEFAULT_DELAY_SAMPLES> {
 impl<R: Real, const N: usize> EhvvaReduced<R, N> {
     /// A model at rest (valve seated, Pmo = Pl, accumulators at their set-points) for the
     /// operating point `inputs`, stepped every `dt_ms` (≤ 0.1 ms).
-    pub fn new(params: &EhvvaParams, inputs: &EhvvaInputs<R>, dt_ms: f64) -> Result<Self, EhvvaError> {
+    pub fn new(
+        params: &EhvvaParams,
+        inputs: &EhvvaInputs<R>,
+        dt_ms: f64,
+    ) -> Result<Self, EhvvaError> {
         let substeps = check_step(params, dt_ms, N)?;
         let piston = Piston::new(params)?;
         let tables = EhvvaTables::new(params)?;
@@ -153,7 +160,9 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaReduced<R, N> {
             let p_in = if u_pilot { self.p_high } else { self.p_low };
             self.p_mo = (self.p_mo + lag * p_in) / (R::ONE + lag);
             // Eq. (12) first line, with eqs. (5)-(6) as damping.
-            let k = self.piston.quadratic_gain(cd, self.lift, self.vel, stroke, inputs.snubber_on);
+            let k = self
+                .piston
+                .quadratic_gain(cd, self.lift, self.vel, stroke, inputs.snubber_on);
             let force = self.piston.static_force(p_top, self.p_low, self.lift);
             let vel = self.piston.velocity_step(self.vel, force, k, self.h);
             let (lift, vel, impact) = Piston::stops(self.lift + self.h * vel, vel, stroke);
@@ -162,7 +171,9 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaReduced<R, N> {
                 self.seat_velocity = impact;
             }
             // Eqs. (7)-(8).
-            let dph = self.piston.p_high_rate(self.p_high, inputs.p_supply_mpa, vel);
+            let dph = self
+                .piston
+                .p_high_rate(self.p_high, inputs.p_supply_mpa, vel);
             let dpl = self.piston.p_low_rate(self.p_low, inputs.p_back_mpa, vel);
             self.p_high += self.h * dph;
             self.p_low += self.h * dpl;
@@ -193,7 +204,13 @@ mod tests {
     use crate::real::Q32;
 
     fn inputs(p_supply: f64, lift_high: bool) -> EhvvaInputs<f64> {
-        EhvvaInputs { p_supply_mpa: p_supply, p_back_mpa: 1.0, temp_c: 22.0, lift_high, snubber_on: false }
+        EhvvaInputs {
+            p_supply_mpa: p_supply,
+            p_back_mpa: 1.0,
+            temp_c: 22.0,
+            lift_high,
+            snubber_on: false,
+        }
     }
 
     #[test]
@@ -215,7 +232,10 @@ mod tests {
         ));
         let mut bad = p;
         bad.mass_kg = -1.0;
-        assert_eq!(EhvvaReduced::<f64>::new(&bad, &i, 0.02).err(), Some(EhvvaError::InvalidParameter("mass_kg")));
+        assert_eq!(
+            EhvvaReduced::<f64>::new(&bad, &i, 0.02).err(),
+            Some(EhvvaError::InvalidParameter("mass_kg"))
+        );
     }
 
     #[test]
@@ -227,7 +247,11 @@ mod tests {
             for _ in 0..300 {
                 assert_eq!(m.step(false, &i), 0.0);
             }
-            let stroke = if lift_high { p.lift_high_mm } else { p.lift_low_mm };
+            let stroke = if lift_high {
+                p.lift_high_mm
+            } else {
+                p.lift_low_mm
+            };
             let mut max: f64 = 0.0;
             for _ in 0..600 {
                 let y = m.step(true, &i);
@@ -246,9 +270,15 @@ mod tests {
         // Eq. (11): the piston sees Pmo only td after the command.
         let p = EhvvaParams::paper_default();
         let i = inputs(7.0, true);
-        let td = EhvvaTables::<f64>::new(&p).unwrap().t_delay_ms(7.0, 22.0, true);
+        let td = EhvvaTables::<f64>::new(&p)
+            .unwrap()
+            .t_delay_ms(7.0, 22.0, true);
         let mut m = EhvvaReduced::<f64>::new(&p, &i, 0.02).unwrap();
-        let ev = ValveEvent { t_open_ms: 1.0, dwell_ms: 8.0, t_end_ms: 30.0 };
+        let ev = ValveEvent {
+            t_open_ms: 1.0,
+            dwell_ms: 8.0,
+            t_end_ms: 30.0,
+        };
         let r = run_event(&mut m, &ev, &i, 7.5, |t, y| {
             if t < 1.0 + td {
                 assert_eq!(y, 0.0, "moved at {t} ms, before td = {td}");

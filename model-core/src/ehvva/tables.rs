@@ -82,12 +82,17 @@ impl<R: Real> EhvvaTables<R> {
         let half = R::from_f64(0.5);
         let mean = half * (vo + vc);
         let half_split = self.gain_direction_delay * half * (vo - vc);
-        ((mean + half_split).max(R::ZERO), (mean - half_split).max(R::ZERO))
+        (
+            (mean + half_split).max(R::ZERO),
+            (mean - half_split).max(R::ZERO),
+        )
     }
 
     /// Main-valve outlet pressure time constant τp(Ph, T) in ms (eq. (10), Fig. 5 top).
     pub fn tau_p_ms(&self, p_supply_mpa: R, temp_c: R) -> R {
-        self.tau.eval(p_supply_mpa, temp_c).max(R::from_f64(TAU_MIN_MS))
+        self.tau
+            .eval(p_supply_mpa, temp_c)
+            .max(R::from_f64(TAU_MIN_MS))
     }
 }
 
@@ -112,12 +117,21 @@ mod tests {
     #[test]
     fn table4_values_at_5_mpa() {
         let t = tables();
-        for (temp, cd, vo, vc) in
-            [(-20.0, 0.21, 4.2, 4.0), (22.0, 0.40, 3.7, 3.0), (60.0, 0.65, 3.5, 3.0), (100.0, 0.70, 3.2, 3.0)]
-        {
+        for (temp, cd, vo, vc) in [
+            (-20.0, 0.21, 4.2, 4.0),
+            (22.0, 0.40, 3.7, 3.0),
+            (60.0, 0.65, 3.5, 3.0),
+            (100.0, 0.70, 3.2, 3.0),
+        ] {
             assert!((t.cd(temp) - cd).abs() < 1e-12, "Cd({temp})");
-            assert!((t.t_delay_ms(5.0, temp, true) - vo).abs() < 1e-9, "VO delay at {temp}");
-            assert!((t.t_delay_ms(5.0, temp, false) - vc).abs() < 0.05, "VC delay at {temp}");
+            assert!(
+                (t.t_delay_ms(5.0, temp, true) - vo).abs() < 1e-9,
+                "VO delay at {temp}"
+            );
+            assert!(
+                (t.t_delay_ms(5.0, temp, false) - vc).abs() < 0.05,
+                "VC delay at {temp}"
+            );
         }
     }
 
@@ -130,7 +144,10 @@ mod tests {
             for i in 0..=30 {
                 let p = 5.0 + 0.1 * i as f64;
                 let (vo, vc) = t.t_delay_pair_ms(p, temp);
-                assert!(vo < last_vo + 1e-12 && vc < last_vc + 1e-12, "not falling at {p} MPa");
+                assert!(
+                    vo < last_vo + 1e-12 && vc < last_vc + 1e-12,
+                    "not falling at {p} MPa"
+                );
                 assert!(vc < vo, "VC not below VO at {p} MPa, {temp} °C");
                 last_vo = vo;
                 last_vc = vc;
@@ -191,6 +208,9 @@ mod tests {
         );
         let mut p = EhvvaParams::paper_default();
         p.tables.td_temp_c[2] = -30.0;
-        assert!(matches!(EhvvaTables::<f64>::new(&p), Err(EhvvaError::Table("tables.td_open_ms", _))));
+        assert!(matches!(
+            EhvvaTables::<f64>::new(&p),
+            Err(EhvvaError::Table("tables.td_open_ms", _))
+        ));
     }
 }
