@@ -18,4 +18,11 @@ if command -v size >/dev/null 2>&1; then
   # text = flash code + rodata, data = initialised RAM (also in flash), bss = zeroed RAM.
   size -A "$elf" | awk '/^\.(vector_table|text|rodata|data|bss|uninit)/ {print}'
   size "$elf"
+  # Flash = text + data (initial values are copied from flash), static RAM = data + bss
+  # (Berkeley bss includes .uninit, the RTT buffer); no heap. Goals: 96 KiB, 24 KiB.
+  size "$elf" | awk 'NR == 2 {
+    flash = $1 + $2; ram = $2 + $3;
+    printf "flash %d B (%.1f KiB, goal < 96 KiB), static RAM %d B (%.1f KiB, goal < 24 KiB)\n", flash, flash / 1024, ram, ram / 1024;
+    if (flash >= 96 * 1024 || ram >= 24 * 1024) print "WARNING: firmware over its size goal";
+  }'
 fi

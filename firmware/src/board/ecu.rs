@@ -139,10 +139,11 @@ impl Capture for EcuEhvvaIo {
 
 impl EcuEhvvaIo {
     fn push_sorted(&mut self, e: Edge) {
-        // Cam before crank when the cam edge is older (wrapping compare); a full queue drops
-        // the edge and the decoder's tooth count catches the loss.
-        let cam_first = self.pending.back().is_some_and(|b| b.t_us.wrapping_sub(e.t_us) < u32::MAX / 2 && b.t_us != e.t_us);
-        if cam_first {
+        // Keep time order: the cam edge (read after the crank edge) goes in front of a newer
+        // crank edge (wrapping compare). A full queue drops the edge; the decoder's tooth
+        // count catches the loss.
+        let back_is_newer = self.pending.back().is_some_and(|b| b.t_us != e.t_us && b.t_us.wrapping_sub(e.t_us) < u32::MAX / 2);
+        if back_is_newer {
             if let Some(b) = self.pending.pop_back() {
                 let _ = self.pending.push_back(e);
                 let _ = self.pending.push_back(b);
