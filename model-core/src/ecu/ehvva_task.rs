@@ -171,7 +171,7 @@ impl CrankDecoder {
         let is_gap = self.have_period && interval > self.wheel.gap_ratio_min * self.tooth_period_us;
         let spacing;
         if is_gap {
-            spacing = self.wheel.teeth_missing + 1;
+            spacing = self.wheel.teeth_missing.saturating_add(1);
             self.on_gap();
         } else {
             spacing = 1;
@@ -259,12 +259,16 @@ impl CrankDecoder {
     /// the history): long enough that the 1 µs capture step hardly matters, short enough to
     /// follow accelerations.
     fn speed_estimate(&self) -> f32 {
-        let last = SPEED_HISTORY - 1;
-        let mut teeth = 0u32;
-        let mut span = 0u32;
-        for k in 1..self.history_len {
-            teeth += u32::from(self.history_spacing[last + 1 - k]);
-            span = elapsed_us(self.history_us[last], self.history_us[last - k]);
+        let n = self.history_len.min(SPEED_HISTORY);
+        let times = &self.history_us[SPEED_HISTORY - n..];
+        let spacings = &self.history_spacing[SPEED_HISTORY - n..];
+        let Some(&t_last) = times.last() else { return 0.0 };
+        let (mut teeth, mut span) = (0u32, 0u32);
+        // Walk back from the newest tooth; each spacing belongs to the interval ending at the
+        // tooth after the time it is paired with.
+        for (&t, &spacing) in times.iter().rev().skip(1).zip(spacings.iter().rev()) {
+            teeth += u32::from(spacing);
+            span = elapsed_us(t_last, t);
             if span >= SPEED_SPAN_MIN_US {
                 break;
             }
@@ -286,7 +290,7 @@ impl CrankDecoder {
         let base = self.wheel.first_tooth_deg
             + if self.second_rev { 360.0 } else { 0.0 }
             + self.tooth_index as f32 * self.tooth_deg;
-        let to_next_teeth = if self.tooth_index + 1 >= self.wheel.teeth_present() { self.wheel.teeth_missing + 1 } else { 1 };
+        let to_next_teeth = if self.tooth_index.saturating_add(1) >= self.wheel.teeth_present() { self.wheel.teeth_missing.saturating_add(1) } else { 1 };
         let advance = (elapsed_us(t_us, last) as f32 * self.deg_per_us).min(to_next_teeth as f32 * self.tooth_deg);
         Some(wrap_cycle_deg(base + advance))
     }
@@ -297,7 +301,7 @@ impl CrankDecoder {
         let Some(last) = self.last_tooth_us else { return false };
         let since = elapsed_us(now_us, last);
         // Three gap intervals without a tooth, or the absolute limit at very low speed.
-        let expected = self.tooth_period_us * (self.wheel.teeth_missing + 1) as f32;
+        let expected = self.tooth_period_us * (self.wheel.teeth_missing as f32 + 1.0);
         let lost = since > self.stall_timeout_us || (self.have_period && since as f32 > 3.0 * expected);
         if lost {
             let was_turning = self.sync != SyncState::None || self.running;
@@ -926,5 +930,26 @@ mod tests {
         assert!(dec.snapshot().cam_lost);
         assert_ne!(dec.sync(), SyncState::Full);
         assert!(dec.angle_at(0).is_none());
+    }
+
+    proptest::proptest! {
+        /// Whatever the edges (noise, missing teeth, random cam), nothing panics and the pilot
+        /// is never on without full sync.
+        #[test]
+        fn arbitrary_edges_never_fire_without_sync(edges in proptest::collection::vec((proptest::bool::ANY, 1u32..40_000), 0..300)) {
+            let mut task = EhvvaTask::new(EhvvaTaskConfig::default(), (3.5f32, 3.0f32)).unwrap();
+            let inp = inputs(request(100.0, 300.0), 6.0, 60.0);
+            let mut t = 0u32;
+            for (cam, dt) in edges {
+                t = t.wrapping_add(dt);
+                let source = if cam { EdgeSource::CamSync } else { EdgeSource::CrankTooth };
+                task.on_edge(Edge { source, t_us: t });
+                let out = task.step(&inp, t);
+                if task.decoder().sync() != SyncState::Full {
+                    proptest::prop_assert_eq!(out.pilot, SolenoidCmd::Off);
+                }
+                proptest::prop_assert!(out.engine.rpm.is_finite() && out.engine.rpm >= 0.0);
+            }
+        }
     }
 }
