@@ -495,9 +495,9 @@ impl EvvtFamily {
     fn baseline(&self, d: &Data, ctx: &Ctx) -> Result<(f64, f64, LsqResult), String> {
         let mut out = vec![0.0; d.y.len()];
         let mut best = (f64::INFINITY, 0.5, 5.0);
-        for i in 0..12 {
-            let alpha = 0.02 * 1.65f64.powi(i);
-            for beta in [0.3, 0.7, 1.5, 3.0, 6.0, 12.0, 25.0, 50.0] {
+        for i in 0..10 {
+            let alpha = 0.02 * 2f64.powi(i);
+            for beta in [0.5, 1.5, 4.0, 10.0, 25.0, 60.0] {
                 if sim_error(&Model::lti(alpha, beta), d, &mut out).is_ok() {
                     let cost = out.iter().map(|e| e * e).sum::<f64>();
                     if cost < best.0 {
@@ -567,7 +567,7 @@ impl EvvtFamily {
                 // The residual is model − measured; the disturbance is in the measurement.
                 let resid: Vec<f64> = out.iter().map(|e| -e).collect();
                 let (olo, ohi) = self.order_range(d);
-                let (order, _) = order_peak(&resid, &d.revs, olo, ohi).ok_or("the log is too short for an order spectrum")?;
+                let (order, _) = order_peak(&resid, &d.revs, olo, ohi).ok_or("no order spectrum: the log is too short or its sample rate too low for orders above the minimum")?;
                 let (c, s) = project_sinusoid(&resid, &d.revs, order);
                 // The order is refined within the peak's main lobe (± 1/total revolutions).
                 let lobe = 1.0 / d.revs.last().copied().unwrap_or(1.0).max(1.0);
@@ -791,6 +791,28 @@ mod tests {
         assert!((fit.params[0].1 / a - 1.0).abs() < 0.03, "alpha {} vs {a}", fit.params[0].1);
         assert!((fit.params[1].1 / b - 1.0).abs() < 0.05, "beta {} vs {b}", fit.params[1].1);
         // Validation error is about the 1-degree quantization (uniform: 0.29 rms).
+        assert!(fit.rmse < 0.4, "rmse {}", fit.rmse);
+    }
+
+    /// The extensions find their own parameters: the advance factor and the belt's order,
+    /// amplitude and phase (all from the estimation log alone).
+    #[test]
+    fn extensions_recover_the_hidden_parameters() {
+        let f = EvvtFamily::default();
+        let (est, val, t) = logs("direction", 44);
+        let fit = f.fit(Some("direction"), &est, &val).unwrap();
+        let factor = fit.params.iter().find(|(k, _)| k == "advance_alpha_factor").unwrap().1;
+        let truth_factor = truth(&t, "advance_alpha_factor");
+        assert!((factor / truth_factor - 1.0).abs() < 0.03, "advance factor {factor} vs {truth_factor}");
+        let (est, val, t) = logs("belt-vibration", 45);
+        let fit = f.fit(Some("belt-vibration"), &est, &val).unwrap();
+        let p = |k: &str| fit.params.iter().find(|(n, _)| n == k).unwrap().1;
+        let order = truth(&t, "belt_order");
+        assert!((p("belt_order") - order).abs() < 1e-3, "order {} vs {order}", p("belt_order"));
+        assert!((p("belt_amplitude_deg") / truth(&t, "belt_amplitude_deg") - 1.0).abs() < 0.05);
+        let dphi = (p("belt_phase_rad_at_log_start") - truth(&t, "belt_phase_rad") + PI).rem_euclid(2.0 * PI) - PI;
+        assert!(dphi.abs() < 0.1, "phase off by {dphi}");
+        // Validation error back to the quantization level.
         assert!(fit.rmse < 0.4, "rmse {}", fit.rmse);
     }
 
