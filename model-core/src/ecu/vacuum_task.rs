@@ -274,6 +274,12 @@ impl VacuumTask {
     }
 
     fn update_stuck(&mut self, inp: &VacuumTaskInputs, now_us: u32) {
+        // Judged only while the valves are commanded: in the supervisor's safe state the
+        // position reading may be the failed sensor's last good value.
+        if inp.safe.vacuum_spring_open {
+            self.stuck_since_us = [None; 3];
+            return;
+        }
         for k in 0..3 {
             let (Some(obs), Some(&x_meas), Some(since), Some(stuck)) =
                 (self.observer.get(k), inp.x_meas_pct.get(k), self.stuck_since_us.get_mut(k), self.stuck.get_mut(k))
