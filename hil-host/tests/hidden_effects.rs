@@ -53,6 +53,15 @@ fn evvt_hidden_effects_are_found() {
     }
 }
 
+#[test]
+fn vacuum_hidden_effects_are_found() {
+    for effect in effects(Plant::Vacuum) {
+        for seed in CI_SEEDS {
+            check(Plant::Vacuum, effect, seed);
+        }
+    }
+}
+
 /// The long sweep: `cargo test -p hil-host --release --test hidden_effects -- --ignored --nocapture`.
 #[test]
 #[ignore]

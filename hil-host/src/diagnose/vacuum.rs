@@ -295,12 +295,12 @@ impl VacuumModel {
             }
             "coulomb-friction" => {
                 m.effects.coulomb_friction = true;
-                m.fc_kpa = 1.0;
+                m.fc_kpa = 2.0;
                 m.dahl_x_pct = 0.3;
             }
             "backlash" => {
                 m.effects.backlash = true;
-                m.backlash_pct = 2.0;
+                m.backlash_pct = 4.0;
             }
             other => return Err(format!("unknown vacuum effect `{other}`")),
         }
@@ -409,19 +409,41 @@ fn bounds(name: &str) -> (f64, f64) {
     }
 }
 
-/// The logged inputs of a vacuum log.
+/// The logged inputs of a vacuum log. Ambient and tank pressure are slow inputs: they are
+/// smoothed by centred moving averages (1 s and 0.3 s) so that their sensor noise does not drive
+/// the simulated membrane (0.1 kPa of ambient noise is 0.5 % of position on a 5 %/kPa map).
 pub struct Inputs<'a> {
     pub duty: &'a [f64],
     pub u_batt: &'a [f64],
-    pub p_amb: &'a [f64],
-    pub p_tank: &'a [f64],
+    pub p_amb: Vec<f64>,
+    pub p_tank: Vec<f64>,
     pub dt_s: f64,
+}
+
+/// Centred moving average over `seconds` (shorter at the ends).
+pub fn moving_average(y: &[f64], seconds: f64, dt_s: f64) -> Vec<f64> {
+    let half = (0.5 * seconds / dt_s).round() as usize;
+    let mut prefix = Vec::with_capacity(y.len() + 1);
+    prefix.push(0.0);
+    for v in y {
+        prefix.push(prefix.last().copied().unwrap_or(0.0) + v);
+    }
+    (0..y.len()).map(|k| {
+        let (a, b) = (k.saturating_sub(half), (k + half + 1).min(y.len()));
+        (prefix[b] - prefix[a]) / (b - a) as f64
+    }).collect()
 }
 
 impl<'a> Inputs<'a> {
     pub fn from_log(log: &'a Log) -> Result<Self, String> {
         let c = |n: &str| log.col(n).ok_or_else(|| format!("{}: no `{n}` column", log.file));
-        Ok(Self { duty: c("duty_pct")?, u_batt: c("u_batt_V")?, p_amb: c("p_amb_kPa")?, p_tank: c("p_tank_kPa")?, dt_s: log.dt_s })
+        Ok(Self {
+            duty: c("duty_pct")?,
+            u_batt: c("u_batt_V")?,
+            p_amb: moving_average(c("p_amb_kPa")?, 1.0, log.dt_s),
+            p_tank: moving_average(c("p_tank_kPa")?, 0.3, log.dt_s),
+            dt_s: log.dt_s,
+        })
     }
     pub fn len(&self) -> usize {
         self.duty.len()
@@ -466,7 +488,7 @@ pub struct VacuumFamily {
     pub max_fit_samples: usize,
     /// Solver settings for every stage.
     pub lsq: LsqOptions,
-    /// The last baseline, keyed by its estimation data: the effects start from it.
+    /// The last prepared start, keyed by its estimation data: every fit starts from it.
     cache: Mutex<Option<(u64, VacuumModel, usize)>>,
 }
 
@@ -476,7 +498,7 @@ impl Default for VacuumFamily {
             h_max_s: 0.001,
             pressure_weight: 1.0,
             max_fit_samples: 24_000,
-            lsq: LsqOptions { max_iterations: 40, cost_tolerance: 1e-6, step_tolerance: 1e-7, ..LsqOptions::default() },
+            lsq: LsqOptions { max_iterations: 20, cost_tolerance: 1e-5, step_tolerance: 1e-7, ..LsqOptions::default() },
             cache: Mutex::new(None),
         }
     }
@@ -568,8 +590,10 @@ impl VacuumFamily {
         Ok((m, r))
     }
 
-    /// The baseline: map shapes picked from the data, then staged fits (pressure, rod, all).
-    fn baseline(&self, est: &Log) -> Result<(VacuumModel, usize), String> {
+    /// The common start of every fit, cached per estimation data: the valve map shape and its
+    /// parameters fitted to the logged pressure (both shapes, the better kept) and the position
+    /// map fitted to the settled points. Without a pressure column: generic starting values.
+    fn prepared(&self, est: &Log, data: &EstData) -> Result<(VacuumModel, usize), String> {
         let key = fingerprint(est);
         if let Ok(guard) = self.cache.lock() {
             if let Some((k, m, it)) = guard.as_ref() {
@@ -578,16 +602,14 @@ impl VacuumFamily {
                 }
             }
         }
-        let data = self.est_data(est)?;
         let mut iterations = 0;
-        // Valve map: both shapes fitted on the pressure (cheap: no rod), the better kept.
         let mut model = VacuumModel::baseline_guess(ValveMap::PiecewiseLinear, RodMap::Linear);
         if data.p.is_some() {
             let mut best: Option<(f64, VacuumModel)> = None;
             for start in valve_starts() {
                 let names = start.parameter_names(None)?;
                 let pressure_names: Vec<&'static str> = names.iter().copied().filter(|n| is_pressure_param(n)).collect();
-                if let Ok((m, r)) = self.fit_stage(&start, &pressure_names, &data, Residuals::Pressure, &self.lsq) {
+                if let Ok((m, r)) = self.fit_stage(&start, &pressure_names, data, Residuals::Pressure, &self.lsq) {
                     iterations += r.iterations;
                     if best.as_ref().is_none_or(|(c, _)| r.cost < *c) {
                         best = Some((r.cost, m));
@@ -595,43 +617,69 @@ impl VacuumFamily {
                 }
             }
             model = best.ok_or("no valve map could be fitted to the logged pressure")?.1;
-            // Rod map from the settled points of measured pressure and position.
             let (rod, it) = self.rod_map_guess(est, &model)?;
             iterations += it;
             model = rod;
-            let names = model.parameter_names(None)?;
-            let rod_names: Vec<&'static str> = names.iter().copied().filter(|n| !is_pressure_param(n)).collect();
-            let (m, r) = self.fit_stage(&model, &rod_names, &data, Residuals::Position, &self.lsq)?;
+        }
+        if let Ok(mut guard) = self.cache.lock() {
+            *guard = Some((key, model, iterations));
+        }
+        Ok((model, iterations))
+    }
+
+    /// Calibrates the baseline (`None`) or baseline + effect in stages: the pressure
+    /// sub-model on the logged pressure (only when the effect is a pressure effect: the
+    /// prepared start already fits the baseline's), the rod on the position with the pressure
+    /// model held, then all parameters on both. Returns the model, the fitted parameter names,
+    /// their 95 % half-widths and the solver iterations.
+    fn calibrate(&self, est: &Log, effect: Option<&str>) -> Result<(VacuumModel, Vec<&'static str>, Vec<Option<f64>>, usize), String> {
+        let data = self.est_data(est)?;
+        let (mut model, mut iterations) = self.prepared(est, &data)?;
+        if let Some(e) = effect {
+            model = model.with_effect(e)?;
+        }
+        let names = model.parameter_names(effect)?;
+        if data.p.is_some() {
+            if matches!(effect, Some("supply-voltage" | "pressure-direction")) {
+                let pn: Vec<&'static str> = names.iter().copied().filter(|n| is_pressure_param(n) || *n == "voltage_gain" || *n == "tau_fall_s").collect();
+                let (m, r) = self.fit_stage(&model, &pn, &data, Residuals::Pressure, &self.lsq)?;
+                iterations += r.iterations;
+                model = m;
+            }
+            let rn: Vec<&'static str> = names.iter().copied().filter(|n| !is_pressure_param(n) && *n != "voltage_gain" && *n != "tau_fall_s").collect();
+            let (m, r) = self.fit_stage(&model, &rn, &data, Residuals::Position, &self.lsq)?;
             iterations += r.iterations;
             model = m;
         }
-        let names = model.parameter_names(None)?;
         let (m, r) = self.fit_stage(&model, &names, &data, Residuals::Both, &self.lsq)?;
         iterations += r.iterations;
-        if let Ok(mut guard) = self.cache.lock() {
-            *guard = Some((key, m, iterations));
-        }
-        Ok((m, iterations))
+        Ok((m, names, r.ci95, iterations))
     }
 
-    /// Linear and arctan position maps fitted to the settled samples (duty and voltage
-    /// unchanged for 1 s; all samples if there are too few); the arctan is kept only if it
-    /// lowers the error by 20 %.
+    /// Linear and arctan position maps fitted to the centre of the (pressure, position) band;
+    /// the arctan is kept only if it lowers the error by 20 % and the line misses by > 1 %.
     fn rod_map_guess(&self, log: &Log, model: &VacuumModel) -> Result<(VacuumModel, usize), String> {
         let io = Inputs::from_log(log)?;
         let x = log.col("x_pct").ok_or("no x_pct column")?;
         let p = log.col("p_act_kPa").ok_or("no p_act_kPa column")?;
-        let hold = (1.0 / log.dt_s).round() as usize;
-        let mut since = 0usize;
+        // The band's centre per 1 kPa of map pressure, from every sample off the stops: ramps
+        // and steps both ways put the hysteresis of friction or clearance on both sides of the
+        // map, so the middle of the 5th and 95th percentiles follows the map (a plain least
+        // squares would follow wherever the samples crowd).
+        let mut raw: Vec<(f64, f64)> = (0..io.len()).filter(|&k| x[k] > 1.0 && x[k] < 99.0).map(|k| (model.p_amb_ref_kpa - (io.p_amb[k] - p[k]), x[k])).collect();
+        raw.sort_by(|a, b| a.0.total_cmp(&b.0));
         let mut pts: Vec<(f64, f64)> = Vec::new();
-        for k in 0..io.len() {
-            since = if k > 0 && io.duty[k] == io.duty[k - 1] && (io.u_batt[k] - io.u_batt[k - 1]).abs() < 0.2 { since + 1 } else { 0 };
-            if since >= hold && x[k] > 1.0 && x[k] < 99.0 {
-                pts.push((model.p_amb_ref_kpa - (io.p_amb[k] - p[k]), x[k]));
+        let mut i = 0;
+        while i < raw.len() {
+            let bin = raw[i].0.floor();
+            let j = raw[i..].iter().position(|q| q.0.floor() != bin).map_or(raw.len(), |o| i + o);
+            if j - i >= 5 {
+                let mut xs: Vec<f64> = raw[i..j].iter().map(|q| q.1).collect();
+                xs.sort_by(f64::total_cmp);
+                let q = |f: f64| xs[((xs.len() - 1) as f64 * f).round() as usize];
+                pts.push((bin + 0.5, 0.5 * (q(0.05) + q(0.95))));
             }
-        }
-        if pts.len() < 20 {
-            pts = (0..io.len()).filter(|&k| x[k] > 1.0 && x[k] < 99.0).map(|k| (model.p_amb_ref_kpa - (io.p_amb[k] - p[k]), x[k])).collect();
+            i = j;
         }
         if pts.len() < 10 {
             return Err(format!("{}: the position hardly leaves its stops; the position map cannot be fitted", log.file));
@@ -680,7 +728,8 @@ impl VacuumFamily {
             for (nm, v) in names.iter().zip(&r.x) {
                 at.set(nm, *v);
             }
-            if 2.0 * r.cost < 0.8 * 0.8 * sse_lin {
+            // The arctan must beat the line by 20 % in RMS and the line must miss by > 1 %.
+            if 2.0 * r.cost < 0.8 * 0.8 * sse_lin && sse_lin > pts.len() as f64 {
                 return Ok((at, r.iterations));
             }
         }
@@ -727,22 +776,7 @@ impl Family for VacuumFamily {
     }
 
     fn fit(&self, effect: Option<&str>, est: &Log, val: &Log) -> Result<Fit, String> {
-        let (base, base_iterations) = self.baseline(est)?;
-        let (model, names, ci95, iterations) = match effect {
-            None => {
-                // Confidence intervals of the baseline at its solution (a zero-iteration solve).
-                let names = base.parameter_names(None)?;
-                let ci = self.confidence(&base, &names, est)?;
-                (base, names, ci, base_iterations)
-            }
-            Some(e) => {
-                let start = base.with_effect(e)?;
-                let names = start.parameter_names(Some(e))?;
-                let data = self.est_data(est)?;
-                let (m, r) = self.fit_stage(&start, &names, &data, Residuals::Both, &self.lsq)?;
-                (m, names, r.ci95, r.iterations)
-            }
-        };
+        let (model, names, ci95, iterations) = self.calibrate(est, effect)?;
         let (x, _) = self.predict(&model, val)?;
         let measured = val.col("x_pct").ok_or_else(|| format!("{}: no `x_pct` column", val.file))?.to_vec();
         Ok(Fit::new(effect.unwrap_or("baseline"), model.named(&names), ci95, measured, x, iterations))
@@ -772,16 +806,6 @@ impl Family for VacuumFamily {
             out.push(("position direction".into(), direction(x, 1.0)));
         }
         out
-    }
-}
-
-impl VacuumFamily {
-    /// 95 % half-widths at `m` (the solver run with no iterations left).
-    fn confidence(&self, m: &VacuumModel, names: &[&'static str], est: &Log) -> Result<Vec<Option<f64>>, String> {
-        let data = self.est_data(est)?;
-        let opts = LsqOptions { max_iterations: 0, ..self.lsq.clone() };
-        let (_, r) = self.fit_stage(m, names, &data, Residuals::Both, &opts)?;
-        Ok(r.ci95)
     }
 }
 
@@ -821,7 +845,7 @@ mod tests {
     fn simulation_reproduces_model_core_with_its_step() {
         let n = 3000;
         let (d, u, pa, pt) = inputs(n);
-        let io = Inputs { duty: &d, u_batt: &u, p_amb: &pa, p_tank: &pt, dt_s: 0.01 };
+        let io = Inputs { duty: &d, u_batt: &u, p_amb: pa.clone(), p_tank: pt.clone(), dt_s: 0.01 };
         for p in [VacuumParams::lpt(), VacuumParams::hpt(), VacuumParams::hpc()] {
             for effects in [VacuumEffects::NONE, all_effects()] {
                 let p = p.with_effects(effects);
@@ -843,7 +867,7 @@ mod tests {
     fn coarse_rod_step_stays_far_below_sensor_noise() {
         let n = 6000;
         let (d, u, pa, pt) = inputs(n);
-        let io = Inputs { duty: &d, u_batt: &u, p_amb: &pa, p_tank: &pt, dt_s: 0.01 };
+        let io = Inputs { duty: &d, u_batt: &u, p_amb: pa.clone(), p_tank: pt.clone(), dt_s: 0.01 };
         let fam = VacuumFamily::default();
         for p in [VacuumParams::lpt(), VacuumParams::hpt(), VacuumParams::hpc()] {
             for effects in [VacuumEffects::NONE, all_effects()] {

@@ -8,6 +8,7 @@
 
 pub mod evvt;
 pub mod positioner;
+pub mod vacuum;
 
 use crate::log::Plant;
 
@@ -67,6 +68,7 @@ pub fn effects(plant: Plant) -> &'static [&'static str] {
     match plant {
         Plant::Evvt => &["none", "supply-voltage", "engine-speed", "direction", "belt-vibration"],
         Plant::Positioner => &["none", "coulomb-friction", "asymmetric-friction"],
+        Plant::Vacuum => &["none", "supply-voltage", "pressure-direction", "coulomb-friction", "backlash"],
         _ => &[],
     }
 }
@@ -82,6 +84,7 @@ pub fn generate(plant: Plant, effect: &str, seed: u64) -> Result<Case, String> {
     match plant {
         Plant::Evvt => evvt::generate(effect, seed),
         Plant::Positioner => positioner::generate(effect, seed),
+        Plant::Vacuum => vacuum::generate(effect, seed),
         other => Err(format!("no generator for plant `{other}` yet")),
     }
 }
