@@ -357,3 +357,85 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaFull<R, N> {
         self.seat_velocity.take()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Command edge to the main valve half open (VO) or half closed (VC) with the explicit
+    /// delays t0, t1 removed: the chain's own lag.
+    fn own_lag_ms(p_supply: f64) -> (f64, f64) {
+        let mut p = EhvvaParams::paper_default();
+        // A lag longer than any td leaves no pure delay.
+        p.valve.dynamic_lag_open_ms = 100.0;
+        p.valve.dynamic_lag_close_ms = 100.0;
+        let inputs = EhvvaInputs {
+            p_supply_mpa: p_supply,
+            p_back_mpa: 1.0,
+            temp_c: 22.0,
+            lift_high: true,
+            snubber_on: false,
+        };
+        let dt = 0.01;
+        let mut m = EhvvaFull::<f64>::new(&p, &inputs, dt).unwrap();
+        let (mut on, mut off) = (None, None);
+        for k in 0..2000 {
+            let u = (100..1100).contains(&k);
+            m.step(u, &inputs);
+            let t = (k + 1) as f64 * dt;
+            if on.is_none() && u && m.main_opening() >= 0.5 {
+                on = Some(t - 1.0);
+            }
+            if off.is_none() && k >= 1100 && m.main_opening() <= 0.5 {
+                off = Some(t - 11.0);
+            }
+        }
+        (on.unwrap(), off.unwrap())
+    }
+
+    #[test]
+    fn full_model_dynamic_lag_is_calibrated() {
+        // The reduced model's delayed Pmo is half-way td + ln2·τp after the command; the
+        // ninth-order model's switched pressure td − lag + (own lag). The calibrated lag must
+        // make the two agree to 0.1 ms over the supply-pressure range.
+        let p = EhvvaParams::paper_default();
+        let tables = EhvvaTables::<f64>::new(&p).unwrap();
+        for p_supply in [5.0, 6.0, 7.0, 8.0] {
+            let (on, off) = own_lag_ms(p_supply);
+            let half_tau = core::f64::consts::LN_2 * tables.tau_p_ms(p_supply, 22.0);
+            let err_on = on - half_tau - p.valve.dynamic_lag_open_ms;
+            let err_off = off - half_tau - p.valve.dynamic_lag_close_ms;
+            assert!(
+                err_on.abs() < 0.1,
+                "VO at {p_supply} MPa: own lag {on:.3} ms, error {err_on:.3}"
+            );
+            assert!(
+                err_off.abs() < 0.1,
+                "VC at {p_supply} MPa: own lag {off:.3} ms, error {err_off:.3}"
+            );
+        }
+    }
+
+    #[test]
+    fn rejects_bad_valve_parameters() {
+        let mut p = EhvvaParams::paper_default();
+        p.valve.main_overlap_mm = 2.0;
+        let inputs = EhvvaInputs {
+            p_supply_mpa: 7.0,
+            p_back_mpa: 1.0,
+            temp_c: 22.0,
+            lift_high: true,
+            snubber_on: false,
+        };
+        assert_eq!(
+            EhvvaFull::<f64>::new(&p, &inputs, 0.02).err(),
+            Some(EhvvaError::InvalidParameter("valve.main_overlap_mm"))
+        );
+        let mut p = EhvvaParams::paper_default();
+        p.valve.pilot_mass_kg = 0.0;
+        assert_eq!(
+            EhvvaFull::<f64>::new(&p, &inputs, 0.02).err(),
+            Some(EhvvaError::InvalidParameter("valve.pilot_mass_kg"))
+        );
+    }
+}
