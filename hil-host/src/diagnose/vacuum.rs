@@ -499,7 +499,7 @@ impl Default for VacuumFamily {
         Self {
             h_max_s: 0.001,
             pressure_weight: 1.0,
-            max_fit_samples: 24_000,
+            max_fit_samples: 16_000,
             lsq: LsqOptions { max_iterations: 20, cost_tolerance: 1e-5, step_tolerance: 1e-7, ..LsqOptions::default() },
             cache: Mutex::new(None),
             baseline_cache: Mutex::new(None),
