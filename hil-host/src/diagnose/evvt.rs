@@ -254,7 +254,7 @@ fn simulate(m: &Model, d: &Data, out: &mut [f64]) -> Result<(), String> {
     let mut u_held = 0.0;
     let mut key = (f64::NAN, f64::NAN);
     let mut z = zoh(0.0, 0.0, d.dt);
-    for k in 0..n {
+    for (k, slot) in out.iter_mut().enumerate().take(n) {
         let b = belt(k);
         if let Drive::OpenLoop { window } = d.drive {
             if k % window == 0 {
@@ -262,7 +262,7 @@ fn simulate(m: &Model, d: &Data, out: &mut [f64]) -> Result<(), String> {
             }
         }
         let phase = x1 + b;
-        out[k] = phase;
+        *slot = phase;
         let u = match d.drive {
             Drive::ClosedLoop { kp, cmd_max, hold } => {
                 if k % hold == 0 {
@@ -824,6 +824,14 @@ mod tests {
         }
         let d = Data::from_log(&est, 2.0, 0.5).unwrap();
         assert!(matches!(d.drive, Drive::OpenLoop { window: 200 }));
+        // A reference with a controller law the command does not obey is not simulated either.
+        let (mut wrong, _, _) = logs("none", 33);
+        for (k, v) in wrong.meta.iter_mut() {
+            if k == "kp" {
+                *v = "30".into();
+            }
+        }
+        assert!(matches!(Data::from_log(&wrong, 2.0, 0.5).unwrap().drive, Drive::OpenLoop { .. }));
         let fit = EvvtFamily::default().fit(None, &est, &val).unwrap();
         let a = truth(&t, "alpha_at_nominal_deg_per_s2_rpm");
         assert!((fit.params[0].1 / a - 1.0).abs() < 0.2, "alpha {} vs {a}", fit.params[0].1);

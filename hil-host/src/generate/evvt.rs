@@ -208,7 +208,7 @@ fn step_ramp_reference(rng: &mut Rng, samples: usize) -> Vec<f64> {
         if rng.coin() {
             // Ramp at 3..12 deg/s.
             let rate = rng.uniform(3.0, 12.0);
-            let steps = (((target - level) as f64).abs() / rate / DT_S).ceil().max(1.0) as usize;
+            let steps = ((target - level).abs() / rate / DT_S).ceil().max(1.0) as usize;
             for k in 1..=steps {
                 r.push(level + (target - level) * k as f64 / steps as f64);
             }
