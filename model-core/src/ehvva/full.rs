@@ -36,7 +36,7 @@
 
 use super::event::EhvvaPlant;
 use super::params::{EhvvaError, EhvvaInputs, EhvvaParams};
-use super::piston::{stops, Piston};
+use super::piston::{stops, Moving, Piston};
 use super::reduced::{check_step, directional, DEFAULT_DELAY_SAMPLES};
 use super::tables::EhvvaTables;
 use crate::delay::DelayLine;
@@ -110,16 +110,13 @@ pub struct EhvvaFull<R: Real, const N: usize = DEFAULT_DELAY_SAMPLES> {
     vp: R,
     xm: R,
     vm: R,
-    lift: R,
-    vel: R,
-    p_low: R,
-    p_high: R,
+    /// Lift, velocity, accumulators and the last seat landing (shared with the other models).
+    m: Moving<R>,
     // Delay lines: pilot inlet pressure (t0), main-valve switched pressure and opening
     // fraction (t1).
     pilot_history: DelayLine<R, N>,
     main_p_history: DelayLine<R, N>,
     main_s_history: DelayLine<R, N>,
-    seat_velocity: Option<R>,
 }
 
 impl<R: Real, const N: usize> EhvvaFull<R, N> {
@@ -213,14 +210,10 @@ impl<R: Real, const N: usize> EhvvaFull<R, N> {
             vp: R::ZERO,
             xm: R::ZERO,
             vm: R::ZERO,
-            lift: R::ZERO,
-            vel: R::ZERO,
-            p_low: inputs.p_back_mpa,
-            p_high: inputs.p_supply_mpa,
+            m: Moving { lift: R::ZERO, vel: R::ZERO, p_high: inputs.p_supply_mpa, p_low: inputs.p_back_mpa, seat_velocity: None },
             pilot_history: DelayLine::new(R::ZERO),
             main_p_history: DelayLine::new(inputs.p_back_mpa),
             main_s_history: DelayLine::new(R::ZERO),
-            seat_velocity: None,
         })
     }
 
@@ -237,10 +230,10 @@ impl<R: Real, const N: usize> EhvvaFull<R, N> {
         self.xm
     }
     pub fn p_high_mpa(&self) -> R {
-        self.p_high
+        self.m.p_high
     }
     pub fn p_low_mpa(&self) -> R {
-        self.p_low
+        self.m.p_low
     }
     /// The main valve's switched pressure as the piston sees it (after t1), read from the
     /// newest delay-line sample, MPa.
@@ -257,7 +250,7 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaFull<R, N> {
     fn step(&mut self, u_pilot: bool, inputs: &EhvvaInputs<R>) -> R {
         let stroke = self.piston.stroke(inputs.lift_high);
         let cd = self.tables.cd(inputs.temp_c);
-        let (td_open, td_close) = self.tables.t_delay_pair_ms(self.p_high, inputs.temp_c);
+        let (td_open, td_close) = self.tables.t_delay_pair_ms(self.m.p_high, inputs.temp_c);
         // Pure-delay parts of td (the rest is this model's own dynamics).
         let pure_open = (td_open - self.lag_open).max(R::ZERO);
         let pure_close = (td_close - self.lag_close).max(R::ZERO);
@@ -269,10 +262,10 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaFull<R, N> {
 
         // Newest samples of the delayed signals, from the state at the start of the step.
         self.pilot_history
-            .push(self.p_high * (self.xp * self.inv_pilot_stroke).clamp(R::ZERO, R::ONE));
+            .push(self.m.p_high * (self.xp * self.inv_pilot_stroke).clamp(R::ZERO, R::ONE));
         let s_now = self.main_opening();
         self.main_p_history
-            .push(self.p_low + (self.p_high - self.p_low) * s_now);
+            .push(self.m.p_low + (self.m.p_high - self.m.p_low) * s_now);
         self.main_s_history.push(s_now);
 
         let u_volts = if u_pilot { self.coil_voltage } else { R::ZERO };
@@ -316,45 +309,33 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaFull<R, N> {
             self.xm = xm;
             self.vm = vm;
             // Eq. (9) line 5 with eq. (5): main valve metering in series with the top snubber.
-            let closing = self.vel < R::ZERO;
+            let closing = self.m.vel < R::ZERO;
             let frac = if closing { R::ONE - s_main } else { s_main }.max(s_min);
             let inv_a2_top = self.inv_a2_main_full / (frac * frac)
                 + self
                     .piston
-                    .inv_a2_top_snubber(self.lift, closing, inputs.snubber_on);
+                    .inv_a2_top_snubber(self.m.lift, closing, inputs.snubber_on);
             let k = self
                 .piston
-                .quadratic_gain_with(cd, inv_a2_top, self.lift, stroke);
-            let force = self.piston.static_force(p_main, self.p_low, self.lift);
-            let vel = self.piston.velocity_step(self.vel, force, k, self.h);
-            let (lift, vel, impact) = Piston::stops(self.lift + self.h * vel, vel, stroke);
-            if impact.is_some() && self.lift > R::ZERO {
-                self.seat_velocity = impact;
-            }
-            // Eqs. (7)-(8).
-            let dph = self
-                .piston
-                .p_high_rate(self.p_high, inputs.p_supply_mpa, vel);
-            let dpl = self.piston.p_low_rate(self.p_low, inputs.p_back_mpa, vel);
-            self.p_high += self.h * dph;
-            self.p_low += self.h * dpl;
-            self.lift = lift;
-            self.vel = vel;
+                .quadratic_gain_with(cd, inv_a2_top, self.m.lift, stroke);
+            let force = self.piston.static_force(p_main, self.m.p_low, self.m.lift);
+            // Piston, end stops and eqs. (7)-(8).
+            self.piston.advance(&mut self.m, force, k, self.h, stroke, inputs.p_supply_mpa, inputs.p_back_mpa);
         }
-        self.lift
+        self.m.lift
     }
 
     fn dt_ms(&self) -> R {
         self.dt
     }
     fn lift_mm(&self) -> R {
-        self.lift
+        self.m.lift
     }
     fn velocity_m_s(&self) -> R {
-        self.vel
+        self.m.vel
     }
     fn take_seat_velocity(&mut self) -> Option<R> {
-        self.seat_velocity.take()
+        self.m.seat_velocity.take()
     }
 }
 

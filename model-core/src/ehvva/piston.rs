@@ -197,4 +197,34 @@ impl<R: Real> Piston<R> {
             + (self.area_top - self.area_bottom) * (-vel).max(R::ZERO);
         (inflow - self.relief_low * (p_low - p_set)) * self.inv_cap_low
     }
+
+    /// One sub-step `h` of the piston and both accumulators, the part the reduced (eq. (12))
+    /// and ninth-order (eq. (9)) models share once each has its top pressure and damping:
+    /// velocity (semi-implicit), position and end stops, then eqs. (7)-(8) with the new
+    /// velocity. A seat impact is reported only for a landing, not for the seat holding a
+    /// piston already at rest on it.
+    pub fn advance(&self, m: &mut Moving<R>, force: R, quad_gain: R, h: R, stroke: R, p_supply_set: R, p_back_set: R) {
+        let vel = self.velocity_step(m.vel, force, quad_gain, h);
+        let (lift, vel, impact) = Piston::stops(m.lift + h * vel, vel, stroke);
+        if impact.is_some() && m.lift > R::ZERO {
+            m.seat_velocity = impact;
+        }
+        let dph = self.p_high_rate(m.p_high, p_supply_set, vel);
+        let dpl = self.p_low_rate(m.p_low, p_back_set, vel);
+        m.p_high += h * dph;
+        m.p_low += h * dpl;
+        m.lift = lift;
+        m.vel = vel;
+    }
+}
+
+/// The moving state the models share: lift (mm), velocity (mm/ms = m/s), accumulator
+/// pressures (MPa), and the velocity of the last seat landing (cleared on read).
+#[derive(Clone, Copy, Debug)]
+pub struct Moving<R> {
+    pub lift: R,
+    pub vel: R,
+    pub p_high: R,
+    pub p_low: R,
+    pub seat_velocity: Option<R>,
 }

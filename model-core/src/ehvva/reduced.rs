@@ -20,7 +20,7 @@
 
 use super::event::EhvvaPlant;
 use super::params::{EhvvaError, EhvvaInputs, EhvvaParams};
-use super::piston::Piston;
+use super::piston::{Moving, Piston};
 use super::tables::EhvvaTables;
 use crate::delay::DelayLine;
 use crate::real::Real;
@@ -81,12 +81,9 @@ pub struct EhvvaReduced<R: Real, const N: usize = DEFAULT_DELAY_SAMPLES> {
     h: R,
     substeps: usize,
     p_mo: R,
-    lift: R,
-    vel: R,
-    p_low: R,
-    p_high: R,
+    /// Lift, velocity, accumulators and the last seat landing (shared with the other models).
+    m: Moving<R>,
     pmo_history: DelayLine<R, N>,
-    seat_velocity: Option<R>,
 }
 
 impl<R: Real, const N: usize> EhvvaReduced<R, N> {
@@ -108,12 +105,8 @@ impl<R: Real, const N: usize> EhvvaReduced<R, N> {
             h: R::from_f64(dt_ms / substeps as f64),
             substeps,
             p_mo: inputs.p_back_mpa,
-            lift: R::ZERO,
-            vel: R::ZERO,
-            p_low: inputs.p_back_mpa,
-            p_high: inputs.p_supply_mpa,
+            m: Moving { lift: R::ZERO, vel: R::ZERO, p_high: inputs.p_supply_mpa, p_low: inputs.p_back_mpa, seat_velocity: None },
             pmo_history: DelayLine::new(inputs.p_back_mpa),
-            seat_velocity: None,
         })
     }
 
@@ -123,11 +116,11 @@ impl<R: Real, const N: usize> EhvvaReduced<R, N> {
     }
     /// Supply (high) accumulator pressure Ph, MPa.
     pub fn p_high_mpa(&self) -> R {
-        self.p_high
+        self.m.p_high
     }
     /// Back (low) accumulator pressure Pl, MPa.
     pub fn p_low_mpa(&self) -> R {
-        self.p_low
+        self.m.p_low
     }
     /// The calibrated tables this model uses.
     pub fn tables(&self) -> &EhvvaTables<R> {
@@ -139,8 +132,8 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaReduced<R, N> {
     fn step(&mut self, u_pilot: bool, inputs: &EhvvaInputs<R>) -> R {
         let stroke = self.piston.stroke(inputs.lift_high);
         let cd = self.tables.cd(inputs.temp_c);
-        let tau = self.tables.tau_p_ms(self.p_high, inputs.temp_c);
-        let (td_open, td_close) = self.tables.t_delay_pair_ms(self.p_high, inputs.temp_c);
+        let tau = self.tables.tau_p_ms(self.m.p_high, inputs.temp_c);
+        let (td_open, td_close) = self.tables.t_delay_pair_ms(self.m.p_high, inputs.temp_c);
         let open_is_longer = td_open >= td_close;
         let d_open = td_open * self.inv_dt;
         let d_close = td_close * self.inv_dt;
@@ -157,43 +150,30 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaReduced<R, N> {
             );
             back += inv_n;
             // Eq. (10): τp dPmo/dt = −Pmo + u(Ph − Pl) + Pl.
-            let p_in = if u_pilot { self.p_high } else { self.p_low };
+            let p_in = if u_pilot { self.m.p_high } else { self.m.p_low };
             self.p_mo = (self.p_mo + lag * p_in) / (R::ONE + lag);
             // Eq. (12) first line, with eqs. (5)-(6) as damping.
             let k = self
                 .piston
-                .quadratic_gain(cd, self.lift, self.vel, stroke, inputs.snubber_on);
-            let force = self.piston.static_force(p_top, self.p_low, self.lift);
-            let vel = self.piston.velocity_step(self.vel, force, k, self.h);
-            let (lift, vel, impact) = Piston::stops(self.lift + self.h * vel, vel, stroke);
-            // Only a landing counts, not the seat holding a piston already at rest on it.
-            if impact.is_some() && self.lift > R::ZERO {
-                self.seat_velocity = impact;
-            }
-            // Eqs. (7)-(8).
-            let dph = self
-                .piston
-                .p_high_rate(self.p_high, inputs.p_supply_mpa, vel);
-            let dpl = self.piston.p_low_rate(self.p_low, inputs.p_back_mpa, vel);
-            self.p_high += self.h * dph;
-            self.p_low += self.h * dpl;
-            self.lift = lift;
-            self.vel = vel;
+                .quadratic_gain(cd, self.m.lift, self.m.vel, stroke, inputs.snubber_on);
+            let force = self.piston.static_force(p_top, self.m.p_low, self.m.lift);
+            // Piston, end stops and eqs. (7)-(8).
+            self.piston.advance(&mut self.m, force, k, self.h, stroke, inputs.p_supply_mpa, inputs.p_back_mpa);
         }
-        self.lift
+        self.m.lift
     }
 
     fn dt_ms(&self) -> R {
         self.dt
     }
     fn lift_mm(&self) -> R {
-        self.lift
+        self.m.lift
     }
     fn velocity_m_s(&self) -> R {
-        self.vel
+        self.m.vel
     }
     fn take_seat_velocity(&mut self) -> Option<R> {
-        self.seat_velocity.take()
+        self.m.seat_velocity.take()
     }
 }
 
