@@ -15,15 +15,16 @@
 //!
 //! Baseline: the paper's model with the catalogue effects off: the valve sees the duty, one
 //! pressure time constant, no friction, no clearance. Its map shapes are picked from the data:
-//! the valve map (piecewise-linear eq. (2) or cubic eq. (5)) by fitting both to the logged
-//! pressure and keeping the lower estimation error; the position map (linear eq. (8) or arctan
-//! eq. (9)) by fitting both to the settled (pressure, position) points and keeping the arctan
-//! only if it lowers their error by 20 % (with hysteresis in the data both fit a band; the
-//! arctan can mimic a line anyway). Mass and the two damping coefficients (Sec. 3.2: extend and
-//! retract differ) are baseline parameters; U_ref = 12 V and p_amb_ref = 100 kPa are fixed (they
-//! are collinear with the map's slopes and offsets).
+//! the valve map (piecewise-linear eq. (2) or cubic eq. (5)) by fitting the pressure model from
+//! the three presets' maps (LPT, HPT lines, HPC cubic) to the logged pressure and keeping the
+//! lowest error; the position map (linear eq. (8) or arctan eq. (9)) by fitting both to the
+//! centre of the quasi-static (pressure, position) band and keeping the arctan only if it lowers
+//! the error by 20 % and the line misses by more than 1 % (hysteresis of friction or clearance
+//! lies on both sides of the map; the arctan can mimic a line anyway). Mass and the two damping
+//! coefficients (Sec. 3.2: extend and retract differ) are baseline parameters; U_ref = 12 V and
+//! p_amb_ref = 100 kPa are fixed (collinear with the maps' slopes and offsets).
 //!
-//! Effects, each refitted with all baseline parameters (warm-started from the baseline):
+//! Effects, each calibrated with all baseline parameters:
 //! - `supply-voltage`: the valve sees duty·(1 + κ(U/U_ref − 1)); κ = 1 is eq. (1), κ = 0 the
 //!   baseline, so the magnitude is fitted rather than assumed;
 //! - `pressure-direction`: separate `tau_rise_s` and `tau_fall_s` (Fig. 5);
@@ -35,12 +36,22 @@
 //! pressure has changed by 2·Fc, so the hysteresis width in x follows the map's slope), the
 //! clearance between membrane and valve (constant width in x, the valve stops short of the end
 //! stops by half the clearance, and the membrane's own dynamics continue through the reversal).
+//! Neither can reproduce the other exactly, and the simulation error decides between them.
 //!
-//! Weighting: the residual vector is the x error in % and, when `p_act_kPa` is logged, the
-//! pressure error in kPa times [`VacuumFamily::pressure_weight`] = 1 %/kPa: the position maps'
-//! slopes are 1..5 %/kPa, so a pressure error counts no more than the position error it causes.
+//! Calibration and weighting: with `p_act_kPa` logged, the model is a cascade (the pressure of
+//! eq. (4) does not depend on the rod), so it is fitted in two stages, each on its own output:
+//! the pressure parameters (valve map, time constants, κ) on the pressure error in kPa, then the
+//! rod parameters (position map, mass, damping, friction, clearance) on the position error in %
+//! with the pressure model held. This block weighting keeps a rod that the baseline cannot
+//! describe (friction, clearance) from bending the valve map, and a pressure model error from
+//! being absorbed by the rod. The mechanical effects leave the pressure stage unchanged (it is the
+//! baseline's); the pressure effects refit it and start their rod stage from the baseline's rod;
+//! the mechanical effects start theirs from the band-centre map (the baseline's rod is bent by
+//! the hysteresis it could not describe). Without `p_act_kPa`, every parameter is fitted at once
+//! on the position error, from each preset's parameters, the best kept.
+//! Ambient and tank pressure are smoothed before use (see [`Inputs`]).
 //! Long logs: at most [`VacuumFamily::max_fit_samples`] estimation samples enter the solver, as
-//! evenly spread windows each started at its settled inputs with the first 2 s not scored.
+//! four evenly spread windows each started at its settled inputs with the first 2 s not scored.
 
 use std::ops::Range;
 use std::sync::Mutex;
@@ -474,16 +485,16 @@ struct EstData<'a> {
 enum Residuals {
     Pressure,
     Position,
-    Both,
 }
+
+/// A calibrated model, its fitted parameter names, their 95 % half-widths and the iterations.
+type Calibrated = (VacuumModel, Vec<&'static str>, Vec<Option<f64>>, usize);
 
 /// Family settings.
 #[derive(Debug)]
 pub struct VacuumFamily {
     /// Largest rod integration step of the simulation.
     pub h_max_s: f64,
-    /// Weight of the pressure residual, % per kPa.
-    pub pressure_weight: f64,
     /// Estimation samples used by the solver at most (long logs are windowed).
     pub max_fit_samples: usize,
     /// Solver settings for every stage.
@@ -498,7 +509,6 @@ impl Default for VacuumFamily {
     fn default() -> Self {
         Self {
             h_max_s: 0.001,
-            pressure_weight: 1.0,
             max_fit_samples: 16_000,
             lsq: LsqOptions { max_iterations: 20, cost_tolerance: 1e-5, step_tolerance: 1e-7, ..LsqOptions::default() },
             cache: Mutex::new(None),
@@ -546,15 +556,14 @@ impl VacuumFamily {
 
     /// Fits `names` of `start` on `data` with the given residuals.
     fn fit_stage(&self, start: &VacuumModel, names: &[&'static str], data: &EstData, which: Residuals, opts: &LsqOptions) -> Result<(VacuumModel, crate::lsq::LsqResult), String> {
-        let use_p = data.p.is_some() && which != Residuals::Position;
-        let use_x = which != Residuals::Pressure;
+        let use_p = data.p.is_some() && which == Residuals::Pressure;
+        let use_x = which == Residuals::Position;
         let per_window: usize = data.windows.iter().map(|w| w.range.len()).sum();
         let n_res = per_window * (use_x as usize + use_p as usize);
         let x0: Vec<f64> = names.iter().map(|n| start.get(n)).collect();
         let lo: Vec<f64> = names.iter().map(|n| bounds(n).0).collect();
         let hi: Vec<f64> = names.iter().map(|n| bounds(n).1).collect();
         let max_len = data.windows.iter().map(|w| w.range.len()).max().unwrap_or(0);
-        let w_p = self.pressure_weight;
         let residual = |theta: &[f64], out: &mut [f64]| -> Result<(), String> {
             let mut m = *start;
             for (n, v) in names.iter().zip(theta) {
@@ -573,7 +582,7 @@ impl VacuumFamily {
                         o += 1;
                     }
                     if let (true, Some(p)) = (use_p, data.p) {
-                        out[o] = if scored { w_p * (ps[i] - p[k]) } else { 0.0 };
+                        out[o] = if scored { ps[i] - p[k] } else { 0.0 };
                         o += 1;
                     }
                 }
@@ -613,7 +622,7 @@ impl VacuumFamily {
             let mut best: Option<(f64, VacuumModel)> = None;
             for start in valve_starts() {
                 let names = start.parameter_names(None)?;
-                if let Ok((m, r)) = self.fit_stage(&start, &names, data, Residuals::Both, &self.lsq) {
+                if let Ok((m, r)) = self.fit_stage(&start, &names, data, Residuals::Position, &self.lsq) {
                     iterations += r.iterations;
                     if best.as_ref().is_none_or(|(c, _)| r.cost < *c) {
                         best = Some((r.cost, m));
@@ -653,7 +662,7 @@ impl VacuumFamily {
     /// logged pressure, all parameters at once on the position error. Returns the model, the
     /// fitted parameter names, their 95 % half-widths (from each stage's Jacobian) and the
     /// solver iterations.
-    fn calibrate(&self, est: &Log, effect: Option<&str>) -> Result<(VacuumModel, Vec<&'static str>, Vec<Option<f64>>, usize), String> {
+    fn calibrate(&self, est: &Log, effect: Option<&str>) -> Result<Calibrated, String> {
         let data = self.est_data(est)?;
         let (prepared, mut iterations) = self.prepared(est, &data)?;
         let key = fingerprint(est);
@@ -673,7 +682,7 @@ impl VacuumFamily {
         }
         let names = model.parameter_names(effect)?;
         if data.p.is_none() {
-            let (m, r) = self.fit_stage(&model, &names, &data, Residuals::Both, &self.lsq)?;
+            let (m, r) = self.fit_stage(&model, &names, &data, Residuals::Position, &self.lsq)?;
             return Ok((m, names, r.ci95, iterations + r.iterations));
         }
         let in_pressure = |n: &&'static str| is_pressure_param(n) || *n == "voltage_gain" || *n == "tau_fall_s";
@@ -823,7 +832,7 @@ impl Family for VacuumFamily {
         "x_pct"
     }
     fn formulation(&self) -> &'static str {
-        "simulation: the valve + actuator model run open loop from the logged duty, supply voltage, ambient and tank pressure; x_pct (and p_act_kPa, 1 %/kPa) simulation error"
+        "simulation: the valve + actuator model run open loop from the logged duty, supply voltage, ambient and tank pressure; pressure parameters on the p_act_kPa simulation error (when logged), rod parameters on the x_pct simulation error"
     }
     fn effects(&self) -> &'static [&'static str] {
         &["supply-voltage", "pressure-direction", "coulomb-friction", "backlash"]
