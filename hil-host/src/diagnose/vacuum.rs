@@ -881,7 +881,7 @@ mod tests {
     fn inputs(n: usize) -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>) {
         let duty: Vec<f64> = (0..n).map(|k| {
             let t = k as f64 * 0.01;
-            if (t as usize / 2) % 2 == 0 { 20.0 + 30.0 * (t * 0.7).sin().abs() } else { 90.0 - (t * 13.0) % 60.0 }
+            if (t as usize / 2).is_multiple_of(2) { 20.0 + 30.0 * (t * 0.7).sin().abs() } else { 90.0 - (t * 13.0) % 60.0 }
         }).map(|d: f64| (d * 10.0).round() / 10.0).collect();
         let u: Vec<f64> = (0..n).map(|k| 12.0 + 1.5 * ((k / 300) % 3) as f64 - 1.5).collect();
         (duty, u, vec![99.0; n], (0..n).map(|k| 25.0 + 5.0 * (k as f64 * 0.001).sin()).collect())
