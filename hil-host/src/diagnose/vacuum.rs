@@ -862,7 +862,25 @@ impl Family for VacuumFamily {
             }).collect()
         };
         if let Some(p) = val.col("p_act_kPa") {
-            out.push(("pressure rate sign".into(), direction(p, 1.0)));
+            let now = direction(p, 1.0);
+            // Hysteresis remembers the last direction: friction and clearance both offset x
+            // by its sign; friction by Fc times the map's slope (wide where the map is steep),
+            // the clearance by a constant half-width. The slope comes from the baseline.
+            let mut held = now.clone();
+            for k in 1..n {
+                if held[k] == 0.0 {
+                    held[k] = held[k - 1];
+                }
+            }
+            let baseline = self.baseline_cache.lock().ok().and_then(|g| g.as_ref().map(|(_, m)| *m));
+            if let Some(m) = baseline {
+                let slope: Vec<f64> = (0..n)
+                    .map(|k| (m.static_position_pct(p[k] + 0.5, io.p_amb[k]) - m.static_position_pct(p[k] - 0.5, io.p_amb[k])).abs())
+                    .collect();
+                out.push(("last pressure direction x map slope (friction)".into(), held.iter().zip(&slope).map(|(d, s)| d * s).collect()));
+            }
+            out.push(("last pressure direction (friction, clearance)".into(), held));
+            out.push(("pressure rate sign".into(), now));
             out.push(("actuator pressure".into(), p.to_vec()));
         }
         if let Some(x) = val.col("x_pct") {
