@@ -726,33 +726,41 @@ impl VacuumFamily {
         // and steps both ways put the hysteresis of friction or clearance on both sides of the
         // map, so the middle of the 5th and 95th percentiles follows the map (a plain least
         // squares would follow wherever the samples crowd).
-        // Quasi-static samples only (pressure moving < 30 kPa/s, as on the slow ramps and in
+        // Quasi-static samples first (pressure moving < 30 kPa/s, as on the slow ramps and in
         // holds): step transients lag by the rod's dynamics and would widen the band unevenly.
+        // Where the valve map is steep (HPC above 90 %) even the ramps are fast: the limit is
+        // relaxed until at least 10 bins are found.
         let n = io.len();
         let w = ((0.05 / log.dt_s).round() as usize).max(1);
-        let slow = |k: usize| (p[(k + w).min(n - 1)] - p[k.saturating_sub(w)]).abs() < 3.0;
-        let mut raw: Vec<(f64, f64)> = (0..n).filter(|&k| x[k] > 1.0 && x[k] < 99.0 && slow(k)).map(|k| (model.p_amb_ref_kpa - (io.p_amb[k] - p[k]), x[k])).collect();
-        raw.sort_by(|a, b| a.0.total_cmp(&b.0));
         let mut pts: Vec<(f64, f64)> = Vec::new();
-        let mut i = 0;
-        while i < raw.len() {
-            let bin = raw[i].0.floor();
-            let j = raw[i..].iter().position(|q| q.0.floor() != bin).map_or(raw.len(), |o| i + o);
-            if j - i >= 5 {
-                let mut xs: Vec<f64> = raw[i..j].iter().map(|q| q.1).collect();
-                xs.sort_by(f64::total_cmp);
-                let q = |f: f64| xs[((xs.len() - 1) as f64 * f).round() as usize];
-                // Bins where the band touches a stop are clipped on one side: left out.
-                if q(0.05) > 3.0 && q(0.95) < 97.0 {
-                    pts.push((bin + 0.5, 0.5 * (q(0.05) + q(0.95))));
+        for limit_kpa in [3.0, 8.0, f64::INFINITY] {
+            let slow = |k: usize| (p[(k + w).min(n - 1)] - p[k.saturating_sub(w)]).abs() < limit_kpa;
+            let mut raw: Vec<(f64, f64)> = (0..n).filter(|&k| x[k] > 1.0 && x[k] < 99.0 && slow(k)).map(|k| (model.p_amb_ref_kpa - (io.p_amb[k] - p[k]), x[k])).collect();
+            raw.sort_by(|a, b| a.0.total_cmp(&b.0));
+            pts.clear();
+            let mut i = 0;
+            while i < raw.len() {
+                let bin = raw[i].0.floor();
+                let j = raw[i..].iter().position(|q| q.0.floor() != bin).map_or(raw.len(), |o| i + o);
+                if j - i >= 5 {
+                    let mut xs: Vec<f64> = raw[i..j].iter().map(|q| q.1).collect();
+                    xs.sort_by(f64::total_cmp);
+                    let q = |f: f64| xs[((xs.len() - 1) as f64 * f).round() as usize];
+                    // Bins where the band touches a stop are clipped on one side: left out.
+                    if q(0.05) > 3.0 && q(0.95) < 97.0 {
+                        pts.push((bin + 0.5, 0.5 * (q(0.05) + q(0.95))));
+                    }
                 }
+                i = j;
             }
-            i = j;
+            if pts.len() >= 10 {
+                break;
+            }
         }
         if pts.len() < 10 {
-            return Err(format!("{}: the position hardly leaves its stops; the position map cannot be fitted", log.file));
+            // The position hardly leaves its stops: keep the start's (preset's) map.
+            return Ok((*model, 0));
         }
-        // Linear: least squares of x on p.
         let n = pts.len() as f64;
         let (mp, mx) = (pts.iter().map(|q| q.0).sum::<f64>() / n, pts.iter().map(|q| q.1).sum::<f64>() / n);
         let spp: f64 = pts.iter().map(|q| (q.0 - mp).powi(2)).sum();
