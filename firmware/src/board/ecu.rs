@@ -28,7 +28,7 @@ use embassy_stm32::time::{hz, khz};
 use embassy_stm32::timer::input_capture::{CapturePin, InputCapture};
 use embassy_stm32::timer::low_level::{CountingMode, InputCaptureMode, InputTISelection};
 use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm, SimplePwmChannel};
-use embassy_stm32::timer::Channel;
+use embassy_stm32::timer::{Channel, GeneralInstance4Channel};
 use embassy_stm32::{bind_interrupts, pac, Peri, Peripherals};
 use embassy_time::Timer;
 use heapless::Deque;
@@ -62,28 +62,18 @@ pub fn config() -> embassy_stm32::Config {
     c
 }
 
-/// A PWM channel with a 0..1 duty.
-pub struct Pwm(pub SimplePwmChannel<'static, TIM3>);
-/// A PWM channel of TIM4 (pilot, motor command).
-pub struct Pwm4(pub SimplePwmChannel<'static, TIM4>);
+/// A PWM channel with a 0..1 duty, on any timer (TIM3: vacuum valves; TIM4: pilot, motor
+/// command).
+pub struct Pwm<T: GeneralInstance4Channel>(pub SimplePwmChannel<'static, T>);
+/// The TIM4 channels (pilot, motor command).
+pub type Pwm4 = Pwm<TIM4>;
 
 fn duty_counts(max: u32, duty: f32) -> u32 {
     // NaN clamps to 0 (`as` saturates), so a bad duty never drives a valve full on.
     ((duty.clamp(0.0, 1.0) * max as f32) as u32).min(max)
 }
 
-impl PwmOut for Pwm {
-    fn set_duty(&mut self, duty: f32) {
-        let max = self.0.max_duty_cycle();
-        self.0.set_duty_cycle(duty_counts(max, duty));
-        self.0.enable();
-    }
-    fn disable(&mut self) {
-        self.0.set_duty_cycle_fully_off();
-    }
-}
-
-impl PwmOut for Pwm4 {
+impl<T: GeneralInstance4Channel> PwmOut for Pwm<T> {
     fn set_duty(&mut self, duty: f32) {
         let max = self.0.max_duty_cycle();
         self.0.set_duty_cycle(duty_counts(max, duty));
@@ -211,7 +201,7 @@ impl AnalogBank for EcuAdc {
 
 /// All outputs of the vacuum task.
 pub struct EcuVacuumIo {
-    pub valves: [Pwm; 3],
+    pub valves: [Pwm<TIM3>; 3],
     pub pump: Switch,
 }
 
@@ -271,9 +261,9 @@ impl EcuBoard {
         for v in &mut valves {
             v.set_duty(0.0);
         }
-        let mut pilot = Pwm4(pwm4.ch1);
+        let mut pilot = Pwm(pwm4.ch1);
         pilot.off();
-        let mut motor = Pwm4(pwm4.ch2);
+        let mut motor = Pwm(pwm4.ch2);
         motor.set_duty(0.0);
 
         let adc = Adc::new(p.ADC1);
