@@ -6,6 +6,8 @@ cd "$(dirname "$0")/.."
 
 # Set-up: the embedded target (idempotent; quick when present).
 rustup target add thumbv7em-none-eabihf >/dev/null
+# QEMU >= 10 and its instruction-counting plugin for the emulated-board (PIL) tests.
+./tools/setup-qemu.sh
 
 # One target directory for everything: host tests, the firmware build.
 echo "== host tests (model-core, paper tests, hil-host)"
