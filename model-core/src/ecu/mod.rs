@@ -9,12 +9,16 @@
 //! - [`vacuum_task`]: 80 Hz duty from the inverse actuator model with supply-voltage
 //!   compensation, pump on the needed pressure, tank leak residual, stuck actuators.
 //! - [`supervisor`]: ADC range checks, fault debouncing, the safe state of each actuator.
+//! - [`lockstep`] and [`frame`]: the whole ECU as one function of sensor frames, and the
+//!   CRC-checked frames that carry them over a UART (hardware/processor in the loop).
 //!
 //! Everything runs in f32 (the target's FPU type).
 
 pub mod board;
 pub mod ehvva_task;
 pub mod evvt_task;
+pub mod frame;
+pub mod lockstep;
 pub mod supervisor;
 pub mod vacuum_task;
 
