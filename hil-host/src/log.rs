@@ -196,7 +196,7 @@ impl Log {
 }
 
 /// Metadata keys the tools understand; others are kept and shown.
-const KNOWN_KEYS: [&str; 15] = [
+const KNOWN_KEYS: [&str; 16] = [
     "plant",
     "source",
     "sample_rate_hz",
@@ -207,6 +207,7 @@ const KNOWN_KEYS: [&str; 15] = [
     "control_period_s",
     "force_max_N",
     "motor_cmd_max_rpm",
+    "cam_events_per_cycle",
     "u_ref_V",
     "seed",
     "effect",

@@ -20,6 +20,10 @@ commands:
   generate <plant> <effect|none> [--seed N] [--out dir]
       write a bench-like estimation and validation log pair from the plant model with one
       hidden effect (the truth goes to truth.json beside them, not into the logs)
+  identify evvt <closed-loop log>... [--json out.json]
+      EVVT plant α/(s(s+β)) per operating point from closed-loop PRBS logs (Yang 2015: q-Markov
+      cover of the closed loop, open loop by G = H(I-H)^-1 K^-1, integrator pole at zero) and
+      the LPV tables α(N, V), β(N, V)
 plants: vacuum, ehvva, evvt, positioner
 ";
 
@@ -30,6 +34,7 @@ fn main() -> ExitCode {
         Some("diagnose") => run_diagnose(&args[1..]),
         Some("generate") => run_generate(&args[1..]),
         Some("run") => run_scenario(&args[1..]),
+        Some("identify") => run_identify(&args[1..]),
         Some("-h") | Some("--help") | Some("help") => {
             print!("{USAGE}");
             Ok(())
@@ -182,5 +187,38 @@ fn run_scenario(args: &[String]) -> Result<(), CliError> {
     let summary = run(&scenario, Some(&out)).map_err(CliError::Failed)?;
     print!("{}", summary.text(&scenario.name));
     println!("logs (DATA-FORMAT) and plots in {}", out.display());
+    Ok(())
+}
+
+fn run_identify(args: &[String]) -> Result<(), CliError> {
+    match args.first().map(String::as_str) {
+        Some("evvt") => identify_evvt(&args[1..]),
+        _ => Err(CliError::Usage("identify takes an actuator: evvt or ehvva".into())),
+    }
+}
+
+fn identify_evvt(args: &[String]) -> Result<(), CliError> {
+    use hil_host::identify::evvt;
+    let a = parse_args(args, &["json"])?;
+    if a.positional.is_empty() {
+        return Err(CliError::Usage("identify evvt takes one or more closed-loop PRBS logs".into()));
+    }
+    let opts = evvt::EvvtIdentifyOptions::default();
+    let mut points = Vec::new();
+    for path in &a.positional {
+        let log = read_log(Path::new(path), Some(Plant::Evvt)).map_err(|e| CliError::Failed(e.to_string()))?;
+        for n in &log.notices {
+            eprintln!("notice: {}: {n}", log.file);
+        }
+        let p = evvt::identify_log(&log, &opts).map_err(CliError::Failed)?;
+        print!("{}", p.report);
+        points.push(p);
+    }
+    print!("{}", evvt::tables_text(&points));
+    if let Some(out) = a.get("json") {
+        let text = serde_json::to_string_pretty(&evvt::to_json(&points)).map_err(|e| CliError::Failed(e.to_string()))?;
+        std::fs::write(out, text + "\n").map_err(|e| CliError::Failed(format!("{out}: {e}")))?;
+        eprintln!("tables written to {out}");
+    }
     Ok(())
 }

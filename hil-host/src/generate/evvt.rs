@@ -29,7 +29,7 @@
 //!   The validation run starts at another crank angle: its disturbance phase differs.
 
 use model_core::control::evvt_phase::{EvvtFault, EvvtPhaseConfig, EvvtPhaseController, EvvtPhaseInputs};
-use model_core::evvt::{EvvtLpvTable, EvvtParams, EvvtPlant, PAPER_DESIGN_KP_RPM_PER_DEG, PHASE_RESOLUTION_DEG};
+use model_core::evvt::{quantize_phase_deg, EvvtLpvTable, EvvtParams, EvvtPlant, PAPER_DESIGN_KP_RPM_PER_DEG, PHASE_RESOLUTION_DEG};
 use model_core::prbs::InversePrbs;
 
 use super::{Case, Rng};
@@ -297,6 +297,139 @@ pub fn generate_sized(effect: &str, seed: u64, sizes: &Sizes) -> Result<Case, St
         estimation_csv: log_text("estimation", seed, &est),
         validation_csv: log_text("validation", seed, &val),
     })
+}
+
+/// How the measured phase reaches the controller and the log.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum PhaseSampling {
+    /// A fresh (quantized) phase at every control instant (the diagnosis cases above).
+    ControlPeriod,
+    /// The bench's cam sensor (Section IV-A: "four pulses per engine cycle"): the phase is
+    /// computed at each cam event, `events_per_cycle` per 720 crank degrees, so its sample
+    /// instants follow engine speed (every 30 ms at 1000 rpm with 4 events); the controller
+    /// holds the last value until the next event, and the log's `phase_deg` is that held value
+    /// on the control grid (what the controller saw, so the logged law still holds).
+    CamEvents { events_per_cycle: u32 },
+}
+
+/// One closed-loop PRBS identification experiment at one operating point (Section IV-B):
+/// the inverse PRBS (eqs. (6)-(8)) on the phase reference, clocked every
+/// `prbs_hold_periods` control periods, the fixed proportional controller, the plant at
+/// constant engine speed and battery voltage.
+#[derive(Clone, Copy, Debug)]
+pub struct IdentificationExperiment {
+    /// The plant; α and β at (`engine_rpm`, `u_batt_v`) are the truth.
+    pub params: EvvtParams,
+    pub engine_rpm: f64,
+    pub u_batt_v: f64,
+    pub kp_rpm_per_deg: f64,
+    pub control_period_s: f64,
+    pub prbs_order: u8,
+    /// Control periods per PRBS value (the PRBS clock is this times the control period).
+    pub prbs_hold_periods: usize,
+    /// Log length in PRBS periods (2·(2ⁿ − 1) values each).
+    pub prbs_periods: f64,
+    /// Gaussian noise on the phase before the 1-degree quantization, standard deviation.
+    pub phase_noise_deg: f64,
+    pub phase_sampling: PhaseSampling,
+    pub seed: u64,
+}
+
+impl Default for IdentificationExperiment {
+    /// The design plant at 1100 rpm and 14 V, kp = 25 rpm/deg, 10 ms control period, order-9
+    /// PRBS clocked at 100 ms (two periods: 204 s), 0.3 deg sensor noise, 4 cam events per cycle.
+    fn default() -> Self {
+        Self {
+            params: EvvtParams::default(),
+            engine_rpm: 1100.0,
+            u_batt_v: 14.0,
+            kp_rpm_per_deg: PAPER_DESIGN_KP_RPM_PER_DEG,
+            control_period_s: DT_S,
+            prbs_order: PRBS_ORDER,
+            prbs_hold_periods: 10,
+            prbs_periods: 2.0,
+            phase_noise_deg: 0.3,
+            phase_sampling: PhaseSampling::CamEvents { events_per_cycle: 4 },
+            seed: 1,
+        }
+    }
+}
+
+/// Writes the `evvt` log of one identification experiment (metadata `kp`,
+/// `control_period_s`, `motor_cmd_max_rpm`, and `cam_events_per_cycle` with cam-event
+/// sampling).
+pub fn identification_log(x: &IdentificationExperiment) -> Result<String, String> {
+    let mut rng = Rng::new(x.seed);
+    let dt = x.control_period_s;
+    if !(dt > 0.0 && dt.is_finite()) || x.prbs_hold_periods == 0 || !(x.prbs_periods > 0.0) {
+        return Err("identification experiment: control period, PRBS hold and length must be positive".into());
+    }
+    let mut prbs = InversePrbs::<f64>::new(x.prbs_order, PRBS_AMPLITUDE_DEG).map_err(|e| format!("{e:?}"))?;
+    let values = (prbs.period() as f64 * x.prbs_periods).round() as usize;
+    let reference: Vec<f64> = (0..values)
+        .flat_map(|_| std::iter::repeat_n(PRBS_CENTRE_DEG + prbs.next_value(), x.prbs_hold_periods))
+        .collect();
+    let cam_period_s = match x.phase_sampling {
+        PhaseSampling::ControlPeriod => None,
+        PhaseSampling::CamEvents { events_per_cycle } => {
+            if events_per_cycle == 0 || !(x.engine_rpm > 0.0) {
+                return Err("cam-event sampling needs events_per_cycle > 0 and a positive engine speed".into());
+            }
+            // 720 crank degrees per cycle at 6·N crank degrees per second.
+            Some(120.0 / (x.engine_rpm * events_per_cycle as f64))
+        }
+    };
+    let mut plant = EvvtPlant::<f64>::new(&EvvtParams { initial_phase_deg: PRBS_CENTRE_DEG, ..x.params }).map_err(|e| format!("{e:?}"))?;
+    let mut ctrl = EvvtPhaseController::<f64>::new(&EvvtPhaseConfig::paper_fixed_p(x.kp_rpm_per_deg)).map_err(|e| format!("{e:?}"))?;
+    let noise_sd = x.phase_noise_deg.max(0.0);
+    let measure = |phase: f64, rng: &mut Rng| quantize_phase_deg(phase + noise_sd * rng.normal(), PHASE_RESOLUTION_DEG).clamp(-30.0, 90.0);
+    let mut held = measure(plant.phase_deg(), &mut rng);
+    // First cam event at a random crank angle.
+    let mut next_event_s = cam_period_s.map_or(f64::INFINITY, |tc| rng.uniform(0.0, tc));
+    let n = reference.len();
+    let mut run = Run { cmd: Vec::with_capacity(n), rpm: Vec::with_capacity(n), volt: Vec::with_capacity(n), reference, phase: Vec::with_capacity(n) };
+    for k in 0..n {
+        let t = k as f64 * dt;
+        if cam_period_s.is_none() {
+            held = measure(plant.phase_deg(), &mut rng);
+        }
+        let out = ctrl.update(
+            &EvvtPhaseInputs { setpoint_deg: run.reference[k], measured_phase_deg: held, engine_rpm: x.engine_rpm, u_batt_v: x.u_batt_v, cranking: false, fault: EvvtFault::None },
+            dt,
+        );
+        run.cmd.push(out.motor_cmd_rpm);
+        run.rpm.push((x.engine_rpm + 3.0 * rng.normal()).max(0.0));
+        run.volt.push((x.u_batt_v + 0.03 * rng.normal()).max(0.0));
+        run.phase.push(held);
+        // Move the plant through the period, stopping at each cam event to sample it; an
+        // event at the period's end is seen at the next control instant.
+        let t_end = t + dt;
+        let mut t_now = t;
+        while next_event_s <= t_end {
+            plant.step(out.motor_cmd_rpm, x.engine_rpm, x.u_batt_v, next_event_s - t_now);
+            t_now = next_event_s;
+            held = measure(plant.phase_deg(), &mut rng);
+            next_event_s += cam_period_s.unwrap_or(f64::INFINITY);
+        }
+        plant.step(out.motor_cmd_rpm, x.engine_rpm, x.u_batt_v, t_end - t_now);
+    }
+    let t: Vec<f64> = (0..n).map(|k| (k as f64 * dt * 1e6).round() / 1e6).collect();
+    let mut meta = vec![
+        ("plant".to_string(), "evvt".to_string()),
+        ("source".into(), format!("hil-host generate, closed-loop PRBS identification experiment (simulated bench, seed {})", x.seed)),
+        ("sample_rate_hz".into(), format!("{}", 1.0 / dt)),
+        ("kp".into(), format!("{}", x.kp_rpm_per_deg)),
+        ("control_period_s".into(), format!("{dt}")),
+        ("motor_cmd_max_rpm".into(), format!("{}", EvvtPhaseConfig::paper_fixed_p(x.kp_rpm_per_deg).motor_cmd_max_rpm)),
+        ("controller".into(), format!("fixed P: motor_cmd_rpm = kp (phase_ref_deg - phase_deg), phase quantized to {PHASE_RESOLUTION_DEG} crank deg, saturated")),
+    ];
+    if let PhaseSampling::CamEvents { events_per_cycle } = x.phase_sampling {
+        meta.push(("cam_events_per_cycle".into(), format!("{events_per_cycle}")));
+    }
+    Ok(format_log(
+        &meta,
+        &[("t_s", &t), ("motor_cmd_rpm", &run.cmd), ("engine_rpm", &run.rpm), ("u_batt_V", &run.volt), ("phase_ref_deg", &run.reference), ("phase_deg", &run.phase)],
+    ))
 }
 
 #[cfg(test)]

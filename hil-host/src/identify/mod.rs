@@ -1,0 +1,3 @@
+//! `identify`: parameter tables for model-core from measured logs (issue 6).
+
+pub mod evvt;
