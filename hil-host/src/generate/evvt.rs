@@ -361,7 +361,7 @@ impl Default for IdentificationExperiment {
 pub fn identification_log(x: &IdentificationExperiment) -> Result<String, String> {
     let mut rng = Rng::new(x.seed);
     let dt = x.control_period_s;
-    if !(dt > 0.0 && dt.is_finite()) || x.prbs_hold_periods == 0 || !(x.prbs_periods > 0.0) {
+    if !(dt > 0.0 && dt.is_finite()) || x.prbs_hold_periods == 0 || x.prbs_periods.is_nan() || x.prbs_periods <= 0.0 {
         return Err("identification experiment: control period, PRBS hold and length must be positive".into());
     }
     let mut prbs = InversePrbs::<f64>::new(x.prbs_order, PRBS_AMPLITUDE_DEG).map_err(|e| format!("{e:?}"))?;
@@ -372,7 +372,7 @@ pub fn identification_log(x: &IdentificationExperiment) -> Result<String, String
     let cam_period_s = match x.phase_sampling {
         PhaseSampling::ControlPeriod => None,
         PhaseSampling::CamEvents { events_per_cycle } => {
-            if events_per_cycle == 0 || !(x.engine_rpm > 0.0) {
+            if events_per_cycle == 0 || x.engine_rpm.is_nan() || x.engine_rpm <= 0.0 {
                 return Err("cam-event sampling needs events_per_cycle > 0 and a positive engine speed".into());
             }
             // 720 crank degrees per cycle at 6·N crank degrees per second.

@@ -598,7 +598,7 @@ pub fn identify_log(log: &Log, opts: &EvvtIdentifyOptions) -> Result<EvvtPointRe
     let kp = log.meta_f64("kp").map_err(|e| e.to_string())?.ok_or_else(|| {
         format!("{file}: no `# kp:` metadata: the proportional gain of the closed loop (rpm per crank degree) is needed for the indirect approach G = H(I - H)^-1 K^-1")
     })?;
-    if !(kp > 0.0) {
+    if kp <= 0.0 {
         return Err(format!("{file}: metadata `kp` is {kp}; it must be positive"));
     }
     let t_s = match log.meta_f64("control_period_s").map_err(|e| e.to_string())? {
@@ -958,7 +958,7 @@ mod tests {
     #[test]
     fn poles_of_a_known_polynomial() {
         // (z − 1)(z − 0.9)(z² − z + 0.5)
-        let a = [0.9, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.5, -0.5, 0.0, 0.0, 1.0, 0.5];
+        let a = [0.9, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, -0.5, 0.0, 0.0, 1.0, 1.0];
         let c = char_poly(&a, 4);
         let mut roots = poly_roots(&c);
         roots.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.total_cmp(&y.1)));
