@@ -1,0 +1,531 @@
+//! `hil-host pil`: processor in the loop. The ECU core runs as firmware (`firmware-qemu`) on
+//! QEMU's emulated STM32F405 board (`netduinoplus2`); each lockstep step the host sends the
+//! sensor frame over the emulated USART1 (a TCP socket on the host side) and waits for the
+//! actuator frame.
+//!
+//! The link is lossless above a lossy line: a Nack (the firmware rejected a frame) or no
+//! answer within [`PilOptions::answer_timeout`] makes the host send the same frame again; the
+//! firmware answers a repeated `seq` with its previous answer without stepping twice. Frames
+//! that fail the host's checks are counted and never used. [`LinkFaults`] injects corrupted
+//! and dropped sensor frames to exercise exactly that.
+//!
+//! QEMU is killed when the [`QemuBoard`] is dropped, on every path (errors and panics
+//! included); should the host die without dropping it, the firmware ends QEMU itself after
+//! 10 s of silence on the link (semihosting exit).
+
+use std::fs::File;
+use std::io::{ErrorKind, Read, Write};
+use std::net::{Ipv4Addr, SocketAddr, TcpListener, TcpStream};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use model_core::ecu::frame::{encode, ActuatorFrame, Frame, FrameDecoder, FrameError, SensorFrame, MAX_FRAME_BYTES};
+use model_core::ecu::lockstep::EcuCore;
+
+/// The firmware's target triple and package.
+pub const TARGET: &str = "thumbv7em-none-eabihf";
+pub const FIRMWARE_PACKAGE: &str = "firmware-qemu";
+/// The QEMU binary and machine.
+pub const QEMU: &str = "qemu-system-arm";
+pub const MACHINE: &str = "netduinoplus2";
+
+/// The workspace root (the directory of the top Cargo.toml), fixed at compile time.
+pub fn workspace_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).parent().map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from("."))
+}
+
+/// Cargo's target directory: `CARGO_TARGET_DIR` when set (relative to the workspace root),
+/// else `<workspace>/target`.
+pub fn target_dir() -> PathBuf {
+    match std::env::var_os("CARGO_TARGET_DIR") {
+        Some(d) => workspace_root().join(d),
+        None => workspace_root().join("target"),
+    }
+}
+
+/// Where `cargo build --release -p firmware-qemu --target thumbv7em-none-eabihf` puts the ELF.
+pub fn firmware_elf_path() -> PathBuf {
+    target_dir().join(TARGET).join("release").join(FIRMWARE_PACKAGE)
+}
+
+/// Builds the firmware image (release, locked, the workspace's target directory) and returns
+/// its path. Must not be called while cargo holds the build lock of the same target
+/// directory (from a build script, say); a running test binary is fine.
+pub fn build_firmware() -> Result<PathBuf, String> {
+    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+    let status = Command::new(cargo)
+        .current_dir(workspace_root())
+        .args(["build", "--release", "--locked", "-p", FIRMWARE_PACKAGE, "--target", TARGET])
+        .status()
+        .map_err(|e| format!("cannot run cargo to build {FIRMWARE_PACKAGE}: {e}"))?;
+    if !status.success() {
+        return Err(format!("building {FIRMWARE_PACKAGE} failed ({status})"));
+    }
+    let elf = firmware_elf_path();
+    if elf.is_file() {
+        Ok(elf)
+    } else {
+        Err(format!("cargo built {FIRMWARE_PACKAGE} but {} is missing", elf.display()))
+    }
+}
+
+/// `qemu-system-arm --version`'s first line, or why it cannot be run.
+pub fn qemu_version() -> Result<String, String> {
+    let out = Command::new(QEMU).arg("--version").output().map_err(|e| format!("{QEMU} not found ({e}); run tools/setup-qemu.sh"))?;
+    let text = String::from_utf8_lossy(&out.stdout);
+    Ok(text.lines().next().unwrap_or("").to_string())
+}
+
+/// The instruction-counting TCG plugin (built by tools/setup-qemu.sh).
+pub fn plugin_path() -> PathBuf {
+    workspace_root().join("tools/qemu-plugin/insn_between.so")
+}
+
+/// How QEMU is started.
+#[derive(Clone, Debug, Default)]
+pub struct QemuOptions {
+    /// Semihosting arguments after the program name (`bench` selects the bench mode).
+    pub args: Vec<String>,
+    /// `-plugin` argument (`path,key=value,...`).
+    pub plugin: Option<String>,
+    /// Where QEMU's stdout (the defmt stream over semihosting) and stderr go; a temporary
+    /// directory's files when `None`.
+    pub log_dir: Option<PathBuf>,
+}
+
+/// A running QEMU with the firmware and the TCP connection to its USART1. Dropping it kills
+/// QEMU.
+pub struct QemuBoard {
+    child: Child,
+    stream: TcpStream,
+    /// QEMU's stdout: the firmware's defmt frames (decode with `defmt-print -e <elf>`).
+    pub defmt_log: PathBuf,
+    stderr_log: PathBuf,
+}
+
+impl Drop for QemuBoard {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+impl QemuBoard {
+    /// Starts QEMU with `elf` on a free local port and connects to its serial port.
+    pub fn start(elf: &Path, opts: &QemuOptions) -> Result<Self, String> {
+        if !elf.is_file() {
+            return Err(format!("{}: no such firmware image", elf.display()));
+        }
+        let dir = match &opts.log_dir {
+            Some(d) => d.clone(),
+            None => std::env::temp_dir().join(format!("hil-pil-{}", std::process::id())),
+        };
+        std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        let defmt_log = dir.join("defmt.bin");
+        let stderr_log = dir.join("qemu-stderr.txt");
+        // A port that was free a moment ago; QEMU failing to bind it (a race with another
+        // process) is retried on a new one.
+        let mut last_err = String::new();
+        for _ in 0..3 {
+            let port = free_port()?;
+            let mut semihosting = String::from("enable=on,target=native,arg=firmware-qemu");
+            for a in &opts.args {
+                semihosting.push_str(",arg=");
+                semihosting.push_str(a);
+            }
+            let mut cmd = Command::new(QEMU);
+            cmd.args(["-M", MACHINE, "-display", "none", "-monitor", "none"])
+                .args(["-semihosting-config", &semihosting])
+                .args(["-serial", &format!("tcp:127.0.0.1:{port},server=on,wait=on,nodelay=on")])
+                .arg("-kernel")
+                .arg(elf);
+            if let Some(p) = &opts.plugin {
+                cmd.args(["-plugin", p]);
+            }
+            let out = File::create(&defmt_log).map_err(|e| format!("{}: {e}", defmt_log.display()))?;
+            let err = File::create(&stderr_log).map_err(|e| format!("{}: {e}", stderr_log.display()))?;
+            let child = cmd
+                .stdin(Stdio::null())
+                .stdout(out)
+                .stderr(err)
+                .spawn()
+                .map_err(|e| format!("cannot start {QEMU} ({e}); run tools/setup-qemu.sh"))?;
+            let mut board = Pending { child: Some(child) };
+            match connect(&mut board, port, &stderr_log) {
+                Ok(stream) => {
+                    let child = board.child.take().ok_or("QEMU process lost")?;
+                    return Ok(QemuBoard { child, stream, defmt_log, stderr_log });
+                }
+                Err(e) => last_err = e,
+            }
+        }
+        Err(last_err)
+    }
+
+    /// What QEMU printed on stderr so far.
+    pub fn stderr_text(&self) -> String {
+        std::fs::read_to_string(&self.stderr_log).unwrap_or_default()
+    }
+
+    /// Whether QEMU is still running.
+    pub fn running(&mut self) -> bool {
+        matches!(self.child.try_wait(), Ok(None))
+    }
+
+    pub fn stream(&mut self) -> &mut TcpStream {
+        &mut self.stream
+    }
+}
+
+/// A QEMU child not yet connected: killed on drop too.
+struct Pending {
+    child: Option<Child>,
+}
+
+impl Drop for Pending {
+    fn drop(&mut self) {
+        if let Some(c) = self.child.as_mut() {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+}
+
+fn free_port() -> Result<u16, String> {
+    let l = TcpListener::bind((Ipv4Addr::LOCALHOST, 0)).map_err(|e| format!("no free local port: {e}"))?;
+    l.local_addr().map(|a| a.port()).map_err(|e| e.to_string())
+}
+
+fn connect(board: &mut Pending, port: u16, stderr_log: &Path) -> Result<TcpStream, String> {
+    let addr = SocketAddr::from((Ipv4Addr::LOCALHOST, port));
+    let start = Instant::now();
+    loop {
+        if let Some(c) = board.child.as_mut() {
+            if let Ok(Some(status)) = c.try_wait() {
+                let text = std::fs::read_to_string(stderr_log).unwrap_or_default();
+                return Err(format!("{QEMU} exited ({status}) before accepting the serial connection: {}", text.trim()));
+            }
+        }
+        match TcpStream::connect_timeout(&addr, Duration::from_millis(200)) {
+            Ok(s) => {
+                // Without it every small frame waits for the previous one's ACK (~40 ms).
+                s.set_nodelay(true).map_err(|e| format!("TCP_NODELAY: {e}"))?;
+                return Ok(s);
+            }
+            Err(_) if start.elapsed() < Duration::from_secs(20) => std::thread::sleep(Duration::from_millis(20)),
+            Err(e) => return Err(format!("cannot connect to {QEMU}'s serial port {port}: {e}")),
+        }
+    }
+}
+
+/// Faults injected on the host → ECU direction, counted over every transmission
+/// (retransmissions included): the n-th, 2n-th, ... frame is corrupted (one payload byte
+/// inverted: the CRC must catch it), the m-th, 2m-th, ... is not sent at all. A transmission
+/// that is due for both is dropped.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct LinkFaults {
+    pub corrupt_every: Option<u32>,
+    pub drop_every: Option<u32>,
+}
+
+/// Counters of one PIL run, both directions.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct LinkStats {
+    /// Sensor frames answered (lockstep steps).
+    pub steps: u64,
+    /// Sensor frames put on the wire, retransmissions included (dropped ones not).
+    pub transmissions: u64,
+    pub corrupted_injected: u64,
+    pub dropped_injected: u64,
+    /// Nacks from the firmware (it rejected a frame).
+    pub nacks_received: u64,
+    /// Answers that did not come within the answer timeout.
+    pub answer_timeouts: u64,
+    /// Frames from the firmware that failed the host's checks (CRC, length, ...).
+    pub bad_frames_received: u64,
+    /// Actuator frames that answer no pending request (late answers to a retransmitted
+    /// frame); discarded.
+    pub stale_answers: u64,
+    /// Unasked safe-state reports (the firmware's link timeout fired).
+    pub safe_state_reports: u64,
+    /// The firmware's own count of rejected frames, from its last answer.
+    pub ecu_bad_frames: u32,
+}
+
+/// Options of a PIL link.
+#[derive(Clone, Debug)]
+pub struct PilOptions {
+    pub qemu: QemuOptions,
+    pub faults: LinkFaults,
+    /// How long to wait for an answer before sending the frame again. Shorter than the
+    /// firmware's 100 ms link timeout, so a dropped frame does not make its outputs go safe.
+    pub answer_timeout: Duration,
+    /// Transmissions of one frame before the run is given up.
+    pub max_attempts: u32,
+}
+
+impl Default for PilOptions {
+    fn default() -> Self {
+        Self { qemu: QemuOptions::default(), faults: LinkFaults::default(), answer_timeout: Duration::from_millis(40), max_attempts: 20 }
+    }
+}
+
+/// What arrived while waiting for an answer.
+enum Reply {
+    Answer(ActuatorFrame),
+    Nack,
+    Timeout,
+}
+
+/// The ECU link over QEMU's serial port.
+pub struct PilLink {
+    board: QemuBoard,
+    decoder: FrameDecoder,
+    opts: PilOptions,
+    stats: LinkStats,
+    rx: [u8; 512],
+    rx_len: usize,
+    rx_at: usize,
+    /// Safe-state reports received (in order), for the silent-link check.
+    pub safe_reports: Vec<ActuatorFrame>,
+}
+
+impl PilLink {
+    /// Starts QEMU with the firmware image `elf` and connects.
+    pub fn start(elf: &Path, opts: PilOptions) -> Result<Self, String> {
+        let board = QemuBoard::start(elf, &opts.qemu)?;
+        Ok(Self { board, decoder: FrameDecoder::new(), opts, stats: LinkStats::default(), rx: [0; 512], rx_len: 0, rx_at: 0, safe_reports: Vec::new() })
+    }
+
+    pub fn stats(&self) -> LinkStats {
+        self.stats
+    }
+
+    pub fn board(&mut self) -> &mut QemuBoard {
+        &mut self.board
+    }
+
+    /// One lockstep step: sends `sensors` until the firmware answers it.
+    pub fn exchange(&mut self, sensors: &SensorFrame) -> Result<ActuatorFrame, String> {
+        let mut wire = [0u8; MAX_FRAME_BYTES];
+        let n = encode(&Frame::Sensor(*sensors), &mut wire).map_err(|e| format!("encoding sensor frame {}: {e:?}", sensors.seq))?;
+        for _ in 0..self.opts.max_attempts {
+            self.transmit(&wire[..n])?;
+            match self.wait_reply(sensors)? {
+                Reply::Answer(a) => {
+                    self.stats.steps += 1;
+                    self.stats.ecu_bad_frames = a.bad_frames;
+                    return Ok(a);
+                }
+                Reply::Nack => self.stats.nacks_received += 1,
+                Reply::Timeout => self.stats.answer_timeouts += 1,
+            }
+        }
+        Err(format!(
+            "sensor frame {} unanswered after {} transmissions ({:?}); QEMU stderr: {}",
+            sensors.seq,
+            self.opts.max_attempts,
+            self.stats,
+            self.board.stderr_text().trim()
+        ))
+    }
+
+    /// Sends one frame, or corrupts or drops it as the fault plan says.
+    fn transmit(&mut self, frame: &[u8]) -> Result<(), String> {
+        let k = self.stats.transmissions + self.stats.dropped_injected + 1;
+        let due = |every: Option<u32>| every.is_some_and(|n| n > 0 && k % u64::from(n) == 0);
+        if due(self.opts.faults.drop_every) {
+            self.stats.dropped_injected += 1;
+            return Ok(());
+        }
+        self.stats.transmissions += 1;
+        let stream = self.board.stream();
+        if due(self.opts.faults.corrupt_every) {
+            self.stats.corrupted_injected += 1;
+            let mut bad = frame.to_vec();
+            // A byte in the middle of the payload: header and CRC stay intact, so the
+            // firmware sees one whole frame with a wrong CRC.
+            let at = 5 + (frame.len() - 7) / 2;
+            bad[at] ^= 0xFF;
+            stream.write_all(&bad)
+        } else {
+            stream.write_all(frame)
+        }
+        .map_err(|e| format!("writing to {QEMU}'s serial port: {e}"))
+    }
+
+    /// Reads until the answer to `sent`, a Nack, or the answer timeout.
+    fn wait_reply(&mut self, sent: &SensorFrame) -> Result<Reply, String> {
+        let deadline = Instant::now() + self.opts.answer_timeout;
+        loop {
+            while let Some(decoded) = self.next_decoded() {
+                match decoded {
+                    Ok(Frame::Actuator(a)) if a.seq == sent.seq && a.t_us == sent.t_us => return Ok(Reply::Answer(a)),
+                    Ok(Frame::Actuator(a)) => self.unasked(a),
+                    Ok(Frame::Nack(_)) => return Ok(Reply::Nack),
+                    Ok(Frame::Sensor(_)) | Err(_) => self.stats.bad_frames_received += 1,
+                }
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                return Ok(Reply::Timeout);
+            }
+            if !self.fill(deadline - now)? {
+                return Ok(Reply::Timeout);
+            }
+        }
+    }
+
+    fn unasked(&mut self, a: ActuatorFrame) {
+        if a == (ActuatorFrame { bad_frames: a.bad_frames, ..EcuCore::safe_outputs(a.seq, a.t_us) }) {
+            self.stats.safe_state_reports += 1;
+            self.safe_reports.push(a);
+        } else {
+            self.stats.stale_answers += 1;
+        }
+    }
+
+    /// The next decoder result from the bytes already received.
+    fn next_decoded(&mut self) -> Option<Result<Frame, FrameError>> {
+        if let Some(r) = self.decoder.poll() {
+            return Some(r);
+        }
+        while self.rx_at < self.rx_len {
+            let b = self.rx[self.rx_at];
+            self.rx_at += 1;
+            if let Some(r) = self.decoder.push(b) {
+                return Some(r);
+            }
+        }
+        None
+    }
+
+    /// Receives what is there within `wait`; false when nothing came.
+    fn fill(&mut self, wait: Duration) -> Result<bool, String> {
+        let stream = &mut self.board.stream;
+        stream.set_read_timeout(Some(wait.max(Duration::from_micros(100)))).map_err(|e| e.to_string())?;
+        match stream.read(&mut self.rx) {
+            Ok(0) => Err(format!("{QEMU} closed the serial connection; stderr: {}", self.board.stderr_text().trim())),
+            Ok(n) => {
+                self.rx_len = n;
+                self.rx_at = 0;
+                Ok(true)
+            }
+            Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => Ok(false),
+            Err(e) if e.kind() == ErrorKind::Interrupted => Ok(true),
+            Err(e) => Err(format!("reading {QEMU}'s serial port: {e}")),
+        }
+    }
+
+    /// Sends nothing for `silence` and collects what the firmware reports meanwhile (its
+    /// link timeout's safe state).
+    pub fn stay_silent(&mut self, silence: Duration) -> Result<Vec<ActuatorFrame>, String> {
+        let before = self.safe_reports.len();
+        let deadline = Instant::now() + silence;
+        loop {
+            while let Some(decoded) = self.next_decoded() {
+                match decoded {
+                    Ok(Frame::Actuator(a)) => self.unasked(a),
+                    Ok(_) | Err(_) => self.stats.bad_frames_received += 1,
+                }
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                return Ok(self.safe_reports[before..].to_vec());
+            }
+            self.fill(deadline - now)?;
+        }
+    }
+}
+
+/// A sensor stream without plants (open loop): the engine at constant speed on a 60-2 crank
+/// wheel with the cam edge once per cycle, healthy sensor readings, fixed setpoints. Enough to
+/// make every task of the core work (crank sync, valve events, EVVT and vacuum control); the
+/// closed-loop runs come from `run`.
+#[derive(Clone, Debug)]
+pub struct OpenLoopFeed {
+    pub rpm: f64,
+    pub adc_counts: [u16; model_core::ecu::supervisor::N_CHANNELS],
+    next_tooth: u64,
+    seq: u32,
+}
+
+impl OpenLoopFeed {
+    pub fn new(rpm: f64) -> Self {
+        let cfg = model_core::ecu::supervisor::SupervisorConfig::default();
+        // Battery, supply and back pressure, oil temperature, tank, ambient, LPT/HPT/HPC
+        // positions, ECU temperature (Channel order).
+        let values = [13.8f32, 6.0, 2.0, 80.0, 40.0, 100.0, 20.0, 40.0, 60.0, 50.0];
+        Self { rpm, adc_counts: std::array::from_fn(|k| cfg.scales[k].counts_for(values[k])), next_tooth: 1, seq: 0 }
+    }
+
+    /// The next step's frame (`seq` from 1, `t_us = seq · STEP_US`).
+    pub fn next_frame(&mut self) -> SensorFrame {
+        use model_core::ecu::board::{Edge, EdgeSource};
+        use model_core::ecu::ehvva_task::ValveRequest;
+        use model_core::ecu::frame::MAX_EDGES;
+        self.seq += 1;
+        let t_us = self.seq * model_core::ecu::lockstep::STEP_US;
+        let mut edges = [SensorFrame::NO_EDGE; MAX_EDGES];
+        let mut n = 0;
+        let us_per_tooth = 1e6 / (self.rpm * 6.0) * 6.0;
+        loop {
+            let t = (self.next_tooth as f64 * us_per_tooth) as u32;
+            if t > t_us {
+                break;
+            }
+            // Teeth 58 and 59 of each revolution are the gap.
+            if self.next_tooth % 60 < 58 && n < MAX_EDGES {
+                edges[n] = Edge { source: EdgeSource::CrankTooth, t_us: t };
+                n += 1;
+            }
+            if self.next_tooth % 120 == 73 && n < MAX_EDGES {
+                edges[n] = Edge { source: EdgeSource::CamSync, t_us: t + 1 };
+                n += 1;
+            }
+            self.next_tooth += 1;
+        }
+        SensorFrame {
+            seq: self.seq,
+            t_us,
+            n_edges: n as u8,
+            edges,
+            adc_counts: self.adc_counts,
+            valve: ValveRequest { open_deg: 100.0, close_deg: 400.0, high_lift: true, soft_seat: true, enabled: true },
+            cam_phase_set_deg: 20.0,
+            vacuum_x_set_pct: [20.0, 40.0, 60.0],
+            motor_driver_fault: false,
+        }
+    }
+}
+
+/// The result of driving a link with a list of sensor frames.
+#[derive(Clone, Debug)]
+pub struct FramesRun {
+    pub answers: Vec<ActuatorFrame>,
+    pub wall_s: f64,
+    pub stats: LinkStats,
+}
+
+impl FramesRun {
+    pub fn steps_per_s(&self) -> f64 {
+        self.answers.len() as f64 / self.wall_s.max(1e-9)
+    }
+}
+
+/// Sends `frames` through a PIL link, one lockstep step each.
+pub fn run_frames(link: &mut PilLink, frames: &[SensorFrame]) -> Result<FramesRun, String> {
+    let start = Instant::now();
+    let mut answers = Vec::with_capacity(frames.len());
+    for f in frames {
+        answers.push(link.exchange(f)?);
+    }
+    Ok(FramesRun { answers, wall_s: start.elapsed().as_secs_f64(), stats: link.stats() })
+}
+
+/// The same frames through [`EcuCore`] natively.
+pub fn run_frames_native(frames: &[SensorFrame]) -> Result<Vec<ActuatorFrame>, String> {
+    let mut core = EcuCore::new(model_core::ecu::lockstep::EcuCoreConfig::default()).map_err(|e| format!("ECU core calibration: {e}"))?;
+    Ok(frames.iter().map(|f| core.step(f)).collect())
+}
