@@ -1,28 +1,42 @@
-//! `hil-host run`: the control code from model-core in closed loop with the plant models, all
-//! three actuators at once, natively on the host.
+//! `hil-host run`: the ECU's control code against the plant models, natively on the host, in
+//! lockstep through frames.
 //!
-//! A scenario (TOML) gives the operating conditions over time as piecewise-linear profiles;
-//! the run writes one DATA-FORMAT log per actuator (so its output feeds `diagnose`), a summary
-//! and SVG plots.
+//! Each 50 µs step ([`STEP_US`]) the plant side builds a [`SensorFrame`] (crank and cam edges,
+//! ADC counts of every channel, the setpoints of the engine management), an [`EcuLink`]
+//! answers the [`ActuatorFrame`], and the plant side applies it over the next step. The native
+//! link ([`NativeLink`]) calls model-core's [`EcuCore`] (supervisor + EHVVA + EVVT + vacuum
+//! tasks, the firmware's own code and schedule); the emulated-board route implements
+//! [`EcuLink`] over the UART and calls the same [`run_with`], so two runs of one scenario can
+//! be compared step by step.
 //!
-//! - EVVT: the scheduled phase controller every 10 ms on the 1-degree-quantized phase, the
-//!   plant stepped at 1 ms.
-//! - Vacuum (HPT wastegate): the position controller at 80 Hz (inverse model + supply-voltage
-//!   compensation + PI), the valve/actuator at 1 ms, the tank and the pump switched on the
-//!   pressure the actuator needs.
-//! - EHVVA: one valve event per engine cycle at requested crank angles; the command edges are
-//!   advanced by the calibrated actuation delays td(Ph, T) so that the valve moves at the
-//!   requested angle; the reduced nonlinear model (eq. 12) is the plant. The timing error is
-//!   measured in crank degrees where the valve starts to move: the lift rises through 1 % of
-//!   the stroke (opening) and falls through 99 % (closing).
+//! The plant side (everything from model-core, nothing re-implemented here):
+//! - engine: crank angle integrated from the speed profile → 60-2 crank tooth edges (first
+//!   tooth after the gap at cycle angle 0, [`TriggerWheel::sixty_minus_two`]) and the cam sync
+//!   edge at cycle angle `cam_edge_parked_deg − phase` (the EVVT plant's phase, as
+//!   [`model_core::ecu::evvt_task::EvvtTask::phase_from_edge_deg`] reads it back);
+//! - EHVVA: the pilot coil ([`RlCoil`]) under the commanded peak-and-hold voltage, the pilot
+//!   valve held while its current stays above the drop-out current, the reduced nonlinear
+//!   model of eq. (12) at 10 µs with the commanded lift valve and snubber switch states;
+//! - EVVT: the motor speed command output (duty × full scale) minus the ring-gear speed is
+//!   the plant's command (eq. (11)); the LPV plant steps at 0.5 ms;
+//! - vacuum: the three actuators, the tank and the pump ([`VacuumSystem`]) at 0.5 ms.
+//!
+//! Faults (`[[fault]]` in the scenario) act on the plant side only: the ECU sees what a real
+//! one would see (a sensor reading 0 or 4095 counts, no crank teeth, a position that stops
+//! following, a tank that does not get pumped, the driver's fault pin).
 
 use std::path::{Path, PathBuf};
 
-use model_core::control::evvt_phase::{EvvtFault, EvvtPhaseConfig, EvvtPhaseController, EvvtPhaseInputs};
-use model_core::control::vacuum_position::{VacuumPositionConfig, VacuumPositionController, VacuumPositionFault, VacuumPositionInputs};
-use model_core::ehvva::{EhvvaInputs, EhvvaParams, EhvvaPlant, EhvvaReduced, EhvvaTables};
-use model_core::evvt::{quantize_phase_deg, EvvtParams, EvvtPlant};
-use model_core::vacuum::{VacuumInputs, VacuumParams, VacuumTank, VacuumTankParams, VacuumValveActuator};
+use model_core::ecu::board::{Edge, EdgeSource, SolenoidCmd};
+use model_core::ecu::ehvva_task::{TriggerWheel, ValveRequest, CYCLE_DEG};
+use model_core::ecu::evvt_task::EvvtTaskConfig;
+use model_core::ecu::frame::{ActuatorFrame, SensorFrame, MAX_EDGES};
+use model_core::ecu::lockstep::{EcuCore, EcuCoreConfig, STEP_US};
+use model_core::ecu::supervisor::{Channel, Fault, FaultSet, SupervisorConfig, N_CHANNELS};
+use model_core::ehvva::{EhvvaInputs, EhvvaParams, EhvvaPlant, EhvvaReduced};
+use model_core::evvt::{EvvtParams, EvvtPlant, PlanetaryGear};
+use model_core::peak_hold::{RlCoil, SolenoidParams};
+use model_core::vacuum::VacuumSystem;
 use serde::Deserialize;
 
 use crate::log::format_log;
@@ -65,6 +79,104 @@ fn constant(v: f64) -> Profile {
     Profile(vec![(0.0, v)])
 }
 
+/// What a `[[fault]]` injects.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum FaultKind {
+    /// The battery falls to `u_batt_v` (0.1 s ramps in and out).
+    BatterySag,
+    /// Supply pressure sensor wire open: 0 counts.
+    SupplyPressureOpen,
+    /// Supply pressure sensor shorted to its supply: 4095 counts.
+    SupplyPressureShort,
+    /// No crank tooth edges (the cam sensor still works).
+    CrankLost,
+    /// The `actuator`'s rod stops where it is (its chamber pressure still follows the valve).
+    VacuumStuck,
+    /// The pump runs when switched on but moves no air.
+    VacuumPumpFailure,
+    /// The EVVT motor driver's fault pin is active.
+    MotorDriverFault,
+}
+
+impl FaultKind {
+    pub fn name(self) -> &'static str {
+        match self {
+            FaultKind::BatterySag => "battery_sag",
+            FaultKind::SupplyPressureOpen => "supply_pressure_open",
+            FaultKind::SupplyPressureShort => "supply_pressure_short",
+            FaultKind::CrankLost => "crank_lost",
+            FaultKind::VacuumStuck => "vacuum_stuck",
+            FaultKind::VacuumPumpFailure => "vacuum_pump_failure",
+            FaultKind::MotorDriverFault => "motor_driver_fault",
+        }
+    }
+}
+
+/// The three vacuum actuators, in the ECU's order.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum VacuumActuator {
+    /// Low-pressure turbine wastegate.
+    Lpt,
+    /// High-pressure turbine bypass.
+    Hpt,
+    /// High-pressure compressor bypass.
+    Hpc,
+}
+
+impl VacuumActuator {
+    pub fn index(self) -> usize {
+        self as usize
+    }
+}
+
+/// One injected fault, active from `start_s` until `end_s` (or the end of the run).
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct FaultSpec {
+    pub kind: FaultKind,
+    pub start_s: f64,
+    #[serde(default)]
+    pub end_s: Option<f64>,
+    /// `battery_sag` only: the battery voltage in the sag.
+    #[serde(default)]
+    pub u_batt_v: Option<f64>,
+    /// `vacuum_stuck` only: which actuator (default the wastegate, `lpt`).
+    #[serde(default)]
+    pub actuator: Option<VacuumActuator>,
+}
+
+impl FaultSpec {
+    fn active(&self, t: f64) -> bool {
+        t >= self.start_s && self.end_s.is_none_or(|e| t < e)
+    }
+    fn check(&self, i: usize) -> Result<(), String> {
+        let at = |what: String| Err(format!("fault #{} (`{}`): {what}", i + 1, self.kind.name()));
+        if !(self.start_s.is_finite() && self.start_s >= 0.0) {
+            return at(format!("start_s = {} must be a time ≥ 0", self.start_s));
+        }
+        if let Some(e) = self.end_s {
+            if !(e.is_finite() && e > self.start_s) {
+                return at(format!("end_s = {e} must come after start_s = {}", self.start_s));
+            }
+        }
+        match (self.kind, self.u_batt_v) {
+            (FaultKind::BatterySag, None) => return at("needs `u_batt_v` (the battery voltage in the sag)".into()),
+            (FaultKind::BatterySag, Some(u)) if !(u.is_finite() && (0.0..=30.0).contains(&u)) => {
+                return at(format!("u_batt_v = {u} must lie in 0..30 V"))
+            }
+            (FaultKind::BatterySag, _) => {}
+            (_, Some(_)) => return at("`u_batt_v` belongs to `battery_sag` only".into()),
+            (_, None) => {}
+        }
+        if self.actuator.is_some() && self.kind != FaultKind::VacuumStuck {
+            return at("`actuator` belongs to `vacuum_stuck` only".into());
+        }
+        Ok(())
+    }
+}
+
 /// A scenario file. Every profile has a default, so a file names only what it changes.
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -75,27 +187,42 @@ pub struct Scenario {
     pub engine_rpm: Profile,
     #[serde(default = "d_batt")]
     pub u_batt_v: Profile,
+    /// Hydraulic fluid (oil) temperature.
     #[serde(default = "d_temp")]
     pub temp_c: Profile,
+    /// ECU board temperature (its internal sensor).
+    #[serde(default = "d_temp_ecu")]
+    pub temp_ecu_c: Profile,
+    /// Set-points of the EHVVA supply and back pressure regulation.
     #[serde(default = "d_ph")]
     pub p_supply_mpa: Profile,
     #[serde(default = "d_pl")]
     pub p_back_mpa: Profile,
     #[serde(default = "d_amb")]
     pub p_amb_kpa: Profile,
+    #[serde(default = "d_tank")]
+    pub p_tank_initial_kpa: f64,
     #[serde(default = "d_phase")]
     pub cam_phase_setpoint_deg: Profile,
+    /// LPT wastegate position set-point.
     #[serde(default = "d_wg")]
     pub wastegate_setpoint_pct: Profile,
+    #[serde(default = "d_bypass")]
+    pub hpt_bypass_setpoint_pct: Profile,
+    #[serde(default = "d_bypass")]
+    pub hpc_bypass_setpoint_pct: Profile,
     /// Requested valve opening and closing, crank degrees after the cycle's start.
     #[serde(default = "d_open")]
     pub valve_open_deg: Profile,
     #[serde(default = "d_close")]
     pub valve_close_deg: Profile,
+    /// Requested lift valve (high lift) and snubber switch (soft seating) states.
     #[serde(default)]
     pub lift_high: bool,
     #[serde(default)]
     pub snubber_on: bool,
+    #[serde(default, rename = "fault")]
+    pub faults: Vec<FaultSpec>,
 }
 
 fn d_engine() -> Profile {
@@ -107,6 +234,9 @@ fn d_batt() -> Profile {
 fn d_temp() -> Profile {
     constant(60.0)
 }
+fn d_temp_ecu() -> Profile {
+    constant(45.0)
+}
 fn d_ph() -> Profile {
     constant(7.0)
 }
@@ -116,11 +246,17 @@ fn d_pl() -> Profile {
 fn d_amb() -> Profile {
     constant(100.0)
 }
+fn d_tank() -> f64 {
+    40.0
+}
 fn d_phase() -> Profile {
     Profile(vec![(0.0, 10.0), (1.0, 10.0), (1.001, 30.0), (5.0, 30.0), (5.001, 15.0)])
 }
 fn d_wg() -> Profile {
     Profile(vec![(0.0, 20.0), (2.0, 20.0), (2.001, 60.0), (6.0, 60.0), (6.001, 40.0)])
+}
+fn d_bypass() -> Profile {
+    constant(0.0)
 }
 fn d_open() -> Profile {
     constant(360.0)
@@ -139,18 +275,25 @@ impl Scenario {
             engine_rpm: d_engine(),
             u_batt_v: Profile(vec![(0.0, 14.0), (8.0, 14.0), (8.2, 9.5), (9.0, 9.5), (9.2, 14.0)]),
             temp_c: d_temp(),
+            temp_ecu_c: d_temp_ecu(),
             p_supply_mpa: d_ph(),
             p_back_mpa: d_pl(),
             p_amb_kpa: d_amb(),
+            p_tank_initial_kpa: d_tank(),
             cam_phase_setpoint_deg: d_phase(),
             wastegate_setpoint_pct: d_wg(),
+            hpt_bypass_setpoint_pct: d_bypass(),
+            hpc_bypass_setpoint_pct: d_bypass(),
             valve_open_deg: d_open(),
             valve_close_deg: d_close(),
             lift_high: true,
             snubber_on: true,
+            faults: Vec::new(),
         }
     }
 
+    /// Parses and checks a scenario; every error starts with the file name (and, from the
+    /// TOML parser, the line and column).
     pub fn from_toml(file: &Path, text: &str) -> Result<Self, String> {
         let s: Scenario = toml::from_str(text).map_err(|e| format!("{}: {e}", file.display()))?;
         s.check().map_err(|e| format!("{}: {e}", file.display()))?;
@@ -161,42 +304,185 @@ impl Scenario {
         if !(self.duration_s > 0.0 && self.duration_s <= 3600.0) {
             return Err(format!("duration_s = {} must lie in (0, 3600]", self.duration_s));
         }
-        for (name, p) in [
+        if !(self.p_tank_initial_kpa.is_finite() && (1.0..=110.0).contains(&self.p_tank_initial_kpa)) {
+            return Err(format!("p_tank_initial_kpa = {} must lie in 1..110", self.p_tank_initial_kpa));
+        }
+        for (name, p) in self.profiles() {
+            p.check(name)?;
+        }
+        for (i, f) in self.faults.iter().enumerate() {
+            f.check(i)?;
+        }
+        Ok(())
+    }
+
+    fn profiles(&self) -> [(&'static str, &Profile); 13] {
+        [
             ("engine_rpm", &self.engine_rpm),
             ("u_batt_v", &self.u_batt_v),
             ("temp_c", &self.temp_c),
+            ("temp_ecu_c", &self.temp_ecu_c),
             ("p_supply_mpa", &self.p_supply_mpa),
             ("p_back_mpa", &self.p_back_mpa),
             ("p_amb_kpa", &self.p_amb_kpa),
             ("cam_phase_setpoint_deg", &self.cam_phase_setpoint_deg),
             ("wastegate_setpoint_pct", &self.wastegate_setpoint_pct),
+            ("hpt_bypass_setpoint_pct", &self.hpt_bypass_setpoint_pct),
+            ("hpc_bypass_setpoint_pct", &self.hpc_bypass_setpoint_pct),
             ("valve_open_deg", &self.valve_open_deg),
             ("valve_close_deg", &self.valve_close_deg),
-        ] {
-            p.check(name)?;
-        }
-        Ok(())
+        ]
     }
+
+    /// Battery voltage at `t` with any sag applied.
+    pub fn u_batt_at(&self, t: f64) -> f64 {
+        let mut u = self.u_batt_v.at(t);
+        for f in self.faults.iter().filter(|f| f.kind == FaultKind::BatterySag) {
+            let Some(u_sag) = f.u_batt_v else { continue };
+            // Depth 0..1 with linear ramps in and out.
+            let into = ((t - f.start_s) / SAG_RAMP_S).clamp(0.0, 1.0);
+            let out = f.end_s.map_or(1.0, |e| 1.0 - ((t - e) / SAG_RAMP_S).clamp(0.0, 1.0));
+            let depth = into.min(out);
+            if depth > 0.0 {
+                u = u.min(u + (u_sag - u) * depth);
+            }
+        }
+        u
+    }
+
+    fn fault_active(&self, kind: FaultKind, t: f64) -> bool {
+        self.faults.iter().any(|f| f.kind == kind && f.active(t))
+    }
+}
+
+/// The ECU side of the lockstep: one sensor frame in, one actuator frame out.
+pub trait EcuLink {
+    fn exchange(&mut self, sensors: &SensorFrame) -> Result<ActuatorFrame, String>;
+}
+
+/// The ECU's control code called directly on the host.
+pub struct NativeLink {
+    core: EcuCore,
+}
+
+impl NativeLink {
+    /// The firmware's calibration.
+    pub fn new() -> Result<Self, String> {
+        Self::with_config(EcuCoreConfig::default())
+    }
+    pub fn with_config(cfg: EcuCoreConfig) -> Result<Self, String> {
+        Ok(Self { core: EcuCore::new(cfg).map_err(|e| format!("ECU calibration: {e}"))? })
+    }
+    /// The ECU's internals after the last step (measurements, engine snapshot, task outputs).
+    pub fn core(&self) -> &EcuCore {
+        &self.core
+    }
+}
+
+impl EcuLink for NativeLink {
+    fn exchange(&mut self, sensors: &SensorFrame) -> Result<ActuatorFrame, String> {
+        Ok(self.core.step(sensors))
+    }
+}
+
+/// What [`run_with`] runs and keeps.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RunOptions {
+    /// Stop after this much simulated time (capped at the scenario's duration).
+    pub until_s: Option<f64>,
+    /// Keep every step's sensor and actuator frames in [`RunOutput::frames`] (50 µs steps:
+    /// about 3 MB per simulated second).
+    pub keep_frames: bool,
+}
+
+/// EVVT log row, 100 Hz (on the ECU's 10 ms grid).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EvvtRow {
+    pub t_s: f64,
+    /// Motor speed command output, 0..1.
+    pub motor_duty: f64,
+    /// The plant's command: motor speed minus ring-gear speed.
+    pub motor_cmd_rpm: f64,
+    pub engine_rpm: f64,
+    pub u_batt_v: f64,
+    pub phase_ref_deg: f64,
+    /// The plant's cam phase (with the belt disturbance).
+    pub phase_deg: f64,
+}
+
+/// Vacuum log row, 400 Hz (the ECU's 12.5 ms ticks fall on it); LPT, HPT, HPC.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VacuumRow {
+    pub t_s: f64,
+    pub duty_pct: [f64; 3],
+    pub pump_on: bool,
+    pub u_batt_v: f64,
+    pub p_amb_kpa: f64,
+    pub p_tank_kpa: f64,
+    pub x_set_pct: [f64; 3],
+    /// Rod positions (a stuck rod's frozen position).
+    pub x_pct: [f64; 3],
+    pub p_act_kpa: [f64; 3],
+}
+
+/// EHVVA log row, one per 50 µs step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EhvvaRow {
+    pub t_s: f64,
+    /// The pilot valve is open (the plant's input).
+    pub u_pilot: bool,
+    /// The commanded pilot voltage as a duty: 1 = peak (full battery), hold duty, 0 = off.
+    pub pilot_duty: f64,
+    pub coil_a: f64,
+    pub p_supply_mpa: f64,
+    pub p_back_mpa: f64,
+    pub temp_c: f64,
+    pub lift_high: bool,
+    pub snubber_on: bool,
+    pub lift_mm: f64,
+    /// Cycle angle 0..720.
+    pub crank_deg: f64,
+}
+
+/// A fault the ECU raised or cleared (from the actuator frames' fault bits).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FaultEvent {
+    pub t_s: f64,
+    pub fault: Fault,
+    pub raised: bool,
 }
 
 /// What the run measured.
 #[derive(Clone, Debug, Default)]
 pub struct Summary {
     pub evvt_rms_error_deg: f64,
+    /// For each phase set-point step: (time, settling time into ±1 deg).
     pub evvt_settling_s: Vec<(f64, Option<f64>)>,
+    /// LPT wastegate.
     pub vacuum_rms_error_pct: f64,
+    /// For each wastegate set-point step: (time, settling time into ±2 %).
+    pub vacuum_settling_s: Vec<(f64, Option<f64>)>,
     pub vacuum_pump_on_fraction: f64,
     pub ehvva_events: usize,
+    /// (mean, largest magnitude) in crank degrees.
     pub ehvva_open_error_deg: (f64, f64),
     pub ehvva_close_error_deg: (f64, f64),
     pub ehvva_seating_velocity_m_s: Option<f64>,
+    pub faults_injected: Vec<String>,
+    pub fault_events: Vec<FaultEvent>,
     pub simulated_s: f64,
+    /// Wall time of the stepping loop.
     pub wall_s: f64,
 }
 
 impl Summary {
     pub fn text(&self, name: &str) -> String {
-        let mut s = format!("scenario `{name}`: {:.1} s simulated in {:.2} s wall ({:.1} simulated s per wall s)\n", self.simulated_s, self.wall_s, self.simulated_s / self.wall_s.max(1e-9));
+        let mut s = format!(
+            "scenario `{name}`: {:.1} s simulated in {:.2} s wall ({:.1} simulated s per wall s), ECU in lockstep every {STEP_US} µs\n",
+            self.simulated_s,
+            self.wall_s,
+            self.simulated_s / self.wall_s.max(1e-9)
+        );
         s += &format!("EVVT   cam phase tracking: RMS error {:.2} deg\n", self.evvt_rms_error_deg);
         for (t, settle) in &self.evvt_settling_s {
             match settle {
@@ -205,6 +491,12 @@ impl Summary {
             }
         }
         s += &format!("vacuum wastegate tracking: RMS error {:.2} %, pump on {:.0} % of the time\n", self.vacuum_rms_error_pct, 100.0 * self.vacuum_pump_on_fraction);
+        for (t, settle) in &self.vacuum_settling_s {
+            match settle {
+                Some(d) => s += &format!("       step at {t:.2} s settled (±2 %) in {d:.2} s\n"),
+                None => s += &format!("       step at {t:.2} s did not settle (±2 %)\n"),
+            }
+        }
         s += &format!(
             "EHVVA  {} valve events: opening error mean {:+.2} / max |{:.2}| crank deg, closing error mean {:+.2} / max |{:.2}| crank deg\n",
             self.ehvva_events, self.ehvva_open_error_deg.0, self.ehvva_open_error_deg.1, self.ehvva_close_error_deg.0, self.ehvva_close_error_deg.1
@@ -212,177 +504,315 @@ impl Summary {
         if let Some(v) = self.ehvva_seating_velocity_m_s {
             s += &format!("       seating velocity {:.2} m/s (largest)\n", v);
         }
+        if self.faults_injected.is_empty() {
+            s += "faults injected: none\n";
+        } else {
+            s += &format!("faults injected: {}\n", self.faults_injected.join(", "));
+        }
+        if self.fault_events.is_empty() {
+            s += "faults raised by the ECU: none\n";
+        }
+        for e in &self.fault_events {
+            s += &format!("       {:.3} s {} {}\n", e.t_s, if e.raised { "raised " } else { "cleared" }, e.fault.name());
+        }
         s
+    }
+
+    /// The first time `fault` was raised.
+    pub fn raised_at(&self, fault: Fault) -> Option<f64> {
+        self.fault_events.iter().find(|e| e.fault == fault && e.raised).map(|e| e.t_s)
     }
 }
 
-const EVVT_CONTROL_S: f64 = 0.01;
-const VACUUM_CONTROL_S: f64 = 1.0 / 80.0;
-/// 0.5 ms: both control periods (10 ms, 12.5 ms) are whole multiples, so logs are uniform.
-const PLANT_S: f64 = 0.0005;
+/// Everything a run produced.
+#[derive(Clone, Debug, Default)]
+pub struct RunOutput {
+    pub summary: Summary,
+    pub evvt: Vec<EvvtRow>,
+    pub vacuum: Vec<VacuumRow>,
+    pub ehvva: Vec<EhvvaRow>,
+    /// Every step's frames, when [`RunOptions::keep_frames`].
+    pub frames: Vec<(SensorFrame, ActuatorFrame)>,
+}
+
+const STEP_S: f64 = STEP_US as f64 * 1e-6;
+/// The EHVVA model's step: 5 per lockstep step.
 const EHVVA_DT_MS: f64 = 0.01;
-/// Valve model steps per logged sample (10 kHz log).
-const EHVVA_LOG_EVERY: usize = 10;
+const EHVVA_SUBSTEPS: usize = 5;
+/// The EVVT and vacuum plants step every 10 lockstep steps (0.5 ms); both ECU periods
+/// (10 ms, 12.5 ms) are whole multiples.
+const SLOW_EVERY: u64 = 10;
+const EVVT_LOG_EVERY: u64 = 200;
+const VACUUM_LOG_EVERY: u64 = 50;
+/// The battery sag's ramps.
+const SAG_RAMP_S: f64 = 0.1;
+/// The pilot valve drops out below this coil current: 70 % of the 1 A hold current, the
+/// usual margin of a hold current over the drop-out current. An uncompensated hold duty at
+/// 8 V (the 14 V duty gives 0.57 A) would drop the valve; the pull-in itself is inside the
+/// measured actuation delay td of the valve model.
+const PILOT_DROPOUT_A: f64 = 0.7;
+/// Valve timing is measured where the lift passes 1 % of the stroke (opening) and 99 %
+/// (closing), the paper's thresholds.
+const LIFT_FRACTION: f64 = 0.01;
 
-/// Runs the scenario; writes logs and plots into `out` when given.
-pub fn run(sc: &Scenario, out: Option<&Path>) -> Result<Summary, String> {
+/// The engine's crank and cam edges.
+struct Engine {
+    wheel: TriggerWheel,
+    /// Unwrapped crank angle; cycle angle = `theta_deg mod 720`.
+    theta_deg: f64,
+}
+
+impl Engine {
+    /// Advances from `t0_us` by one step at `rpm`; the edges crossed go to `edges` in time order.
+    fn advance(&mut self, rpm: f64, cam_cycle_deg: f64, crank_ok: bool, t0_us: u32, edges: &mut Vec<Edge>) {
+        let theta0 = self.theta_deg;
+        let theta1 = theta0 + rpm.max(0.0) * 6.0 * STEP_S;
+        self.theta_deg = theta1;
+        if !(theta1 > theta0) {
+            return;
+        }
+        let tooth = f64::from(self.wheel.tooth_deg());
+        let total = i64::from(self.wheel.teeth_total);
+        let present = total - i64::from(self.wheel.teeth_missing);
+        let mut found: Vec<(f64, EdgeSource)> = Vec::new();
+        if crank_ok {
+            let first = (theta0 / tooth).floor() as i64 + 1;
+            let last = (theta1 / tooth).floor() as i64;
+            for j in first..=last {
+                if j.rem_euclid(total) < present {
+                    found.push((j as f64 * tooth, EdgeSource::CrankTooth));
+                }
+            }
+        }
+        // The cam edge: once per cycle at `cam_cycle_deg`.
+        let cycles_before = ((theta0 - cam_cycle_deg) / f64::from(CYCLE_DEG)).floor();
+        let cycles_after = ((theta1 - cam_cycle_deg) / f64::from(CYCLE_DEG)).floor();
+        if cycles_after > cycles_before {
+            found.push((cam_cycle_deg + cycles_after * f64::from(CYCLE_DEG), EdgeSource::CamSync));
+        }
+        found.sort_by(|a, b| a.0.total_cmp(&b.0));
+        for (a, source) in found {
+            let dt_us = (a - theta0) / (theta1 - theta0) * f64::from(STEP_US);
+            edges.push(Edge { source, t_us: t0_us.wrapping_add(dt_us as u32) });
+        }
+    }
+
+    fn cycle_deg(&self) -> f64 {
+        self.theta_deg.rem_euclid(f64::from(CYCLE_DEG))
+    }
+}
+
+/// Runs `scenario` against `link` and returns the logs and the summary (nothing is written).
+pub fn run_with(scenario: &Scenario, link: &mut dyn EcuLink, opts: &RunOptions) -> Result<RunOutput, String> {
+    let sc = scenario;
     let started = std::time::Instant::now();
-    let err = |e: &dyn std::fmt::Debug| format!("{e:?}");
+    let err = |what: &str, e: &dyn std::fmt::Debug| format!("{what}: {e:?}");
+    let until_s = opts.until_s.map_or(sc.duration_s, |u| u.min(sc.duration_s));
+    if !(until_s > 0.0) {
+        return Err(format!("run length {until_s} s: nothing to run"));
+    }
+    let n_steps = (until_s / STEP_S).round() as u64;
 
-    // EVVT.
-    let mut evvt = EvvtPlant::<f32>::new(&EvvtParams::default()).map_err(|e| err(&e))?;
-    evvt.reset(sc.cam_phase_setpoint_deg.at(0.0) as f32);
-    let mut phase_ctl = EvvtPhaseController::<f32>::new(&EvvtPhaseConfig::default()).map_err(|e| err(&e))?;
-    // Vacuum.
-    let wg_params = VacuumParams::hpt();
-    let mut wg = VacuumValveActuator::<f32>::new(&wg_params).map_err(|e| err(&e))?;
-    let mut wg_ctl = VacuumPositionController::<f32>::new(&VacuumPositionConfig::for_actuator(wg_params)).map_err(|e| err(&e))?;
-    let mut tank = VacuumTank::<f32>::new(&VacuumTankParams::paper(), 40.0).map_err(|e| err(&e))?;
-    // EHVVA.
+    let board = SupervisorConfig::default();
+    let evvt_cfg = EvvtTaskConfig::default();
     let ehvva_params = EhvvaParams::paper_default();
-    let tables = EhvvaTables::<f32>::new(&ehvva_params).map_err(|e| err(&e))?;
-    let inputs_at = |t: f64| EhvvaInputs::<f32> {
+    let solenoid = SolenoidParams::pilot_default();
+
+    // Plants.
+    let ehvva_inputs = |t: f64, lift_high: bool, snubber_on: bool| EhvvaInputs::<f32> {
         p_supply_mpa: sc.p_supply_mpa.at(t) as f32,
         p_back_mpa: sc.p_back_mpa.at(t) as f32,
         temp_c: sc.temp_c.at(t) as f32,
-        lift_high: sc.lift_high,
-        snubber_on: sc.snubber_on,
+        lift_high,
+        snubber_on,
     };
-    let mut valve = EhvvaReduced::<f32>::new(&ehvva_params, &inputs_at(0.0), EHVVA_DT_MS).map_err(|e| err(&e))?;
+    let mut valve = EhvvaReduced::<f32>::new(&ehvva_params, &ehvva_inputs(0.0, sc.lift_high, sc.snubber_on), EHVVA_DT_MS).map_err(|e| err("EHVVA plant", &e))?;
+    let mut coil = RlCoil::<f64>::new(&solenoid);
+    let (mut pilot_armed, mut pilot_dropped) = (false, false);
+    let mut evvt = EvvtPlant::<f32>::new(&EvvtParams::default()).map_err(|e| err("EVVT plant", &e))?;
+    evvt.reset(sc.cam_phase_setpoint_deg.at(0.0) as f32);
+    let mut vacuum = VacuumSystem::<f32>::paper(sc.p_tank_initial_kpa).map_err(|e| err("vacuum plant", &e))?;
+    let mut stuck_x: [Option<f32>; 3] = [None; 3];
+    let mut engine = Engine { wheel: TriggerWheel::sixty_minus_two(), theta_deg: 5.0 };
 
-    let n = (sc.duration_s / PLANT_S).round() as usize;
-    let evvt_every = (EVVT_CONTROL_S / PLANT_S).round() as usize;
-    let mut evvt_log: Vec<[f64; 6]> = Vec::new();
-    let mut vac_log: Vec<[f64; 7]> = Vec::new();
-    let mut valve_log: Vec<[f64; 8]> = Vec::new();
-    let (mut motor_cmd, mut duty, mut pump_on) = (0.0f32, 0.0f32, false);
-    let vacuum_every = (VACUUM_CONTROL_S / PLANT_S).round() as usize;
-    let (mut evvt_se, mut evvt_n, mut vac_se, mut vac_n, mut pump_steps) = (0.0, 0usize, 0.0, 0usize, 0usize);
+    let mut out = RunOutput {
+        summary: Summary { faults_injected: sc.faults.iter().map(describe_fault).collect(), ..Default::default() },
+        ..Default::default()
+    };
+    let mut edges: Vec<Edge> = Vec::with_capacity(MAX_EDGES);
+    let mut faults_before = FaultSet::default();
+    let (mut open_err, mut close_err) = (Vec::new(), Vec::new());
+    let (mut opened, mut prev_lift, mut worst_seat) = (false, 0.0f64, None::<f64>);
+    let (mut evvt_se, mut evvt_n, mut wg_se, mut wg_n, mut pump_steps) = (0.0, 0usize, 0.0, 0usize, 0u64);
 
-    // EHVVA scheduling state: crank angle integrates engine speed; each cycle (720 deg) gets
-    // one event whose command edges are advanced by td.
-    let mut crank_deg = 0.0f64;
-    let mut cycle_start_t = 0.0f64;
-    let mut pilot_on_at: Option<f64> = None;
-    let mut pilot_off_at: Option<f64> = None;
-    let mut u_pilot = false;
-    let mut requested: Option<(f64, f64)> = None; // (open deg, close deg) of this cycle
-    let mut open_errors = Vec::new();
-    let mut close_errors = Vec::new();
-    let mut opened_this_cycle = false;
-    let mut closed_this_cycle = false;
-    let mut prev_lift = 0.0f64;
-    let mut worst_seat: Option<f64> = None;
-    let valve_steps_per_plant = (PLANT_S * 1000.0 / EHVVA_DT_MS).round() as usize;
-
-    for k in 0..n {
-        let t = k as f64 * PLANT_S;
-        let rpm = sc.engine_rpm.at(t);
-        let u_batt = sc.u_batt_v.at(t);
+    for k in 0..n_steps {
+        let t = k as f64 * STEP_S;
+        let t_us = (k as u32).wrapping_mul(STEP_US);
+        let rpm = sc.engine_rpm.at(t).max(0.0);
+        let u_batt = sc.u_batt_at(t);
         let p_amb = sc.p_amb_kpa.at(t);
 
-        // --- EVVT, 100 Hz control.
-        if k % evvt_every == 0 {
-            let meas = quantize_phase_deg(evvt.phase_deg(), 1.0f32);
-            let sp = sc.cam_phase_setpoint_deg.at(t);
-            let o = phase_ctl.update(
-                &EvvtPhaseInputs { setpoint_deg: sp as f32, measured_phase_deg: meas, engine_rpm: rpm as f32, u_batt_v: u_batt as f32, cranking: false, fault: EvvtFault::None },
-                EVVT_CONTROL_S as f32,
-            );
-            motor_cmd = o.motor_cmd_rpm;
-            let e = sp - evvt.phase_deg() as f64;
-            evvt_se += e * e;
+        // Sensor side: the edges of the step just ended, the ADC counts now.
+        edges.clear();
+        if k > 0 {
+            let t_prev = t - STEP_S;
+            let cam_deg = f64::from(evvt_cfg.cam_edge_parked_deg) - f64::from(evvt.phase_deg());
+            let crank_ok = !sc.fault_active(FaultKind::CrankLost, t_prev);
+            engine.advance(sc.engine_rpm.at(t_prev).max(0.0), cam_deg, crank_ok, t_us.wrapping_sub(STEP_US), &mut edges);
+        }
+        if edges.len() > MAX_EDGES {
+            return Err(format!("t = {t:.5} s: {} edges in one {STEP_US} µs step (engine speed {rpm:.0} rpm too high for the frame)", edges.len()));
+        }
+        let x_meas = [0, 1, 2].map(|i| stuck_x[i].unwrap_or_else(|| actuator(&vacuum, i).x_pct()));
+        let mut values = [0.0f32; N_CHANNELS];
+        for ch in Channel::ALL {
+            values[ch as usize] = match ch {
+                Channel::BatteryV => u_batt as f32,
+                Channel::SupplyPressureMpa => valve.p_high_mpa(),
+                Channel::BackPressureMpa => valve.p_low_mpa(),
+                Channel::OilTempC => sc.temp_c.at(t) as f32,
+                Channel::TankPressureKpa => vacuum.tank.p_tank_kpa(),
+                Channel::AmbientPressureKpa => p_amb as f32,
+                Channel::LptPositionPct => x_meas[0],
+                Channel::HptPositionPct => x_meas[1],
+                Channel::HpcPositionPct => x_meas[2],
+                Channel::EcuTempC => sc.temp_ecu_c.at(t) as f32,
+            };
+        }
+        let mut adc_counts: [u16; N_CHANNELS] = core::array::from_fn(|i| board.scales[i].counts_for(values[i]));
+        if sc.fault_active(FaultKind::SupplyPressureOpen, t) {
+            adc_counts[Channel::SupplyPressureMpa as usize] = 0;
+        }
+        if sc.fault_active(FaultKind::SupplyPressureShort, t) {
+            adc_counts[Channel::SupplyPressureMpa as usize] = 4095;
+        }
+        let x_set = [sc.wastegate_setpoint_pct.at(t), sc.hpt_bypass_setpoint_pct.at(t), sc.hpc_bypass_setpoint_pct.at(t)];
+        let mut frame = SensorFrame {
+            seq: k as u32,
+            t_us,
+            n_edges: edges.len() as u8,
+            edges: [SensorFrame::NO_EDGE; MAX_EDGES],
+            adc_counts,
+            valve: ValveRequest {
+                open_deg: sc.valve_open_deg.at(t) as f32,
+                close_deg: sc.valve_close_deg.at(t) as f32,
+                high_lift: sc.lift_high,
+                soft_seat: sc.snubber_on,
+                enabled: true,
+            },
+            cam_phase_set_deg: sc.cam_phase_setpoint_deg.at(t) as f32,
+            vacuum_x_set_pct: x_set.map(|x| x as f32),
+            motor_driver_fault: sc.fault_active(FaultKind::MotorDriverFault, t),
+        };
+        frame.edges[..edges.len()].copy_from_slice(&edges);
+
+        // The ECU.
+        let act = link.exchange(&frame).map_err(|e| format!("step {k} (t = {t:.5} s): {e}"))?;
+        if act.seq != frame.seq {
+            return Err(format!("step {k} (t = {t:.5} s): the actuator frame answers seq {} instead of {}", act.seq, frame.seq));
+        }
+        let faults = FaultSet(act.faults);
+        for f in Fault::ALL {
+            if faults.contains(f) != faults_before.contains(f) {
+                out.summary.fault_events.push(FaultEvent { t_s: t, fault: f, raised: faults.contains(f) });
+            }
+        }
+        faults_before = faults;
+        if opts.keep_frames {
+            out.frames.push((frame, act));
+        }
+
+        // Stuck rods: frozen from the fault's start.
+        for (i, sx) in stuck_x.iter_mut().enumerate() {
+            let stuck = sc.faults.iter().any(|f| f.kind == FaultKind::VacuumStuck && f.actuator.unwrap_or(VacuumActuator::Lpt).index() == i && f.active(t));
+            *sx = match (stuck, *sx) {
+                (true, Some(x)) => Some(x),
+                (true, None) => Some(actuator(&vacuum, i).x_pct()),
+                (false, _) => None,
+            };
+        }
+
+        // Logs: the state now and the outputs that apply from now.
+        let motor_speed_rpm = f64::from(act.motor_duty) * f64::from(evvt_cfg.motor_full_scale_rpm);
+        let motor_cmd_rpm = motor_speed_rpm - PlanetaryGear::ring_speed_rpm(rpm);
+        let phase_ref = sc.cam_phase_setpoint_deg.at(t);
+        if k % EVVT_LOG_EVERY == 0 {
+            let phase = f64::from(evvt.phase_deg());
+            out.evvt.push(EvvtRow { t_s: t, motor_duty: f64::from(act.motor_duty), motor_cmd_rpm, engine_rpm: rpm, u_batt_v: u_batt, phase_ref_deg: phase_ref, phase_deg: phase });
+            evvt_se += (phase_ref - phase).powi(2);
             evvt_n += 1;
-            evvt_log.push([t, motor_cmd as f64, rpm, u_batt, sp, meas as f64]);
         }
-        evvt.step(motor_cmd, rpm as f32, u_batt as f32, PLANT_S as f32);
-
-        // --- Vacuum, 80 Hz control.
-        if k % vacuum_every == 0 {
-            let sp = sc.wastegate_setpoint_pct.at(t);
-            let o = wg_ctl.step(
-                &VacuumPositionInputs {
-                    setpoint_pct: sp as f32,
-                    measured_x_pct: wg.x_pct(),
-                    p_amb_kpa: p_amb as f32,
-                    p_tank_kpa: tank.p_tank_kpa(),
-                    u_batt_v: u_batt as f32,
-                    enabled: true,
-                    fault: VacuumPositionFault::None,
-                },
-                VACUUM_CONTROL_S as f32,
-            );
-            duty = o.duty_pct;
-            // Pump with hysteresis around the needed tank pressure (Sec. 5.3).
-            if o.pump_request {
-                pump_on = true;
-            } else if tank.p_tank_kpa() < o.p_tank_needed_kpa - 10.0 {
-                pump_on = false;
-            }
-            let e = sp - wg.x_pct() as f64;
-            vac_se += e * e;
-            vac_n += 1;
-            vac_log.push([t, duty as f64, u_batt, p_amb, tank.p_tank_kpa() as f64, wg.x_pct() as f64, wg.p_act_kpa() as f64]);
-        }
-        let vo = wg.step(&VacuumInputs { duty_pct: duty, u_batt_v: u_batt as f32, p_amb_kpa: p_amb as f32, p_tank_kpa: tank.p_tank_kpa() }, PLANT_S as f32);
-        tank.step(pump_on, vo.flow_to_tank_mg_s, p_amb as f32, PLANT_S as f32);
-        if pump_on {
-            pump_steps += 1;
+        if k % VACUUM_LOG_EVERY == 0 {
+            let x_pct = x_meas.map(f64::from);
+            out.vacuum.push(VacuumRow {
+                t_s: t,
+                duty_pct: act.vacuum_duty.map(|d| f64::from(d) * 100.0),
+                pump_on: act.pump_on,
+                u_batt_v: u_batt,
+                p_amb_kpa: p_amb,
+                p_tank_kpa: f64::from(vacuum.tank.p_tank_kpa()),
+                x_set_pct: x_set,
+                x_pct,
+                p_act_kpa: [0, 1, 2].map(|i| f64::from(actuator(&vacuum, i).p_act_kpa())),
+            });
+            wg_se += (x_set[0] - x_pct[0]).powi(2);
+            wg_n += 1;
         }
 
-        // --- EHVVA: crank angle, scheduling in the crank domain, the valve at 10 µs.
-        let deg_per_s = rpm * 6.0;
-        let new_crank = crank_deg + deg_per_s * PLANT_S;
-        if requested.is_none() || new_crank >= 720.0 {
-            if new_crank >= 720.0 {
-                cycle_start_t = t + (720.0 - crank_deg) / deg_per_s;
-                crank_deg = new_crank - 720.0;
-            } else {
-                crank_deg = new_crank;
-            }
-            let (open_deg, close_deg) = (sc.valve_open_deg.at(t), sc.valve_close_deg.at(t));
-            let inp = inputs_at(t);
-            let td_open_s = tables.t_delay_ms(inp.p_supply_mpa, inp.temp_c, true) as f64 / 1000.0;
-            let td_close_s = tables.t_delay_ms(inp.p_supply_mpa, inp.temp_c, false) as f64 / 1000.0;
-            // Time of the requested angles at the present speed, minus the delays.
-            pilot_on_at = Some(cycle_start_t + open_deg / deg_per_s - td_open_s);
-            pilot_off_at = Some(cycle_start_t + close_deg / deg_per_s - td_close_s);
-            requested = Some((open_deg, close_deg));
-            opened_this_cycle = false;
-            closed_this_cycle = false;
-        } else {
-            crank_deg = new_crank;
+        // Apply the outputs over the next step. Pilot coil: mean voltage of the PWM.
+        let pilot_duty = match act.pilot {
+            SolenoidCmd::Off => 0.0,
+            SolenoidCmd::Full => 1.0,
+            SolenoidCmd::Pwm(d) => f64::from(d).clamp(0.0, 1.0),
+        };
+        if pilot_duty == 0.0 {
+            (pilot_armed, pilot_dropped) = (false, false);
+        } else if coil.current_a >= PILOT_DROPOUT_A {
+            pilot_armed = true;
+        } else if pilot_armed {
+            pilot_dropped = true;
         }
-        let inp = inputs_at(t);
-        for j in 0..valve_steps_per_plant {
-            let tj = t + j as f64 * EHVVA_DT_MS / 1000.0;
-            if pilot_on_at.is_some_and(|on| tj >= on) && pilot_off_at.is_some_and(|off| tj < off) {
-                u_pilot = true;
-            } else if pilot_off_at.is_some_and(|off| tj >= off) {
-                u_pilot = false;
+        let u_pilot = pilot_duty > 0.0 && !pilot_dropped;
+        out.ehvva.push(EhvvaRow {
+            t_s: t,
+            u_pilot,
+            pilot_duty,
+            coil_a: coil.current_a,
+            p_supply_mpa: sc.p_supply_mpa.at(t),
+            p_back_mpa: sc.p_back_mpa.at(t),
+            temp_c: sc.temp_c.at(t),
+            lift_high: act.lift_valve_on,
+            snubber_on: act.snubber_on,
+            lift_mm: f64::from(valve.lift_mm()),
+            crank_deg: engine.cycle_deg(),
+        });
+        coil.step(pilot_duty * u_batt, f64::from(STEP_US));
+        let inp = ehvva_inputs(t, act.lift_valve_on, act.snubber_on);
+        let stroke = if act.lift_valve_on { ehvva_params.lift_high_mm } else { ehvva_params.lift_low_mm };
+        let deg_per_substep = rpm * 6.0 * EHVVA_DT_MS * 1e-3;
+        for j in 0..EHVVA_SUBSTEPS {
+            let lift = f64::from(valve.step(u_pilot, &inp));
+            let angle = (engine.cycle_deg() + (j + 1) as f64 * deg_per_substep).rem_euclid(f64::from(CYCLE_DEG));
+            if !opened && prev_lift < LIFT_FRACTION * stroke && lift >= LIFT_FRACTION * stroke {
+                opened = true;
+                open_err.push(wrap_deg(angle - sc.valve_open_deg.at(t)));
             }
-            let lift = valve.step(u_pilot, &inp) as f64;
-            let stroke = if sc.lift_high { 7.5 } else { 4.0 };
-            let angle = crank_deg + (j as f64 * EHVVA_DT_MS / 1000.0) * deg_per_s;
-            if let Some((open_deg, close_deg)) = requested {
-                if !opened_this_cycle && prev_lift < 0.01 * stroke && lift >= 0.01 * stroke {
-                    opened_this_cycle = true;
-                    open_errors.push(wrap_deg(angle - open_deg));
-                }
-                if opened_this_cycle && !closed_this_cycle && prev_lift > 0.99 * stroke && lift <= 0.99 * stroke {
-                    closed_this_cycle = true;
-                    close_errors.push(wrap_deg(angle - close_deg));
-                }
+            if opened && prev_lift > (1.0 - LIFT_FRACTION) * stroke && lift <= (1.0 - LIFT_FRACTION) * stroke {
+                opened = false;
+                close_err.push(wrap_deg(angle - sc.valve_close_deg.at(t)));
             }
             if let Some(v) = valve.take_seat_velocity() {
-                let v = (v as f64).abs();
-                worst_seat = Some(worst_seat.map_or(v, |w: f64| w.max(v)));
+                let v = f64::from(v).abs();
+                worst_seat = Some(worst_seat.map_or(v, |w| w.max(v)));
             }
             prev_lift = lift;
-            // The valve log at 10 kHz: valve events last a few ms.
-            if j % EHVVA_LOG_EVERY == 0 {
-                valve_log.push([tj, u_pilot as u8 as f64, inp.p_supply_mpa as f64, inp.p_back_mpa as f64, inp.temp_c as f64, sc.lift_high as u8 as f64, sc.snubber_on as u8 as f64, lift]);
-            }
+        }
+        if k % SLOW_EVERY == 0 {
+            let dt = (SLOW_EVERY as f64 * STEP_S) as f32;
+            evvt.step(motor_cmd_rpm as f32, rpm as f32, u_batt as f32, dt);
+            let pump_works = !sc.fault_active(FaultKind::VacuumPumpFailure, t);
+            vacuum.step(act.vacuum_duty.map(|d| d * 100.0), u_batt as f32, p_amb as f32, act.pump_on && pump_works, dt);
+            pump_steps += u64::from(act.pump_on);
         }
     }
 
@@ -392,43 +822,71 @@ pub fn run(sc: &Scenario, out: Option<&Path>) -> Result<Summary, String> {
         }
         (v.iter().sum::<f64>() / v.len() as f64, v.iter().fold(0.0f64, |a, x| a.max(x.abs())))
     };
-    let mut summary = Summary {
-        evvt_rms_error_deg: (evvt_se / evvt_n.max(1) as f64).sqrt(),
-        evvt_settling_s: settling_times(&evvt_log, 1.0),
-        vacuum_rms_error_pct: (vac_se / vac_n.max(1) as f64).sqrt(),
-        vacuum_pump_on_fraction: pump_steps as f64 / n.max(1) as f64,
-        ehvva_events: open_errors.len(),
-        ehvva_open_error_deg: stats(&open_errors),
-        ehvva_close_error_deg: stats(&close_errors),
-        ehvva_seating_velocity_m_s: worst_seat,
-        simulated_s: sc.duration_s,
-        wall_s: 0.0,
-    };
-    if let Some(dir) = out {
-        write_outputs(sc, dir, &evvt_log, &vac_log, &valve_log).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let s = &mut out.summary;
+    s.evvt_rms_error_deg = (evvt_se / evvt_n.max(1) as f64).sqrt();
+    s.evvt_settling_s = settling_times(&out.evvt.iter().map(|r| (r.t_s, r.phase_ref_deg, r.phase_deg)).collect::<Vec<_>>(), 1.0);
+    s.vacuum_rms_error_pct = (wg_se / wg_n.max(1) as f64).sqrt();
+    s.vacuum_settling_s = settling_times(&out.vacuum.iter().map(|r| (r.t_s, r.x_set_pct[0], r.x_pct[0])).collect::<Vec<_>>(), 2.0);
+    s.vacuum_pump_on_fraction = pump_steps as f64 / (n_steps / SLOW_EVERY).max(1) as f64;
+    s.ehvva_events = open_err.len();
+    s.ehvva_open_error_deg = stats(&open_err);
+    s.ehvva_close_error_deg = stats(&close_err);
+    s.ehvva_seating_velocity_m_s = worst_seat;
+    s.simulated_s = n_steps as f64 * STEP_S;
+    s.wall_s = started.elapsed().as_secs_f64();
+    Ok(out)
+}
+
+fn actuator(v: &VacuumSystem<f32>, i: usize) -> &model_core::vacuum::VacuumValveActuator<f32> {
+    match i {
+        0 => &v.lpt,
+        1 => &v.hpt,
+        _ => &v.hpc,
     }
-    summary.wall_s = started.elapsed().as_secs_f64();
-    Ok(summary)
+}
+
+fn describe_fault(f: &FaultSpec) -> String {
+    let mut s = format!("{} from {:.3} s", f.kind.name(), f.start_s);
+    if let Some(e) = f.end_s {
+        s += &format!(" to {e:.3} s");
+    }
+    if let Some(u) = f.u_batt_v {
+        s += &format!(" at {u} V");
+    }
+    if f.kind == FaultKind::VacuumStuck {
+        s += &format!(" ({:?})", f.actuator.unwrap_or(VacuumActuator::Lpt));
+    }
+    s
+}
+
+/// Runs the scenario natively ([`NativeLink`]); writes logs and plots into `out` when given.
+pub fn run(sc: &Scenario, out: Option<&Path>) -> Result<Summary, String> {
+    let mut link = NativeLink::new()?;
+    let o = run_with(sc, &mut link, &RunOptions::default())?;
+    if let Some(dir) = out {
+        write_outputs(sc, &o, dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    }
+    Ok(o.summary)
 }
 
 fn wrap_deg(d: f64) -> f64 {
     (d + 360.0).rem_euclid(720.0) - 360.0
 }
 
-/// For each setpoint step in the EVVT log, the time until the measured phase stays within
-/// `band` of the setpoint.
-fn settling_times(log: &[[f64; 6]], band: f64) -> Vec<(f64, Option<f64>)> {
+/// For each set-point step in `(t, setpoint, measured)` samples, the time until the measured
+/// value stays within `band` of the set-point (until the next step).
+pub fn settling_times(log: &[(f64, f64, f64)], band: f64) -> Vec<(f64, Option<f64>)> {
     let mut out = Vec::new();
     for i in 1..log.len() {
-        if (log[i][4] - log[i - 1][4]).abs() > 2.0 * band {
-            let t0 = log[i][0];
-            let sp = log[i][4];
-            let end = (i + 1..log.len()).find(|&j| (log[j][4] - sp).abs() > 1e-9).unwrap_or(log.len());
+        if (log[i].1 - log[i - 1].1).abs() > 2.0 * band {
+            let t0 = log[i].0;
+            let sp = log[i].1;
+            let end = (i + 1..log.len()).find(|&j| (log[j].1 - sp).abs() > 1e-9).unwrap_or(log.len());
             // Last sample outside the band before the next step.
-            let last_out = (i..end).rev().find(|&j| (log[j][5] - sp).abs() > band);
+            let last_out = (i..end).rev().find(|&j| (log[j].2 - sp).abs() > band);
             let settled = match last_out {
                 None => Some(0.0),
-                Some(j) if j + 1 < end => Some(log[j + 1][0] - t0),
+                Some(j) if j + 1 < end => Some(log[j + 1].0 - t0),
                 Some(_) => None,
             };
             out.push((t0, settled));
@@ -437,23 +895,22 @@ fn settling_times(log: &[[f64; 6]], band: f64) -> Vec<(f64, Option<f64>)> {
     out
 }
 
-fn write_outputs(sc: &Scenario, dir: &Path, evvt: &[[f64; 6]], vac: &[[f64; 7]], valve: &[[f64; 8]]) -> std::io::Result<Vec<PathBuf>> {
+/// Writes `evvt.csv`, `vacuum.csv` (the wastegate), `vacuum-hpt.csv`, `vacuum-hpc.csv`,
+/// `ehvva.csv` (DATA-FORMAT logs) and SVG plots into `dir`.
+pub fn write_outputs(sc: &Scenario, o: &RunOutput, dir: &Path) -> std::io::Result<Vec<PathBuf>> {
     std::fs::create_dir_all(dir)?;
-    // Times to the nanosecond: sums of steps carry float noise a log should not show.
-    let round_t = |mut rows: Vec<Vec<f64>>| {
-        for r in rows.iter_mut() {
-            r[0] = (r[0] * 1e9).round() / 1e9;
-        }
-        rows
-    };
-    let column = |data: &Vec<Vec<f64>>, i: usize| data[i].clone();
-    let transpose = |rows: Vec<Vec<f64>>, m: usize| -> Vec<Vec<f64>> { (0..m).map(|i| rows.iter().map(|r| r[i]).collect()).collect() };
+    // Times to the nanosecond: products of steps carry float noise a log should not show.
+    let times = |t: &mut dyn Iterator<Item = f64>| -> Vec<f64> { t.map(|x| (x * 1e9).round() / 1e9).collect() };
+    let flag = |b: bool| if b { 1.0 } else { 0.0 };
     let meta = |plant: &str, rate: f64, extra: Vec<(String, String)>| {
         let mut m = vec![
             ("plant".to_string(), plant.to_string()),
-            ("source".into(), format!("hil-host run, scenario `{}` (native closed loop, model-core controllers against model-core plants)", sc.name)),
+            ("source".into(), format!("hil-host run, scenario `{}` (native lockstep: model-core EcuCore every {STEP_US} µs against model-core plants)", sc.name)),
             ("sample_rate_hz".into(), format!("{rate}")),
         ];
+        if !o.summary.faults_injected.is_empty() {
+            m.push(("faults_injected".into(), o.summary.faults_injected.join("; ")));
+        }
         m.extend(extra);
         m
     };
@@ -464,63 +921,95 @@ fn write_outputs(sc: &Scenario, dir: &Path, evvt: &[[f64; 6]], vac: &[[f64; 7]],
         written.push(p);
         Ok(())
     };
-    let e = transpose(round_t(evvt.iter().map(|r| r.to_vec()).collect()), 6);
+
+    let e = &o.evvt;
+    let et = times(&mut e.iter().map(|r| r.t_s));
+    let col = |f: &dyn Fn(&EvvtRow) -> f64| e.iter().map(f).collect::<Vec<f64>>();
+    let (e_cmd, e_rpm, e_u, e_ref, e_ph) = (col(&|r| r.motor_cmd_rpm), col(&|r| r.engine_rpm), col(&|r| r.u_batt_v), col(&|r| r.phase_ref_deg), col(&|r| r.phase_deg));
     put(
         "evvt.csv",
         format_log(
-            &meta("evvt", 1.0 / EVVT_CONTROL_S, vec![("controller".into(), "model-core EvvtPhaseController, scheduled PI (default config)".into()), ("control_period_s".into(), format!("{EVVT_CONTROL_S}"))]),
-            &[("t_s", &column(&e, 0)), ("motor_cmd_rpm", &e[1]), ("engine_rpm", &e[2]), ("u_batt_V", &e[3]), ("phase_ref_deg", &e[4]), ("phase_deg", &e[5])],
+            &meta("evvt", 1.0 / (EVVT_LOG_EVERY as f64 * STEP_S), vec![("controller".into(), "model-core ecu::evvt_task (scheduled PI), motor command = duty x 6000 rpm - ring speed".into())]),
+            &[("t_s", &et), ("motor_cmd_rpm", &e_cmd), ("engine_rpm", &e_rpm), ("u_batt_V", &e_u), ("phase_ref_deg", &e_ref), ("phase_deg", &e_ph)],
         ),
     )?;
-    let v = transpose(round_t(vac.iter().map(|r| r.to_vec()).collect()), 7);
-    put(
-        "vacuum.csv",
-        format_log(
-            &meta("vacuum", 80.0, vec![("controller".into(), "model-core VacuumPositionController (HPT wastegate)".into())]),
-            &[("t_s", &v[0]), ("duty_pct", &v[1]), ("u_batt_V", &v[2]), ("p_amb_kPa", &v[3]), ("p_tank_kPa", &v[4]), ("x_pct", &v[5]), ("p_act_kPa", &v[6])],
-        ),
-    )?;
-    let w = transpose(round_t(valve.iter().map(|r| r.to_vec()).collect()), 8);
+
+    let v = &o.vacuum;
+    let vt = times(&mut v.iter().map(|r| r.t_s));
+    let vcol = |f: &dyn Fn(&VacuumRow) -> f64| v.iter().map(f).collect::<Vec<f64>>();
+    let (v_u, v_amb, v_tank) = (vcol(&|r| r.u_batt_v), vcol(&|r| r.p_amb_kpa), vcol(&|r| r.p_tank_kpa));
+    let names = [("vacuum.csv", "LPT wastegate"), ("vacuum-hpt.csv", "HPT bypass"), ("vacuum-hpc.csv", "HPC bypass")];
+    for (i, (file, what)) in names.iter().enumerate() {
+        let (duty, x, p) = (vcol(&|r| r.duty_pct[i]), vcol(&|r| r.x_pct[i]), vcol(&|r| r.p_act_kpa[i]));
+        put(
+            file,
+            format_log(
+                &meta("vacuum", 1.0 / (VACUUM_LOG_EVERY as f64 * STEP_S), vec![("actuator".into(), (*what).into()), ("controller".into(), "model-core ecu::vacuum_task (inverse model + supply-voltage compensation)".into())]),
+                &[("t_s", &vt), ("duty_pct", &duty), ("u_batt_V", &v_u), ("p_amb_kPa", &v_amb), ("p_tank_kPa", &v_tank), ("x_pct", &x), ("p_act_kPa", &p)],
+            ),
+        )?;
+    }
+
+    let w = &o.ehvva;
+    let wt = times(&mut w.iter().map(|r| r.t_s));
+    let wcol = |f: &dyn Fn(&EhvvaRow) -> f64| w.iter().map(f).collect::<Vec<f64>>();
+    let (w_u, w_ph, w_pl, w_t, w_lh, w_sn, w_lift) = (
+        wcol(&|r| flag(r.u_pilot)),
+        wcol(&|r| r.p_supply_mpa),
+        wcol(&|r| r.p_back_mpa),
+        wcol(&|r| r.temp_c),
+        wcol(&|r| flag(r.lift_high)),
+        wcol(&|r| flag(r.snubber_on)),
+        wcol(&|r| r.lift_mm),
+    );
     put(
         "ehvva.csv",
         format_log(
-            &meta("ehvva", 1000.0 / (EHVVA_DT_MS * EHVVA_LOG_EVERY as f64), vec![]),
-            &[("t_s", &w[0]), ("u_pilot", &w[1]), ("p_supply_MPa", &w[2]), ("p_back_MPa", &w[3]), ("temp_C", &w[4]), ("lift_high", &w[5]), ("snubber_on", &w[6]), ("lift_mm", &w[7])],
+            &meta("ehvva", 1.0 / STEP_S, vec![("controller".into(), "model-core ecu::ehvva_task (crank-angle events advanced by td, pilot peak-and-hold); u_pilot = pilot valve open".into())]),
+            &[("t_s", &wt), ("u_pilot", &w_u), ("p_supply_MPa", &w_ph), ("p_back_MPa", &w_pl), ("temp_C", &w_t), ("lift_high", &w_lh), ("snubber_on", &w_sn), ("lift_mm", &w_lift)],
         ),
     )?;
+
     put(
         "evvt.svg",
         line_plot(
             "EVVT cam phase",
             "time (s)",
             "phase (crank deg)",
-            &[Series { label: "setpoint", colour: "black", x: &e[0], y: &e[4] }, Series { label: "measured", colour: "#1f77b4", x: &e[0], y: &e[5] }],
+            &[Series { label: "setpoint", colour: "black", x: &et, y: &e_ref }, Series { label: "plant", colour: "#1f77b4", x: &et, y: &e_ph }],
             &[],
         ),
     )?;
+    let (wg_set, wg_x, wg_duty) = (vcol(&|r| r.x_set_pct[0]), vcol(&|r| r.x_pct[0]), vcol(&|r| r.duty_pct[0]));
     put(
         "vacuum.svg",
         line_plot(
-            "wastegate position",
+            "wastegate (LPT) position",
             "time (s)",
-            "position (%)",
+            "position (%), duty (%), kPa, V",
             &[
-                Series { label: "measured", colour: "#1f77b4", x: &v[0], y: &v[5] },
-                Series { label: "duty (%)", colour: "#2ca02c", x: &v[0], y: &v[1] },
-                Series { label: "battery (V)", colour: "#d62728", x: &v[0], y: &v[2] },
+                Series { label: "setpoint", colour: "black", x: &vt, y: &wg_set },
+                Series { label: "position", colour: "#1f77b4", x: &vt, y: &wg_x },
+                Series { label: "duty (%)", colour: "#2ca02c", x: &vt, y: &wg_duty },
+                Series { label: "tank (kPa)", colour: "#9467bd", x: &vt, y: &v_tank },
+                Series { label: "battery (V)", colour: "#d62728", x: &vt, y: &v_u },
             ],
             &[],
         ),
     )?;
-    // One cycle of lift is what a reader wants to see; the whole run would be a solid band.
-    let one: usize = w[0].len().min(2000);
+    // The first 0.3 s of lift: the whole run would be a solid band.
+    let one = wt.len().min((0.3 / STEP_S) as usize);
+    let w_duty = wcol(&|r| r.pilot_duty);
     put(
         "ehvva.svg",
         line_plot(
-            "EHVVA valve lift (first 0.2 s)",
+            "EHVVA valve lift (first 0.3 s)",
             "time (s)",
-            "lift (mm)",
-            &[Series { label: "lift", colour: "#1f77b4", x: &w[0][..one], y: &w[7][..one] }, Series { label: "pilot", colour: "black", x: &w[0][..one], y: &w[1][..one] }],
+            "lift (mm), pilot duty",
+            &[
+                Series { label: "lift", colour: "#1f77b4", x: &wt[..one], y: &w_lift[..one] },
+                Series { label: "pilot duty", colour: "black", x: &wt[..one], y: &w_duty[..one] },
+            ],
             &[],
         ),
     )?;
@@ -548,5 +1037,57 @@ mod tests {
         assert!(e.contains("duration_s"), "{e}");
         let ok = Scenario::from_toml(Path::new("s.toml"), "name = \"x\"\nduration_s = 1.0\nu_batt_v = [[0.0, 14.0], [0.5, 9.0]]\n").unwrap();
         assert_eq!(ok.u_batt_v.at(0.25), 11.5);
+    }
+
+    #[test]
+    fn fault_entries_are_parsed_strictly() {
+        let parse = |faults: &str| Scenario::from_toml(Path::new("f.toml"), &format!("name = \"x\"\nduration_s = 1.0\n{faults}"));
+        let ok = parse("[[fault]]\nkind = \"battery_sag\"\nstart_s = 0.2\nend_s = 0.6\nu_batt_v = 8.0\n[[fault]]\nkind = \"vacuum_stuck\"\nstart_s = 0.1\nactuator = \"hpt\"\n").unwrap();
+        assert_eq!(ok.faults.len(), 2);
+        assert_eq!(ok.faults[1].actuator, Some(VacuumActuator::Hpt));
+        // The sag: 14 V before, ramps, 8 V inside, back to 14 V after the ramp out.
+        assert_eq!(ok.u_batt_at(0.1), 14.0);
+        assert!((ok.u_batt_at(0.25) - 11.0).abs() < 1e-9);
+        assert_eq!(ok.u_batt_at(0.5), 8.0);
+        assert_eq!(ok.u_batt_at(0.8), 14.0);
+        for (text, needle) in [
+            ("[[fault]]\nkind = \"gremlin\"\nstart_s = 0.0\n", "gremlin"),
+            ("[[fault]]\nkind = \"crank_lost\"\nstart_s = 0.0\ncolour = 1\n", "colour"),
+            ("[[fault]]\nkind = \"crank_lost\"\n", "start_s"),
+            ("[[fault]]\nkind = \"battery_sag\"\nstart_s = 0.0\n", "u_batt_v"),
+            ("[[fault]]\nkind = \"crank_lost\"\nstart_s = 0.5\nend_s = 0.2\n", "end_s"),
+            ("[[fault]]\nkind = \"crank_lost\"\nstart_s = 0.0\nu_batt_v = 8.0\n", "belongs to `battery_sag` only"),
+            ("[[fault]]\nkind = \"crank_lost\"\nstart_s = 0.0\nactuator = \"lpt\"\n", "belongs to `vacuum_stuck` only"),
+            ("[[fault]]\nkind = \"vacuum_stuck\"\nstart_s = 0.0\nactuator = \"egr\"\n", "egr"),
+        ] {
+            let e = parse(text).unwrap_err();
+            assert!(e.starts_with("f.toml:") && e.contains(needle), "{text}: {e}");
+        }
+    }
+
+    #[test]
+    fn engine_gives_58_teeth_per_revolution_and_one_cam_edge_per_cycle() {
+        let mut e = Engine { wheel: TriggerWheel::sixty_minus_two(), theta_deg: 1.0 };
+        let mut edges = Vec::new();
+        let (mut teeth, mut cams, mut t_us) = (0, Vec::new(), 0u32);
+        // Two cycles at 3000 rpm (40 ms each).
+        for _ in 0..1600 {
+            edges.clear();
+            e.advance(3000.0, 430.0, true, t_us, &mut edges);
+            assert!(edges.len() <= MAX_EDGES);
+            assert!(edges.windows(2).all(|w| w[0].t_us <= w[1].t_us));
+            for ed in &edges {
+                match ed.source {
+                    EdgeSource::CrankTooth => teeth += 1,
+                    EdgeSource::CamSync => cams.push(ed.t_us),
+                }
+            }
+            t_us += STEP_US;
+        }
+        assert_eq!(teeth, 4 * 58);
+        assert_eq!(cams.len(), 2);
+        // 720 deg at 18 deg/ms: 40 ms apart; the first at (430 - 1) deg / 18 deg/ms.
+        assert!((cams[1] - cams[0]) as i64 - 40_000 <= 1);
+        assert!((cams[0] as f64 - 429.0 / 0.018).abs() <= 1.0, "{}", cams[0]);
     }
 }
