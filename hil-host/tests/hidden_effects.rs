@@ -62,25 +62,46 @@ fn vacuum_hidden_effects_are_found() {
     }
 }
 
+#[test]
+fn ehvva_hidden_effects_are_found() {
+    for effect in effects(Plant::Ehvva) {
+        for seed in CI_SEEDS {
+            check(Plant::Ehvva, effect, seed);
+        }
+    }
+}
+
 /// The long sweep: `cargo test -p hil-host --release --test hidden_effects -- --ignored --nocapture`.
 #[test]
 #[ignore]
 fn sweep_success_rate_per_effect() {
-    let seeds: Vec<u64> = (0..25).map(|k| 1000 + 7919 * k).collect();
     for plant in Plant::ALL {
-        for effect in effects(plant) {
-            let mut ok = 0;
-            let mut failed = Vec::new();
-            for &seed in &seeds {
-                let o = run(plant, effect, seed);
-                let good = o.cause == *effect && (*effect == "none" || o.gain_pct >= 20.0);
-                if good {
-                    ok += 1;
-                } else {
-                    failed.push(format!("{seed} -> {} ({:.0} %)", o.cause, o.gain_pct));
-                }
+        sweep(plant);
+    }
+}
+
+/// One plant's sweep:
+/// `cargo test -p hil-host --release --test hidden_effects ehvva_sweep -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn ehvva_sweep_success_rate_per_effect() {
+    sweep(Plant::Ehvva);
+}
+
+fn sweep(plant: Plant) {
+    let seeds: Vec<u64> = (0..25).map(|k| 1000 + 7919 * k).collect();
+    for effect in effects(plant) {
+        let mut ok = 0;
+        let mut failed = Vec::new();
+        for &seed in &seeds {
+            let o = run(plant, effect, seed);
+            let good = o.cause == *effect && (*effect == "none" || o.gain_pct >= 20.0);
+            if good {
+                ok += 1;
+            } else {
+                failed.push(format!("{seed} -> {} ({:.0} %)", o.cause, o.gain_pct));
             }
-            println!("{plant:<11} {effect:<22} {ok}/{} found{}", seeds.len(), if failed.is_empty() { String::new() } else { format!("; missed: {}", failed.join(", ")) });
         }
+        println!("{plant:<11} {effect:<22} {ok}/{} found{}", seeds.len(), if failed.is_empty() { String::new() } else { format!("; missed: {}", failed.join(", ")) });
     }
 }

@@ -7,6 +7,7 @@
 //! for extra parameters, the significance test that keeps noise from being named a cause, the
 //! preference for the simpler of two nested explanations, and the report.
 
+pub mod ehvva;
 pub mod evvt;
 pub mod positioner;
 pub mod report;
@@ -281,7 +282,7 @@ pub fn family_for(plant: Plant) -> Result<Box<dyn Family>, String> {
         Plant::Evvt => Ok(Box::new(evvt::EvvtFamily::default())),
         Plant::Positioner => Ok(Box::new(positioner::PositionerFamily::default())),
         Plant::Vacuum => Ok(Box::new(vacuum::VacuumFamily::default())),
-        other => Err(format!("diagnosis of `{other}` logs is not available yet")),
+        Plant::Ehvva => Ok(Box::new(ehvva::EhvvaFamily::default())),
     }
 }
 

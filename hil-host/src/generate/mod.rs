@@ -6,6 +6,7 @@
 //! truth (effect and parameters) is returned separately and never written into the logs.
 //! Everything follows from the seed, so a failing case is replayed from the seed a test prints.
 
+pub mod ehvva;
 pub mod evvt;
 pub mod positioner;
 pub mod vacuum;
@@ -69,7 +70,7 @@ pub fn effects(plant: Plant) -> &'static [&'static str] {
         Plant::Evvt => &["none", "supply-voltage", "engine-speed", "direction", "belt-vibration"],
         Plant::Positioner => &["none", "coulomb-friction", "asymmetric-friction"],
         Plant::Vacuum => &["none", "supply-voltage", "pressure-direction", "coulomb-friction", "backlash"],
-        _ => &[],
+        Plant::Ehvva => &["none", "viscosity", "pressure-delay", "direction-delay", "snubber"],
     }
 }
 
@@ -85,7 +86,7 @@ pub fn generate(plant: Plant, effect: &str, seed: u64) -> Result<Case, String> {
         Plant::Evvt => evvt::generate(effect, seed),
         Plant::Positioner => positioner::generate(effect, seed),
         Plant::Vacuum => vacuum::generate(effect, seed),
-        other => Err(format!("no generator for plant `{other}` yet")),
+        Plant::Ehvva => ehvva::generate(effect, seed),
     }
 }
 

@@ -1,0 +1,495 @@
+//! The `ehvva` family (electro-hydraulic camless valve actuator, Li 2018) by simulation error
+//! of the valve lift, and the event simulation that `identify ehvva` shares.
+//!
+//! A bench log is a sequence of valve events (DATA-FORMAT: conditions may jump between them).
+//! The log is cut at each rising pilot command ([`Events::from_log`]): a segment starts
+//! `PRE_MS` before the edge, where the valve is at rest, and runs to the next segment. Each
+//! segment is simulated by model-core's reduced model of eq. (12) ([`EhvvaReduced`], f64)
+//! from rest at the segment's operating point: supply and back pressure are the set-points
+//! read from the samples at rest before the edge (the logged pressures dip while the valve
+//! moves, as the accumulators of eqs. (7)-(8) do in the model), temperature the segment's
+//! mean, lift and switch valves their state at the edge. Once the valve is seated again after
+//! the last command the model is at rest and the rest of the segment is 0 without stepping.
+//!
+//! Parameters are [`Knob`]s: named values that set fields of [`EhvvaParams`], fitted by the
+//! one trust-region solver ([`crate::lsq`]) on the lift simulation error (eqs. (16)-(20)).
+//! - baseline: the paper's tables with every catalogue effect off
+//!   ([`EhvvaParams::baseline`]), calibrated by td at 7 MPa / 22 °C (scales both td tables),
+//!   Cd at 22 °C (scales Cd(T)), τp at 6.5 MPa / 22 °C (scales τp(Ph, T)) and the moving
+//!   mass;
+//! - each catalogue effect adds its model-core gain (`effect_viscosity`,
+//!   `effect_pressure_delay`, `effect_direction_delay`, `effect_snubber`, 0..2), all
+//!   parameters refitted from the baseline's solution.
+
+use std::collections::hash_map::DefaultHasher;
+use std::hash::{Hash, Hasher};
+use std::sync::Mutex;
+
+use model_core::ehvva::{EhvvaInputs, EhvvaParams, EhvvaPlant, EhvvaReduced, EhvvaTables};
+
+use super::{Family, Fit};
+use crate::log::{Log, Plant};
+use crate::lsq::{solve, LsqOptions, LsqResult};
+
+/// The catalogue effects of this family (DATA-FORMAT.md).
+pub const EFFECTS: [&str; 4] = ["viscosity", "pressure-delay", "direction-delay", "snubber"];
+
+/// Rest kept before each rising command edge (the segment start), ms.
+pub const PRE_MS: f64 = 1.0;
+/// Delay-line length of the simulated model: 1024 samples hold 10 ms even at a 0.01 ms step.
+const DELAY_SAMPLES: usize = 1024;
+
+/// One valve event of a log: the samples from rest before a pilot command to the next event.
+#[derive(Clone, Debug)]
+pub struct Event {
+    /// Index of the first sample in the log.
+    pub start: usize,
+    pub u_pilot: Vec<bool>,
+    /// Measured lift.
+    pub lift_mm: Vec<f64>,
+    /// The operating point (set-points, temperature, valve states).
+    pub inputs: EhvvaInputs<f64>,
+    /// Index (in the event) of the rising command edge and of the last falling one.
+    pub on_index: usize,
+    pub off_index: Option<usize>,
+}
+
+impl Event {
+    pub fn stroke_mm(&self, p: &EhvvaParams) -> f64 {
+        if self.inputs.lift_high {
+            p.lift_high_mm
+        } else {
+            p.lift_low_mm
+        }
+    }
+}
+
+/// A log cut into valve events.
+#[derive(Clone, Debug)]
+pub struct Events {
+    pub dt_ms: f64,
+    pub events: Vec<Event>,
+    /// Samples in the log (the events cover it from the first one's start).
+    pub samples: usize,
+    pub file: String,
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    if v.is_empty() {
+        f64::NAN
+    } else {
+        v[v.len() / 2]
+    }
+}
+
+impl Events {
+    pub fn from_log(log: &Log) -> Result<Self, String> {
+        let col = |name: &str| log.col(name).ok_or_else(|| format!("{}: no `{name}` column", log.file));
+        let (u, ph, pl, temp, high, snub, lift) =
+            (col("u_pilot")?, col("p_supply_MPa")?, col("p_back_MPa")?, col("temp_C")?, col("lift_high")?, col("snubber_on")?, col("lift_mm")?);
+        let dt_ms = log.dt_s * 1e3;
+        if !(dt_ms > 0.0 && dt_ms <= 0.1) {
+            return Err(format!("{}: sample period {} ms; the EHVVA models need 0.1 ms or less (10 kHz or more)", log.file, dt_ms));
+        }
+        let n = lift.len();
+        let pre = ((PRE_MS / dt_ms).round() as usize).max(1);
+        let rising: Vec<usize> = (0..n).filter(|&k| u[k] > 0.5 && (k == 0 || u[k - 1] <= 0.5)).collect();
+        if rising.is_empty() {
+            return Err(format!("{}: no valve event (u_pilot never rises)", log.file));
+        }
+        let mut starts: Vec<usize> = Vec::with_capacity(rising.len());
+        for (i, &r) in rising.iter().enumerate() {
+            let s = if i == 0 { 0 } else { r.saturating_sub(pre).max(starts[i - 1] + 1) };
+            starts.push(s);
+        }
+        let mut events = Vec::with_capacity(rising.len());
+        for i in 0..rising.len() {
+            let (s, e) = (starts[i], if i + 1 < starts.len() { starts[i + 1] } else { n });
+            let on = rising[i] - s;
+            // Set-points: the samples at rest before the edge (at most PRE_MS of them).
+            let rest = rising[i].saturating_sub(pre).max(s)..rising[i];
+            let setpoint = |x: &[f64]| {
+                let mut v: Vec<f64> = if rest.len() >= 3 { x[rest.clone()].to_vec() } else { x[s..e].to_vec() };
+                median(&mut v)
+            };
+            let off_index = (s + on..e).filter(|&k| u[k] <= 0.5 && u[k - 1] > 0.5).last().map(|k| k - s);
+            let inputs = EhvvaInputs {
+                p_supply_mpa: setpoint(ph),
+                p_back_mpa: setpoint(pl),
+                temp_c: temp[s..e].iter().sum::<f64>() / (e - s) as f64,
+                lift_high: high[rising[i]] > 0.5,
+                snubber_on: snub[rising[i]] > 0.5,
+            };
+            events.push(Event { start: s, u_pilot: u[s..e].iter().map(|&v| v > 0.5).collect(), lift_mm: lift[s..e].to_vec(), inputs, on_index: on, off_index });
+        }
+        Ok(Events { dt_ms, events, samples: n, file: log.file.clone() })
+    }
+
+    /// The measured lift over the whole log (what `simulate_all` predicts).
+    pub fn measured(&self) -> Vec<f64> {
+        let mut y = vec![0.0; self.samples];
+        for ev in &self.events {
+            y[ev.start..ev.start + ev.lift_mm.len()].copy_from_slice(&ev.lift_mm);
+        }
+        y
+    }
+
+    /// Total samples covered by the events.
+    pub fn covered(&self) -> usize {
+        self.events.iter().map(|e| e.lift_mm.len()).sum()
+    }
+
+    /// A subset of the events (e.g. one test condition), keeping the period.
+    pub fn subset(&self, keep: impl Fn(&Event) -> bool) -> Events {
+        let events: Vec<Event> = self.events.iter().filter(|e| keep(e)).cloned().collect();
+        let mut at = 0;
+        let events = events
+            .into_iter()
+            .map(|mut e| {
+                e.start = at;
+                at += e.lift_mm.len();
+                e
+            })
+            .collect();
+        Events { dt_ms: self.dt_ms, events, samples: at, file: self.file.clone() }
+    }
+
+    fn key(&self) -> u64 {
+        let mut h = DefaultHasher::new();
+        self.samples.hash(&mut h);
+        self.dt_ms.to_bits().hash(&mut h);
+        for e in &self.events {
+            e.start.hash(&mut h);
+            for v in &e.lift_mm {
+                v.to_bits().hash(&mut h);
+            }
+        }
+        h.finish()
+    }
+}
+
+/// Simulates one event from rest with model-core's reduced model, writing the lift into `out`
+/// (same length as the event).
+pub fn simulate_event(params: &EhvvaParams, ev: &Event, dt_ms: f64, out: &mut [f64]) -> Result<(), String> {
+    let mut m = EhvvaReduced::<f64, DELAY_SAMPLES>::new(params, &ev.inputs, dt_ms).map_err(|e| format!("{e:?}"))?;
+    let settle = ((2.0 / dt_ms).round() as usize).max(1);
+    let mut seated_for = 0usize;
+    let last_off = ev.off_index.unwrap_or(usize::MAX);
+    for (k, slot) in out.iter_mut().enumerate() {
+        if k < ev.on_index {
+            // At rest before the command: the model's steady state.
+            *slot = 0.0;
+            continue;
+        }
+        if seated_for >= settle {
+            *slot = 0.0;
+            continue;
+        }
+        let y = m.step(ev.u_pilot[k], &ev.inputs);
+        if !y.is_finite() {
+            return Err(format!("simulation diverged at sample {}", ev.start + k));
+        }
+        *slot = y;
+        seated_for = if k > last_off && y == 0.0 && m.velocity_m_s() == 0.0 { seated_for + 1 } else { 0 };
+    }
+    Ok(())
+}
+
+/// Simulates every event into `out` (the log's length).
+pub fn simulate_all(params: &EhvvaParams, set: &Events, out: &mut [f64]) -> Result<(), String> {
+    for ev in &set.events {
+        simulate_event(params, ev, set.dt_ms, &mut out[ev.start..ev.start + ev.lift_mm.len()])?;
+    }
+    Ok(())
+}
+
+/// A fitted parameter: its name, bounds and how it sets the model's parameters.
+#[derive(Clone, Copy, Debug)]
+pub struct Knob {
+    pub name: &'static str,
+    pub lo: f64,
+    pub hi: f64,
+    pub apply: fn(&mut EhvvaParams, f64),
+}
+
+/// The reference the baseline scales: paper tables at their reference points.
+fn reference() -> (f64, f64, f64) {
+    let p = EhvvaParams::baseline();
+    let t = EhvvaTables::<f64>::new(&p).expect("the paper's parameters are valid");
+    (t.t_delay_ms(7.0, 22.0, true), t.cd(22.0), t.tau_p_ms(6.5, 22.0))
+}
+
+/// td at 7 MPa, 22 °C (mean of VO and VC), Cd at 22 °C and τp at 6.5 MPa, 22 °C of the paper's
+/// tables: the values the baseline knobs scale.
+pub fn reference_values() -> (f64, f64, f64) {
+    reference()
+}
+
+fn scale_td(p: &mut EhvvaParams, td_ms: f64) {
+    let base = EhvvaParams::baseline().tables;
+    let s = td_ms / reference().0;
+    for i in 0..4 {
+        for j in 0..5 {
+            p.tables.td_open_ms[i][j] = base.td_open_ms[i][j] * s;
+            p.tables.td_close_ms[i][j] = base.td_close_ms[i][j] * s;
+        }
+    }
+}
+fn scale_cd(p: &mut EhvvaParams, cd: f64) {
+    let base = EhvvaParams::baseline().tables;
+    let s = cd / reference().1;
+    for i in 0..4 {
+        p.tables.cd[i] = (base.cd[i] * s).min(0.99);
+    }
+}
+fn scale_tau(p: &mut EhvvaParams, tau_ms: f64) {
+    let base = EhvvaParams::baseline().tables;
+    let s = tau_ms / reference().2;
+    for i in 0..2 {
+        for j in 0..3 {
+            p.tables.tau_ms[i][j] = base.tau_ms[i][j] * s;
+        }
+    }
+}
+
+/// Knobs of the baseline (module doc).
+pub const BASELINE_KNOBS: [Knob; 4] = [
+    Knob { name: "td_ms_at_7MPa_22C", lo: 1.0, hi: 7.0, apply: scale_td },
+    Knob { name: "cd_at_22C", lo: 0.1, hi: 0.9, apply: scale_cd },
+    Knob { name: "tau_p_ms_at_6p5MPa_22C", lo: 0.02, hi: 0.5, apply: scale_tau },
+    Knob { name: "mass_kg", lo: 0.08, hi: 0.4, apply: |p, v| p.mass_kg = v },
+];
+
+/// The knob each catalogue effect adds.
+pub fn effect_knob(effect: &str) -> Result<Knob, String> {
+    Ok(match effect {
+        "viscosity" => Knob { name: "viscosity_gain", lo: 0.0, hi: 2.0, apply: |p, v| p.effect_viscosity = v },
+        "pressure-delay" => Knob { name: "pressure_delay_gain", lo: 0.0, hi: 2.0, apply: |p, v| p.effect_pressure_delay = v },
+        "direction-delay" => Knob { name: "direction_delay_gain", lo: 0.0, hi: 2.0, apply: |p, v| p.effect_direction_delay = v },
+        "snubber" => Knob { name: "snubber_gain", lo: 0.0, hi: 2.0, apply: |p, v| p.effect_snubber = v },
+        other => return Err(format!("unknown ehvva effect `{other}` (known: {})", EFFECTS.join(", "))),
+    })
+}
+
+/// `base` with the knobs set to `x`.
+pub fn apply_knobs(base: &EhvvaParams, knobs: &[Knob], x: &[f64]) -> EhvvaParams {
+    let mut p = *base;
+    for (k, &v) in knobs.iter().zip(x) {
+        (k.apply)(&mut p, v);
+    }
+    p
+}
+
+/// Fits `knobs` (starting at `x0`) on the lift simulation error of `set` by the trust-region
+/// solver: the calibration problem of eqs. (16)-(20), shared by `diagnose` and `identify`.
+pub fn calibrate(base: &EhvvaParams, knobs: &[Knob], x0: &[f64], set: &Events, opts: &LsqOptions) -> Result<LsqResult, String> {
+    let measured = set.measured();
+    let lo: Vec<f64> = knobs.iter().map(|k| k.lo).collect();
+    let hi: Vec<f64> = knobs.iter().map(|k| k.hi).collect();
+    let residual = |x: &[f64], out: &mut [f64]| -> Result<(), String> {
+        let p = apply_knobs(base, knobs, x);
+        simulate_all(&p, set, out)?;
+        for (o, y) in out.iter_mut().zip(&measured) {
+            *o -= y;
+        }
+        Ok(())
+    };
+    solve(residual, x0, &lo, &hi, set.samples, opts).map_err(|e| format!("{}: {e}", set.file))
+}
+
+/// Times at which the lift crosses 1 % of the stroke after the rising edge and 99 % after the
+/// falling edge (first crossing, linearly interpolated), in ms from the respective edge.
+pub fn edge_delays_ms(lift: &[f64], on_index: usize, off_index: Option<usize>, stroke_mm: f64, dt_ms: f64) -> (Option<f64>, Option<f64>) {
+    let cross = |from: usize, level: f64, rising: bool| -> Option<f64> {
+        (from.max(1)..lift.len()).find_map(|k| {
+            let (a, b) = (lift[k - 1], lift[k]);
+            let hit = if rising { a < level && b >= level } else { a >= level && b < level };
+            hit.then(|| (k - 1) as f64 + (level - a) / (b - a))
+        })
+    };
+    let open = cross(on_index, 0.01 * stroke_mm, true).map(|k| (k - on_index as f64) * dt_ms);
+    let close = off_index.and_then(|off| cross(off, 0.99 * stroke_mm, false).map(|k| (k - off as f64) * dt_ms));
+    (open, close)
+}
+
+/// Settings of the family.
+#[derive(Debug)]
+pub struct EhvvaFamily {
+    pub lsq: LsqOptions,
+    /// The last baseline fit (key of the estimation log, solution): extensions start from it.
+    baseline: Mutex<Option<(u64, Vec<f64>, LsqResult)>>,
+}
+
+impl Default for EhvvaFamily {
+    fn default() -> Self {
+        Self { lsq: LsqOptions { max_iterations: 30, cost_tolerance: 1e-6, fd_step: 1e-5, ..LsqOptions::default() }, baseline: Mutex::new(None) }
+    }
+}
+
+impl EhvvaFamily {
+    /// The baseline's start: paper values, with td moved so that the mean opening delay of the
+    /// simulated events matches the measured one (a shift the solver need not search for).
+    fn baseline_start(&self, set: &Events) -> Result<Vec<f64>, String> {
+        let (td0, cd0, tau0) = reference();
+        let mut x = vec![td0, cd0, tau0, EhvvaParams::baseline().mass_kg];
+        let p = apply_knobs(&EhvvaParams::baseline(), &BASELINE_KNOBS, &x);
+        let mut sim = vec![0.0; set.samples];
+        simulate_all(&p, set, &mut sim)?;
+        let (mut shift, mut count) = (0.0, 0usize);
+        for ev in &set.events {
+            let stroke = ev.stroke_mm(&p);
+            let range = ev.start..ev.start + ev.lift_mm.len();
+            let (m, _) = edge_delays_ms(&ev.lift_mm, ev.on_index, ev.off_index, stroke, set.dt_ms);
+            let (s, _) = edge_delays_ms(&sim[range], ev.on_index, ev.off_index, stroke, set.dt_ms);
+            if let (Some(m), Some(s)) = (m, s) {
+                shift += m - s;
+                count += 1;
+            }
+        }
+        if count > 0 {
+            x[0] = (td0 + shift / count as f64).clamp(BASELINE_KNOBS[0].lo, BASELINE_KNOBS[0].hi);
+        }
+        Ok(x)
+    }
+
+    fn fit_baseline(&self, set: &Events) -> Result<(Vec<f64>, LsqResult), String> {
+        let key = set.key();
+        if let Some((k, x, r)) = self.baseline.lock().ok().and_then(|g| g.clone()) {
+            if k == key {
+                return Ok((x, r));
+            }
+        }
+        let x0 = self.baseline_start(set)?;
+        let r = calibrate(&EhvvaParams::baseline(), &BASELINE_KNOBS, &x0, set, &self.lsq)?;
+        if let Ok(mut g) = self.baseline.lock() {
+            *g = Some((key, r.x.clone(), r.clone()));
+        }
+        Ok((r.x.clone(), r))
+    }
+}
+
+impl Family for EhvvaFamily {
+    fn plant(&self) -> Plant {
+        Plant::Ehvva
+    }
+    fn output(&self) -> &'static str {
+        "lift_mm"
+    }
+    fn formulation(&self) -> &'static str {
+        "simulation error of the lift: each valve event (cut at the rising pilot command) simulated from rest by model-core's reduced model, eq. (12), at the event's set-points (pressures read at rest before the command); trust-region least squares, eqs. (16)-(20)"
+    }
+    fn effects(&self) -> &'static [&'static str] {
+        &EFFECTS
+    }
+
+    fn fit(&self, effect: Option<&str>, est: &Log, val: &Log) -> Result<Fit, String> {
+        let de = Events::from_log(est)?;
+        let dv = Events::from_log(val)?;
+        let (xb, rb) = self.fit_baseline(&de)?;
+        let mut knobs: Vec<Knob> = BASELINE_KNOBS.to_vec();
+        let r = match effect {
+            None => rb,
+            Some(e) => {
+                knobs.push(effect_knob(e)?);
+                let mut x0 = xb.clone();
+                x0.push(1.0);
+                calibrate(&EhvvaParams::baseline(), &knobs, &x0, &de, &self.lsq)?
+            }
+        };
+        let p = apply_knobs(&EhvvaParams::baseline(), &knobs, &r.x);
+        let mut predicted = vec![0.0; dv.samples];
+        simulate_all(&p, &dv, &mut predicted)?;
+        let params = knobs.iter().zip(&r.x).map(|(k, v)| (k.name.to_string(), *v)).collect();
+        Ok(Fit::new(effect.unwrap_or("baseline"), params, r.ci95.clone(), dv.measured(), predicted, r.iterations))
+    }
+
+    fn regressors(&self, val: &Log) -> Vec<(String, Vec<f64>)> {
+        let mut out: Vec<(String, Vec<f64>)> = Vec::new();
+        for name in ["u_pilot", "p_supply_MPa", "p_back_MPa", "temp_C", "lift_high", "snubber_on"] {
+            if let Some(c) = val.col(name) {
+                out.push((name.to_string(), c.to_vec()));
+            }
+        }
+        if let Some(y) = val.col("lift_mm") {
+            // Direction of motion from the lift smoothed over 0.5 ms, and the seating zone.
+            let w = ((0.5e-3 / val.dt_s).round() as usize).max(1);
+            let v: Vec<f64> = (0..y.len()).map(|k| y[(k + w).min(y.len() - 1)] - y[k.saturating_sub(w)]).collect();
+            let thr = 0.02;
+            out.push(("valve closing (lift falling)".into(), v.iter().map(|&d| if d < -thr { 1.0 } else { 0.0 }).collect()));
+            out.push(("valve opening (lift rising)".into(), v.iter().map(|&d| if d > thr { 1.0 } else { 0.0 }).collect()));
+            out.push(("closing within 1 mm of the seat".into(), v.iter().zip(y).map(|(&d, &l)| if d < -thr && l < 1.0 { 1.0 } else { 0.0 }).collect()));
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::generate::ehvva as gen;
+    use crate::log::parse_log;
+
+    fn logs(effect: &str, seed: u64) -> (Log, Log, Vec<(String, f64)>) {
+        let case = gen::generate(effect, seed).unwrap();
+        let est = parse_log("e.csv", &case.estimation_csv, None).unwrap();
+        let val = parse_log("v.csv", &case.validation_csv, None).unwrap();
+        (est, val, case.truth)
+    }
+
+    fn get(v: &[(String, f64)], key: &str) -> f64 {
+        v.iter().find(|(k, _)| k == key).map(|(_, v)| *v).unwrap_or_else(|| panic!("no {key}"))
+    }
+
+    /// Simulating the events of a generated log with the generator's true parameters gives
+    /// the logged lift back to the sensor noise: the cut into events, the set-points read at
+    /// rest and the early stop after seating lose nothing.
+    #[test]
+    fn event_simulation_reproduces_the_bench_with_the_truth() {
+        let (est, _, truth) = logs("direction-delay", 3);
+        let set = Events::from_log(&est).unwrap();
+        let mut knobs = BASELINE_KNOBS.to_vec();
+        knobs.push(effect_knob("direction-delay").unwrap());
+        let x: Vec<f64> = knobs.iter().map(|k| get(&truth, k.name)).collect();
+        let p = apply_knobs(&EhvvaParams::baseline(), &knobs, &x);
+        let mut sim = vec![0.0; set.samples];
+        simulate_all(&p, &set, &mut sim).unwrap();
+        let e: Vec<f64> = sim.iter().zip(set.measured()).map(|(s, y)| s - y).collect();
+        let rms = crate::residuals::rmse(&e);
+        assert!(rms < 0.008, "rms {rms} mm: more than the lift sensor's noise");
+        // A 10 % longer delay does not.
+        let mut wrong = x.clone();
+        wrong[0] *= 1.1;
+        simulate_all(&apply_knobs(&EhvvaParams::baseline(), &knobs, &wrong), &set, &mut sim).unwrap();
+        let e: Vec<f64> = sim.iter().zip(set.measured()).map(|(s, y)| s - y).collect();
+        assert!(crate::residuals::rmse(&e) > 5.0 * rms);
+    }
+
+    /// The baseline and an extension recover the generator's parameters from the estimation
+    /// log alone.
+    #[test]
+    fn fits_recover_the_hidden_parameters() {
+        let f = EhvvaFamily::default();
+        let (est, val, truth) = logs("none", 17);
+        let fit = f.fit(None, &est, &val).unwrap();
+        for (name, tol) in [("td_ms_at_7MPa_22C", 0.01), ("cd_at_22C", 0.02), ("mass_kg", 0.05)] {
+            let (got, want) = (get(&fit.params, name), get(&truth, name));
+            assert!((got / want - 1.0).abs() < tol, "{name}: {got} vs {want}");
+        }
+        let (est, val, truth) = logs("viscosity", 18);
+        let fit = f.fit(Some("viscosity"), &est, &val).unwrap();
+        let (got, want) = (get(&fit.params, "viscosity_gain"), get(&truth, "viscosity_gain"));
+        assert!((got / want - 1.0).abs() < 0.05, "viscosity gain {got} vs {want}");
+        assert!(fit.rmse < 0.012, "validation rmse {}", fit.rmse);
+    }
+
+    #[test]
+    fn logs_without_events_or_too_slow_are_refused_by_name() {
+        let (mut est, _, _) = logs("none", 1);
+        est.columns.insert("u_pilot".into(), vec![0.0; est.len()]);
+        assert!(Events::from_log(&est).unwrap_err().contains("no valve event"));
+        let (mut est, _, _) = logs("none", 1);
+        est.dt_s = 1e-3;
+        assert!(Events::from_log(&est).unwrap_err().contains("0.1 ms or less"));
+    }
+}
