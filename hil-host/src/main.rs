@@ -19,7 +19,8 @@ commands:
       (default: out/<scenario name>)
   generate <plant> <effect|none> [--seed N] [--out dir]
       write a bench-like estimation and validation log pair from the plant model with one
-      hidden effect (the truth goes to truth.json beside them, not into the logs)
+      hidden effect (the truth goes to truth.json beside them, not into the logs);
+      `generate evvt prbs-grid` writes the nine closed-loop PRBS identification logs instead
   identify evvt <closed-loop log>... [--json out.json]
       EVVT plant α/(s(s+β)) per operating point from closed-loop PRBS logs (Yang 2015: q-Markov
       cover of the closed loop, open loop by G = H(I-H)^-1 K^-1, integrator pole at zero) and
@@ -159,6 +160,9 @@ fn run_generate(args: &[String]) -> Result<(), CliError> {
         Some(s) => s.parse::<u64>().map_err(|_| CliError::Usage(format!("--seed {s}: not a whole number")))?,
         None => std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(1, |d| d.as_nanos() as u64),
     };
+    if plant == Plant::Evvt && effect == "prbs-grid" {
+        return generate_evvt_prbs_grid(seed, &PathBuf::from(a.get("out").unwrap_or(".")));
+    }
     let case = hil_host::generate::generate(plant, effect, seed).map_err(CliError::Failed)?;
     let dir = PathBuf::from(a.get("out").unwrap_or("."));
     std::fs::create_dir_all(&dir).map_err(|e| CliError::Failed(format!("{}: {e}", dir.display())))?;
@@ -187,6 +191,17 @@ fn run_scenario(args: &[String]) -> Result<(), CliError> {
     let summary = run(&scenario, Some(&out)).map_err(CliError::Failed)?;
     print!("{}", summary.text(&scenario.name));
     println!("logs (DATA-FORMAT) and plots in {}", out.display());
+    Ok(())
+}
+
+/// `generate evvt prbs-grid`: the nine closed-loop PRBS identification logs of the design
+/// table (for `identify evvt`).
+fn generate_evvt_prbs_grid(seed: u64, dir: &Path) -> Result<(), CliError> {
+    std::fs::create_dir_all(dir).map_err(|e| CliError::Failed(format!("{}: {e}", dir.display())))?;
+    for (name, text) in hil_host::generate::evvt::identification_grid(seed).map_err(CliError::Failed)? {
+        std::fs::write(dir.join(&name), text).map_err(|e| CliError::Failed(format!("{}: {e}", dir.join(&name).display())))?;
+    }
+    println!("seed {seed}: wrote the nine EVVT PRBS identification logs (design table) to {}", dir.display());
     Ok(())
 }
 

@@ -432,6 +432,20 @@ pub fn identification_log(x: &IdentificationExperiment) -> Result<String, String
     ))
 }
 
+/// The paper's nine identification logs (Section IV-B: 800/1100/1400 rpm × 9.5/11.5/14 V) of
+/// the design table, default experiment, as (file name, log text).
+pub fn identification_grid(seed: u64) -> Result<Vec<(String, String)>, String> {
+    let design = EvvtLpvTable::PAPER_DESIGN;
+    let mut logs = Vec::with_capacity(9);
+    for (i, &n) in design.engine_speed_rpm.iter().enumerate() {
+        for (j, &v) in design.battery_voltage_v.iter().enumerate() {
+            let x = IdentificationExperiment { engine_rpm: n, u_batt_v: v, seed: seed.wrapping_add(3 * i as u64 + j as u64), ..Default::default() };
+            logs.push((format!("prbs-{n}rpm-{v}V.csv"), identification_log(&x)?));
+        }
+    }
+    Ok(logs)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -871,7 +871,10 @@ pub fn lpv_table(points: &[EvvtPointResult]) -> Result<EvvtLpvTable, String> {
 pub fn tables_text(points: &[EvvtPointResult]) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "{:>10} {:>8} {:>6} {:>10} {:>9} {:>10} {:>9}", "N rpm", "V", "order", "alpha", "beta", "alpha map", "beta map");
-    for p in points {
+    let mut sorted: Vec<&EvvtPointResult> = points.iter().collect();
+    // By engine speed (to 50 rpm: the logged speed is noisy), then voltage.
+    sorted.sort_by(|a, b| (a.engine_rpm / 50.0).round().total_cmp(&(b.engine_rpm / 50.0).round()).then(a.u_batt_v.total_cmp(&b.u_batt_v)));
+    for p in sorted {
         let _ = writeln!(s, "{:>10.1} {:>8.2} {:>6} {:>10.4} {:>9.4} {:>10.4} {:>9.4}", p.engine_rpm, p.u_batt_v, p.order, p.alpha, p.beta, p.alpha_map, p.beta_map);
     }
     match lpv_table(points) {
