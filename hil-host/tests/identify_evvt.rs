@@ -204,3 +204,35 @@ fn bad_logs_give_errors_naming_file_and_what_is_missing() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("/nonexistent/prbs.csv"));
 }
+
+/// The long sweep (README numbers): the nine design points × 10 seeds, cam-event sampling,
+/// noise and quantization; prints the worst and RMS α, β errors per point and overall.
+/// `cargo test -p hil-host --test identify_evvt -- --ignored --nocapture`
+#[test]
+#[ignore]
+fn sweep_nine_points_ten_seeds() {
+    let design = EvvtLpvTable::PAPER_DESIGN;
+    let (mut worst_a, mut worst_b, mut sum2, mut count) = (0.0f64, 0.0f64, 0.0, 0);
+    for i in 0..3 {
+        for j in 0..3 {
+            let (n, v) = (design.engine_speed_rpm[i], design.battery_voltage_v[j]);
+            let (a, b) = (design.alpha_deg_per_s2_rpm[i][j], design.beta_per_s[i][j]);
+            let (mut wa, mut wb) = (0.0f64, 0.0f64);
+            for seed in 0..10 {
+                let text = identification_log(&experiment(design, n, v, 1000 + 37 * seed + 3 * i as u64 + j as u64)).unwrap();
+                let r = identify_text("sweep.csv", &text).unwrap();
+                let (ea, eb) = (rel_err_pct(r.alpha, a), rel_err_pct(r.beta, b));
+                wa = wa.max(ea.abs());
+                wb = wb.max(eb.abs());
+                sum2 += ea * ea + eb * eb;
+                count += 2;
+            }
+            println!("{n} rpm {v} V: worst |α error| {wa:.2} %, worst |β error| {wb:.2} % over 10 seeds");
+            worst_a = worst_a.max(wa);
+            worst_b = worst_b.max(wb);
+        }
+    }
+    let rms = (sum2 / count as f64).sqrt();
+    println!("all 90 logs: worst |α error| {worst_a:.2} %, worst |β error| {worst_b:.2} %, RMS {rms:.2} %");
+    assert!(worst_a < 5.0 && worst_b < 5.0);
+}
