@@ -646,7 +646,9 @@ pub fn run_with(scenario: &Scenario, link: &mut dyn EcuLink, opts: &RunOptions) 
     let (mut evvt_se, mut evvt_n, mut wg_se, mut wg_n, mut pump_steps) = (0.0, 0usize, 0.0, 0usize, 0u64);
 
     for k in 0..n_steps {
-        let t = k as f64 * STEP_S;
+        // Time from whole microseconds: fault and profile breakpoints at round times fall on
+        // exact steps.
+        let t = (k * u64::from(STEP_US)) as f64 / 1e6;
         let t_us = (k as u32).wrapping_mul(STEP_US);
         let rpm = sc.engine_rpm.at(t).max(0.0);
         let u_batt = sc.u_batt_at(t);
@@ -655,7 +657,7 @@ pub fn run_with(scenario: &Scenario, link: &mut dyn EcuLink, opts: &RunOptions) 
         // Sensor side: the edges of the step just ended, the ADC counts now.
         edges.clear();
         if k > 0 {
-            let t_prev = t - STEP_S;
+            let t_prev = ((k - 1) * u64::from(STEP_US)) as f64 / 1e6;
             let cam_deg = f64::from(evvt_cfg.cam_edge_parked_deg) - f64::from(evvt.phase_deg());
             let crank_ok = !sc.fault_active(FaultKind::CrankLost, t_prev);
             engine.advance(sc.engine_rpm.at(t_prev).max(0.0), cam_deg, crank_ok, t_us.wrapping_sub(STEP_US), &mut edges);
