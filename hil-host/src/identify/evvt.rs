@@ -64,7 +64,7 @@ use crate::lsq::{self, LsqOptions};
 #[derive(Clone, Debug)]
 pub struct EvvtIdentifyOptions {
     /// Length of the closed-loop held-pulse response estimated, s (the slowest design loop,
-    /// 800 rpm / 9.5 V... 1400 rpm / 9.5 V with kp = 25, decays to 1 % in about 6 s).
+    /// 1400 rpm / 9.5 V with kp = 25, decays to about 1 % in 6 s).
     pub markov_horizon_s: f64,
     /// Hankel rows (lags of the observability side).
     pub hankel_rows: usize,
@@ -896,7 +896,7 @@ pub fn tables_text(points: &[EvvtPointResult]) -> String {
 }
 
 /// The `--json` document: `{"points": [{"engine_rpm", "u_batt_V", "alpha", "beta", "order",
-/// ...}]}`, plus the table when the points form a grid.
+/// ...}]}` (the grid table follows from the points with [`lpv_table`]).
 pub fn to_json(points: &[EvvtPointResult]) -> serde_json::Value {
     let pts: Vec<serde_json::Value> = points
         .iter()
@@ -921,16 +921,7 @@ pub fn to_json(points: &[EvvtPointResult]) -> serde_json::Value {
             })
         })
         .collect();
-    let mut doc = serde_json::json!({ "points": pts });
-    if let Ok(t) = lpv_table(points) {
-        doc["lpv_table"] = serde_json::json!({
-            "engine_speed_rpm": t.engine_speed_rpm,
-            "battery_voltage_V": t.battery_voltage_v,
-            "alpha": t.alpha_deg_per_s2_rpm,
-            "beta": t.beta_per_s,
-        });
-    }
-    doc
+    serde_json::json!({ "points": pts })
 }
 
 #[cfg(test)]
