@@ -1,35 +1,141 @@
-//! `hil-host run` on the default scenario: the control code against the plant models.
+//! `hil-host run`: the ECU's code (model-core `EcuCore` in lockstep every 50 µs) against the
+//! plant models, on the default scenario and on short constant-speed runs.
 use hil_host::log::read_log;
-use hil_host::run::{run, Scenario};
+use hil_host::run::{run, run_with, NativeLink, Profile, RunOptions, RunOutput, Scenario};
+use model_core::ehvva::{run_event, EhvvaInputs, EhvvaParams, EhvvaReduced, EhvvaTables, ValveEvent};
+
+fn native(sc: &Scenario) -> RunOutput {
+    run_with(sc, &mut NativeLink::new().unwrap(), &RunOptions::default()).unwrap()
+}
+
+fn constant(v: f64) -> Profile {
+    Profile(vec![(0.0, v)])
+}
 
 #[test]
 fn default_scenario_tracks_and_holds_through_the_battery_sag() {
     let dir = std::env::temp_dir().join(format!("run-default-{}", std::process::id()));
     let sc = Scenario::default_scenario();
     let s = run(&sc, Some(&dir)).unwrap();
+    assert!(s.fault_events.is_empty(), "{:?}", s.fault_events);
 
-    // EVVT: both phase steps (10 -> 30 -> 15 deg) settle to ±1 deg within 1.5 s.
+    // EVVT: both phase steps (10 -> 30 -> 15 deg) settle to ±1 deg within 2 s (the phase is
+    // measured once per engine cycle: every 150 ms at 800 rpm).
     assert_eq!(s.evvt_settling_s.len(), 2, "{:?}", s.evvt_settling_s);
     for (t, settle) in &s.evvt_settling_s {
-        assert!(settle.is_some_and(|d| d < 1.5), "step at {t} s: {settle:?}");
+        assert!(settle.is_some_and(|d| d < 2.0), "step at {t} s: {settle:?}");
     }
 
-    // Vacuum: the wastegate holds 40 % through the 14 -> 9.5 V sag (8.2..9.0 s): the
-    // supply-voltage compensation works in the loop.
+    // Vacuum: through the 14 -> 9.5 V sag (plateau 8.2..9.0 s) the task's duty is compensated
+    // (duty·U constant: the valve acts on duty·U/U_ref) and the wastegate holds its position.
     let vac = read_log(&dir.join("vacuum.csv"), None).unwrap();
-    let (t, x, u) = (vac.col("t_s").unwrap(), vac.col("x_pct").unwrap(), vac.col("u_batt_V").unwrap());
-    let in_sag: Vec<f64> = (0..t.len()).filter(|&i| t[i] > 8.0 && t[i] < 9.2).map(|i| x[i]).collect();
-    assert!(!in_sag.is_empty() && u.iter().cloned().fold(f64::MAX, f64::min) < 9.6);
-    let worst = in_sag.iter().map(|x| (x - 40.0).abs()).fold(0.0, f64::max);
-    assert!(worst < 2.0, "wastegate moved {worst} % during the sag");
+    let (t, x, u, d) = (vac.col("t_s").unwrap(), vac.col("x_pct").unwrap(), vac.col("u_batt_V").unwrap(), vac.col("duty_pct").unwrap());
+    let at = |time: f64| (0..t.len()).find(|&i| t[i] >= time).unwrap();
+    let before = at(7.9);
+    assert!(u[before] == 14.0 && u.iter().cloned().fold(f64::MAX, f64::min) < 9.6);
+    // (Across the 0.2 s ramp the 80 Hz duty lags the voltage and the rod's friction keeps
+    // about 2 % of that transient; on the plateau nothing moves. Uncompensated, the valve
+    // would see 9.5/14 of its duty.)
+    let plateau = at(8.25);
+    for i in (0..t.len()).filter(|&i| t[i] > 8.25 && t[i] < 9.0) {
+        assert!((d[i] * u[i] - d[before] * u[before]).abs() < 0.01 * d[before] * u[before], "duty·U at {} s", t[i]);
+        assert!((x[i] - x[before]).abs() < 2.5 && (x[i] - x[plateau]).abs() < 0.5, "wastegate moved to {} % at {} s", x[i], t[i]);
+    }
+    // Feedforward only (the firmware's vacuum task has no position feedback): the rod's
+    // friction leaves it within 4 % of the set-point at the end of each hold.
+    for (time, set) in [(1.99, 20.0), (5.99, 60.0), (7.99, 40.0)] {
+        assert!((x[at(time)] - set).abs() < 4.0, "wastegate {} % for {set} % at {time} s", x[at(time)]);
+    }
 
-    // EHVVA: one event per engine cycle; the logs read back strictly.
+    // EHVVA: one event per engine cycle once the decoder has synchronised (< 3 cycles).
     let cycles: f64 = (0..10_000).map(|k| sc.engine_rpm.at(k as f64 * 1e-3) / 60.0 / 2.0 * 1e-3).sum();
-    assert!((s.ehvva_events as f64 - cycles).abs() <= 1.5, "{} events for {cycles:.1} cycles", s.ehvva_events);
-    for f in ["ehvva.csv", "evvt.csv"] {
-        read_log(&dir.join(f), None).unwrap();
+    assert!(s.ehvva_events as f64 <= cycles + 1.0 && s.ehvva_events as f64 >= cycles - 3.0, "{} events for {cycles:.1} cycles", s.ehvva_events);
+    // Advanced by td, the valve reaches 1 % lift a few degrees late (the rise after td, see
+    // the constant-speed test); without the advance it would be ω·td ≈ 16..28 deg late.
+    assert!(s.ehvva_open_error_deg.0 > 0.0 && s.ehvva_open_error_deg.1 < 7.0, "{:?}", s.ehvva_open_error_deg);
+    assert!(s.ehvva_close_error_deg.1 < 7.0, "{:?}", s.ehvva_close_error_deg);
+
+    // Every log reads back under the strict reader.
+    for f in ["ehvva.csv", "evvt.csv", "vacuum.csv", "vacuum-hpt.csv", "vacuum-hpc.csv"] {
+        read_log(&dir.join(f), None).unwrap_or_else(|e| panic!("{f}: {e}"));
+    }
+    for f in ["ehvva.svg", "evvt.svg", "vacuum.svg"] {
+        assert!(std::fs::read_to_string(dir.join(f)).unwrap().starts_with("<svg"));
     }
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// At constant speed the ECU's timing error is exactly what the valve model adds after td:
+/// the measured opening (1 % lift) and closing (99 % lift) angles lie (t_1% − td)·ω after the
+/// requested ones, within the 50 µs step and the decoder's extrapolation.
+#[test]
+fn valve_timing_error_is_the_plant_rise_after_the_td_advance() {
+    let (rpm, ph, pl, temp) = (1500.0, 8.0, 1.0, 22.0);
+    let sc = Scenario {
+        name: "timing".into(),
+        duration_s: 1.0,
+        engine_rpm: constant(rpm),
+        temp_c: constant(temp),
+        p_supply_mpa: constant(ph),
+        p_back_mpa: constant(pl),
+        u_batt_v: constant(14.0),
+        ..Scenario::default_scenario()
+    };
+    let o = native(&sc);
+    let s = &o.summary;
+    assert!(s.ehvva_events >= 9, "{} events in 1 s at 1500 rpm", s.ehvva_events);
+
+    // The same valve model alone: pilot on at 1 ms for the dwell, delays measured.
+    let params = EhvvaParams::paper_default();
+    let inputs = EhvvaInputs::<f32> { p_supply_mpa: ph as f32, p_back_mpa: pl as f32, temp_c: temp as f32, lift_high: true, snubber_on: true };
+    let mut valve = EhvvaReduced::<f32>::new(&params, &inputs, 0.01).unwrap();
+    let deg_per_ms = rpm * 6.0 / 1000.0;
+    let dwell_ms = (540.0 - 360.0) / deg_per_ms;
+    let m = run_event(&mut valve, &ValveEvent::with_dwell(dwell_ms), &inputs, params.lift_high_mm, |_, _| {});
+    let tables = EhvvaTables::<f64>::new(&params).unwrap();
+    let (td_open, td_close) = tables.t_delay_pair_ms(ph, temp);
+    let expect_open = (m.opening_delay_ms().unwrap() - td_open) * deg_per_ms;
+    let expect_close = (m.closing_delay_ms().unwrap() - td_close) * deg_per_ms;
+    println!("opening error {:?} (expected {expect_open:.2}), closing {:?} (expected {expect_close:.2}) crank deg", s.ehvva_open_error_deg, s.ehvva_close_error_deg);
+    assert!((s.ehvva_open_error_deg.0 - expect_open).abs() < 0.6, "opening {:?} vs {expect_open}", s.ehvva_open_error_deg);
+    assert!((s.ehvva_close_error_deg.0 - expect_close).abs() < 0.6, "closing {:?} vs {expect_close}", s.ehvva_close_error_deg);
+    // Event to event the same within half a degree.
+    assert!(s.ehvva_open_error_deg.1 - s.ehvva_open_error_deg.0.abs() < 0.5);
+}
+
+/// The ECU's snubber switch output reaches the valve: at the paper's test 6/7 conditions
+/// (8 MPa, 22 °C, high lift) the valve seats at 0.25 m/s with it on, 0.69 m/s off (Sec. 2).
+#[test]
+fn snubber_switch_output_softens_the_seating() {
+    let seat = |snubber_on: bool| {
+        let sc = Scenario {
+            name: "seat".into(),
+            duration_s: 0.6,
+            engine_rpm: constant(1500.0),
+            temp_c: constant(22.0),
+            p_supply_mpa: constant(8.0),
+            lift_high: true,
+            snubber_on,
+            ..Scenario::default_scenario()
+        };
+        let o = native(&sc);
+        assert!(o.summary.ehvva_events >= 4);
+        assert!(o.ehvva.iter().all(|r| r.snubber_on == snubber_on && r.lift_high));
+        o.summary.ehvva_seating_velocity_m_s.unwrap()
+    };
+    let (on, off) = (seat(true), seat(false));
+    assert!((0.18..=0.32).contains(&on), "switch on: {on} m/s");
+    assert!((0.55..=0.85).contains(&off), "switch off: {off} m/s");
+}
+
+#[test]
+fn a_run_can_stop_early_and_keeps_its_frames() {
+    let sc = Scenario::default_scenario();
+    let o = run_with(&sc, &mut NativeLink::new().unwrap(), &RunOptions { until_s: Some(0.05), keep_frames: true }).unwrap();
+    assert_eq!(o.frames.len(), 1000);
+    assert!(o.frames.iter().enumerate().all(|(k, (s, a))| s.seq == k as u32 && a.seq == s.seq && s.t_us == 50 * k as u32));
+    assert_eq!(o.ehvva.len(), 1000);
+    assert!((o.summary.simulated_s - 0.05).abs() < 1e-12);
 }
 
 #[test]
