@@ -9,6 +9,7 @@
 #![no_std]
 #![no_main]
 
+mod bench;
 mod board;
 mod lockstep;
 
@@ -45,8 +46,16 @@ fn mode_from_command_line() -> Mode {
 }
 
 #[embassy_executor::task]
-async fn lockstep_task(mut link: Link, mut server: Server) -> ! {
-    lockstep::serve(&mut link, &mut server, |core, s| core.step(s)).await
+async fn lockstep_task(mut link: Link, mut server: Server, mode: Mode) -> ! {
+    match mode {
+        Mode::Lockstep => lockstep::serve(&mut link, &mut server, |core, s| core.step(s)).await,
+        Mode::Bench => {
+            if let Err(what) = bench::run_plants(&mut link) {
+                defmt::error!("plant bench: {=str}", what);
+            }
+            lockstep::serve(&mut link, &mut server, bench::counted_step).await
+        }
+    }
 }
 
 #[entry]
@@ -59,7 +68,7 @@ fn main() -> ! {
         Err(what) => halt(what),
     };
     defmt::info!("netduinoplus2: ECU core up, mode {}", mode);
-    match lockstep_task(board.link, Server::new(ecu)) {
+    match lockstep_task(board.link, Server::new(ecu), mode) {
         Ok(t) => board.spawner.spawn(t),
         Err(_) => halt("task spawn"),
     }

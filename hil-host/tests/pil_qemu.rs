@@ -82,20 +82,20 @@ fn pil_answers_equal_native_core_bit_for_bit() {
 fn corrupted_and_dropped_frames_are_counted_and_retransmitted_losslessly() {
     let Some(elf) = firmware() else { return };
     let _one = one_at_a_time();
-    let frames = feed(600);
+    let frames = feed(400);
     let native = pil::run_frames_native(&frames).unwrap();
-    let faults = LinkFaults { corrupt_every: Some(7), drop_every: Some(50) };
+    let faults = LinkFaults { corrupt_every: Some(7), drop_every: Some(40) };
     let mut link = PilLink::start(&elf, PilOptions { faults, ..PilOptions::default() }).unwrap();
     let run = pil::run_frames(&mut link, &frames).unwrap();
     let s = run.stats;
     eprintln!("{s:?}");
     assert_eq!(run.answers.len(), frames.len());
     assert_bit_exact(&native, &run.answers);
-    // Every transmission counted: the k-th is corrupted when 7 | k, dropped when 50 | k.
+    // Every transmission counted: the k-th is corrupted when 7 | k, dropped when 40 | k.
     let attempts = s.transmissions + s.dropped_injected;
-    assert_eq!(s.dropped_injected, attempts / 50);
-    assert_eq!(s.corrupted_injected, attempts / 7 - attempts / 350);
-    assert!(s.corrupted_injected >= 80 && s.dropped_injected >= 12, "too few faults injected: {s:?}");
+    assert_eq!(s.dropped_injected, attempts / 40);
+    assert_eq!(s.corrupted_injected, attempts / 7 - attempts / 280);
+    assert!(s.corrupted_injected >= 50 && s.dropped_injected >= 10, "too few faults injected: {s:?}");
     // The firmware rejected exactly the corrupted frames and said so each time.
     assert_eq!(u64::from(s.ecu_bad_frames), s.corrupted_injected);
     assert_eq!(s.nacks_received, s.corrupted_injected);
@@ -110,10 +110,10 @@ fn corrupted_and_dropped_frames_are_counted_and_retransmitted_losslessly() {
 fn a_silent_link_drives_the_safe_outputs_and_stepping_resumes() {
     let Some(elf) = firmware() else { return };
     let _one = one_at_a_time();
-    let frames = feed(1200);
+    let frames = feed(300);
     let native = pil::run_frames_native(&frames).unwrap();
     let mut link = PilLink::start(&elf, PilOptions::default()).unwrap();
-    let first = pil::run_frames(&mut link, &frames[..1000]).unwrap();
+    let first = pil::run_frames(&mut link, &frames[..150]).unwrap();
     // Outputs live before the silence: the vacuum valves are being driven.
     let last = first.answers.last().copied().unwrap();
     assert!(last.vacuum_duty.iter().any(|d| *d > 0.0), "{last:?}");
@@ -126,7 +126,7 @@ fn a_silent_link_drives_the_safe_outputs_and_stepping_resumes() {
     assert!(!r.lift_valve_on && !r.snubber_on && !r.pump_on);
     assert_eq!((r.motor_duty, r.vacuum_duty), (0.0, [0.0; 3]));
     // The core was not disturbed: the next frames step on as natively.
-    let second = pil::run_frames(&mut link, &frames[1000..]).unwrap();
+    let second = pil::run_frames(&mut link, &frames[150..]).unwrap();
     let mut all = first.answers;
     all.extend(second.answers);
     assert_bit_exact(&native, &all);

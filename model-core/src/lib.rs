@@ -18,6 +18,7 @@ pub mod ehvva;
 pub mod evvt;
 pub mod lut;
 pub mod peak_hold;
+pub mod plant_bench;
 pub mod positioner;
 pub mod prbs;
 pub mod pwm_comp;

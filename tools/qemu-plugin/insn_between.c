@@ -1,17 +1,19 @@
 /*
- * QEMU TCG plugin: counts the guest instructions executed from the first instruction of a
- * "begin" marker function (inclusive) to the first instruction of an "end" marker function
- * (exclusive), for every such interval, and appends each count as a line to a file.
+ * QEMU TCG plugin: counts the guest instructions executed between marker functions. Every
+ * call of a "begin" marker opens an interval under that marker's label, every call of the
+ * "end" marker closes the innermost open one (intervals nest), and each closed interval is
+ * appended as a line "label count" to a file. Instructions inside the marker functions'
+ * bodies are not counted; the call instructions at the call sites are (the firmware counts an
+ * empty interval so the host can subtract them).
  *
- *   qemu-system-arm ... -plugin tools/qemu-plugin/insn_between.so,begin=0x8001234,end=0x8001240,out=counts.txt
+ *   qemu-system-arm ... -plugin tools/qemu-plugin/insn_between.so,begin=core_step:0x8001234:18,end=0x8001240:20,out=counts.txt
  *
- * Addresses are the markers' entry points with the Thumb bit cleared. The counts include the
- * markers' own call overhead; the firmware measures an empty interval first so the host can
- * subtract it. Interrupts taken inside an interval would be counted too: the firmware runs
- * its intervals with interrupts masked.
+ * begin=LABEL:ADDRESS:SIZE (repeatable) and end=ADDRESS:SIZE are the markers' ELF symbols
+ * (the Thumb bit of the address is ignored). Interrupts taken inside an interval would be
+ * counted too: the firmware masks them while an interval is open.
  *
  * Debian's QEMU accepts plugins built for API v2 to v4 but ships no header, so the few types
- * and functions used here are declared below (they have kept these signatures since API v1).
+ * and functions used here are declared below (their signatures are unchanged since API v1).
  */
 #include <stdint.h>
 #include <stdio.h>
@@ -40,40 +42,59 @@ uint64_t qemu_plugin_insn_vaddr(const struct qemu_plugin_insn *insn);
 /* The oldest API level whose functions are used here; QEMU 10 accepts 2..4. */
 EXPORT int qemu_plugin_version = 2;
 
-static uint64_t begin_addr, end_addr;
+#define MAX_MARKERS 32
+#define MAX_DEPTH 16
+
+struct marker {
+    char label[48];
+    uint64_t start, size;
+};
+
+static struct marker begins[MAX_MARKERS];
+static int n_begins;
+static struct marker end_marker;
 static FILE *out;
 /* One emulated Cortex-M4: one vCPU, so plain counters suffice. */
-static uint64_t count;
-static int counting;
-static uint64_t intervals;
+static uint64_t total;
+static struct { int label; uint64_t at; } open_intervals[MAX_DEPTH];
+static int depth;
 
 static void on_insn(unsigned int vcpu, void *udata)
 {
     (void)vcpu;
     (void)udata;
-    count += (uint64_t)counting;
+    total++;
 }
 
 static void on_begin(unsigned int vcpu, void *udata)
 {
     (void)vcpu;
-    (void)udata;
-    counting = 1;
-    count = 1; /* the marker's first instruction */
+    if (depth < MAX_DEPTH) {
+        open_intervals[depth].label = (int)(intptr_t)udata;
+        open_intervals[depth].at = total;
+    }
+    depth++;
 }
 
 static void on_end(unsigned int vcpu, void *udata)
 {
     (void)vcpu;
     (void)udata;
-    if (!counting) {
+    if (depth == 0) {
         return; /* an end without a begin: nothing to report */
     }
-    counting = 0;
-    intervals++;
-    fprintf(out, "%llu\n", (unsigned long long)count);
-    /* The host kills QEMU when it has what it needs: every line must be on disk by then. */
-    fflush(out);
+    depth--;
+    if (depth < MAX_DEPTH) {
+        fprintf(out, "%s %llu\n", begins[open_intervals[depth].label].label,
+                (unsigned long long)(total - open_intervals[depth].at));
+        /* The host kills QEMU when it has what it needs: every line must be on disk by then. */
+        fflush(out);
+    }
+}
+
+static int inside(const struct marker *m, uint64_t pc)
+{
+    return pc >= m->start && pc < m->start + m->size;
 }
 
 static void on_translate(qemu_plugin_id_t id, struct qemu_plugin_tb *tb)
@@ -83,8 +104,20 @@ static void on_translate(qemu_plugin_id_t id, struct qemu_plugin_tb *tb)
     for (size_t i = 0; i < n; i++) {
         struct qemu_plugin_insn *insn = qemu_plugin_tb_get_insn(tb, i);
         uint64_t pc = qemu_plugin_insn_vaddr(insn);
-        qemu_plugin_vcpu_udata_cb_t cb = pc == begin_addr ? on_begin : pc == end_addr ? on_end : on_insn;
-        qemu_plugin_register_vcpu_insn_exec_cb(insn, cb, QEMU_PLUGIN_CB_NO_REGS, NULL);
+        qemu_plugin_vcpu_udata_cb_t cb = on_insn;
+        void *udata = NULL;
+        if (inside(&end_marker, pc)) {
+            cb = pc == end_marker.start ? on_end : NULL;
+        }
+        for (int k = 0; k < n_begins; k++) {
+            if (inside(&begins[k], pc)) {
+                cb = pc == begins[k].start ? on_begin : NULL;
+                udata = (void *)(intptr_t)k;
+            }
+        }
+        if (cb != NULL) {
+            qemu_plugin_register_vcpu_insn_exec_cb(insn, cb, QEMU_PLUGIN_CB_NO_REGS, udata);
+        }
     }
 }
 
@@ -97,24 +130,49 @@ static void on_plugin_exit(qemu_plugin_id_t id, void *udata)
     }
 }
 
+/* "ADDRESS:SIZE" into m; 0 on success. */
+static int parse_range(const char *text, struct marker *m)
+{
+    char *rest;
+    m->start = strtoull(text, &rest, 0) & ~1ULL;
+    if (*rest != ':') {
+        return 1;
+    }
+    m->size = strtoull(rest + 1, &rest, 0);
+    return *rest != '\0' || m->start == 0 || m->size == 0;
+}
+
 EXPORT int qemu_plugin_install(qemu_plugin_id_t id, const qemu_info_t *info, int argc, char **argv)
 {
     (void)info;
     const char *path = NULL;
     for (int i = 0; i < argc; i++) {
-        if (strncmp(argv[i], "begin=", 6) == 0) {
-            begin_addr = strtoull(argv[i] + 6, NULL, 0) & ~1ULL;
-        } else if (strncmp(argv[i], "end=", 4) == 0) {
-            end_addr = strtoull(argv[i] + 4, NULL, 0) & ~1ULL;
-        } else if (strncmp(argv[i], "out=", 4) == 0) {
-            path = argv[i] + 4;
+        const char *a = argv[i];
+        if (strncmp(a, "begin=", 6) == 0 && n_begins < MAX_MARKERS) {
+            const char *colon = strchr(a + 6, ':');
+            struct marker *m = &begins[n_begins];
+            size_t len = colon != NULL ? (size_t)(colon - (a + 6)) : 0;
+            if (len == 0 || len >= sizeof m->label || parse_range(colon + 1, m)) {
+                fprintf(stderr, "insn_between: bad %s (begin=LABEL:ADDRESS:SIZE)\n", a);
+                return 1;
+            }
+            memcpy(m->label, a + 6, len);
+            m->label[len] = '\0';
+            n_begins++;
+        } else if (strncmp(a, "end=", 4) == 0) {
+            if (parse_range(a + 4, &end_marker)) {
+                fprintf(stderr, "insn_between: bad %s (end=ADDRESS:SIZE)\n", a);
+                return 1;
+            }
+        } else if (strncmp(a, "out=", 4) == 0) {
+            path = a + 4;
         } else {
-            fprintf(stderr, "insn_between: unknown argument %s (begin=, end=, out=)\n", argv[i]);
+            fprintf(stderr, "insn_between: unknown argument %s (begin=, end=, out=)\n", a);
             return 1;
         }
     }
-    if (begin_addr == 0 || end_addr == 0 || begin_addr == end_addr) {
-        fprintf(stderr, "insn_between: needs two different marker addresses begin=0x... end=0x...\n");
+    if (n_begins == 0 || end_marker.start == 0) {
+        fprintf(stderr, "insn_between: needs begin=LABEL:ADDRESS:SIZE (one or more) and end=ADDRESS:SIZE\n");
         return 1;
     }
     out = path != NULL ? fopen(path, "w") : stderr;

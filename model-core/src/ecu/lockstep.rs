@@ -75,6 +75,16 @@ impl Period {
     }
 }
 
+/// The tasks of one step, as [`EcuCore::step_probed`] reports them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StepPart {
+    Supervisor,
+    /// The crank/cam edges of the frame and the EHVVA task's step.
+    Ehvva,
+    Evvt,
+    Vacuum,
+}
+
 /// Supervisor + EHVVA + EVVT + vacuum tasks with their schedule and the values they share.
 #[derive(Clone, Debug)]
 pub struct EcuCore {
@@ -135,10 +145,13 @@ impl EcuCore {
 
     /// One lockstep step: the edges and ADC counts of `s`, the tasks that are due, the outputs.
     pub fn step(&mut self, s: &SensorFrame) -> ActuatorFrame {
+        self.step_probed(s, |_, _| {})
+    }
+
+    /// [`Self::step`] with `probe(part, true)` before and `probe(part, false)` after each
+    /// task that runs (the emulated target counts instructions per task with it).
+    pub fn step_probed(&mut self, s: &SensorFrame, mut probe: impl FnMut(StepPart, bool)) -> ActuatorFrame {
         let now = s.t_us;
-        for &edge in s.edges() {
-            self.ehvva.on_edge(edge);
-        }
         if self.sup_period.due(now) {
             let vac = self.last_vacuum;
             let reports = TaskReports {
@@ -147,12 +160,18 @@ impl EcuCore {
                 vacuum_stuck: vac.is_some_and(|v| v.stuck.iter().any(|x| *x)),
                 abnormal_leak: vac.is_some_and(|v| v.abnormal_leak),
             };
+            probe(StepPart::Supervisor, true);
             let out = self.sup.step(&s.adc_counts, &reports, now);
+            probe(StepPart::Supervisor, false);
             self.meas = out.measurements;
             self.faults = out.active;
             self.safe = out.safe;
         }
         let m = self.meas;
+        probe(StepPart::Ehvva, true);
+        for &edge in s.edges() {
+            self.ehvva.on_edge(edge);
+        }
         let e = self.ehvva.step(
             &EhvvaStepInputs {
                 request: s.valve,
@@ -163,8 +182,10 @@ impl EcuCore {
             },
             now,
         );
+        probe(StepPart::Ehvva, false);
         self.engine = Some(e.engine);
         if self.evvt_period.due(now) {
+            probe(StepPart::Evvt, true);
             let o = self.evvt.step(
                 &EvvtTaskInputs {
                     engine: e.engine,
@@ -175,10 +196,12 @@ impl EcuCore {
                 },
                 now,
             );
+            probe(StepPart::Evvt, false);
             self.motor_duty = o.motor_duty;
             self.last_evvt = Some(o);
         }
         if self.vacuum_period.due(now) {
+            probe(StepPart::Vacuum, true);
             let o = self.vacuum.step(
                 &VacuumTaskInputs {
                     x_set_pct: s.vacuum_x_set_pct,
@@ -190,6 +213,7 @@ impl EcuCore {
                 },
                 now,
             );
+            probe(StepPart::Vacuum, false);
             self.last_vacuum = Some(o);
         }
         let vac = self.last_vacuum;

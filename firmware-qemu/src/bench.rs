@@ -1,0 +1,128 @@
+//! The instruction-count bench (started with the semihosting argument `bench`).
+//!
+//! Each counted piece of work runs between a call to one of the `pil_begin_*` marker
+//! functions and a call to `pil_end`; the host's TCG plugin (tools/qemu-plugin) counts the
+//! instructions executed in between, leaving out the markers' own bodies, and writes one
+//! line per interval: the label (the marker's name after `pil_begin_`) and the count. The
+//! marker bodies differ (each stores its own number), so the linker cannot merge them, and
+//! interrupts are masked while an interval is open, so no handler is counted.
+//!
+//! 1. Plants: [`PlantBench`] in f32 and in Q32, `COUNTED_STEPS` counted steps of each model,
+//!    then the final states as raw bits in a [`PLANT_REPORT_MAGIC`] record on the link.
+//! 2. Tasks: the lockstep link is served as usual, with every task of every step counted
+//!    (`supervisor`, `ehvva`, `evvt`, `vacuum`) and the whole `EcuCore::step` (`core_step`,
+//!    which includes the inner markers' call instructions).
+use core::sync::atomic::{compiler_fence, AtomicU32, Ordering};
+
+use model_core::ecu::frame::{crc16, ActuatorFrame, SensorFrame};
+use model_core::ecu::lockstep::{EcuCore, StepPart};
+use model_core::plant_bench::{PlantBench, COUNTED_STEPS, N_STATE};
+use model_core::{Real, Q32};
+
+use crate::board::Link;
+
+/// Start of the plant-state record: `magic (2) | words u8 | words × u64 LE | CRC-16 LE`.
+pub const PLANT_REPORT_MAGIC: [u8; 2] = [0x50, 0xB7];
+
+/// The last marker passed (each marker's body: its own volatile store).
+static MARK: AtomicU32 = AtomicU32::new(0);
+
+macro_rules! markers {
+    ($($name:ident = $id:expr),* $(,)?) => {$(
+        #[no_mangle]
+        #[inline(never)]
+        pub extern "C" fn $name() {
+            // Volatile: a plain store to a never-read static is optimised away, and the
+            // then identical empty bodies are folded into one function by the linker.
+            // SAFETY: an aligned word of a static; only markers write it, nothing reads it.
+            unsafe { MARK.as_ptr().write_volatile($id) };
+        }
+    )*};
+}
+
+markers! {
+    pil_begin_empty = 1,
+    pil_begin_core_step = 2,
+    pil_begin_supervisor = 3,
+    pil_begin_ehvva = 4,
+    pil_begin_evvt = 5,
+    pil_begin_vacuum = 6,
+    pil_begin_ehvva_plant_f32 = 7,
+    pil_begin_ehvva_plant_q32 = 8,
+    pil_begin_evvt_plant_f32 = 9,
+    pil_begin_evvt_plant_q32 = 10,
+    pil_begin_vacuum_plant_f32 = 11,
+    pil_begin_vacuum_plant_q32 = 12,
+    pil_end = 0xE0D,
+}
+
+/// `work` between `begin` and `pil_end`, interrupts masked.
+#[inline(always)]
+fn counted<T>(begin: extern "C" fn(), work: impl FnOnce() -> T) -> T {
+    cortex_m::interrupt::free(|_| {
+        begin();
+        compiler_fence(Ordering::SeqCst);
+        let out = core::hint::black_box(work());
+        compiler_fence(Ordering::SeqCst);
+        pil_end();
+        out
+    })
+}
+
+/// The plant steps of one number type, counted; their final states.
+fn plants<R: Real>(ehvva: extern "C" fn(), evvt: extern "C" fn(), vacuum: extern "C" fn()) -> Result<[R; N_STATE], &'static str> {
+    let mut b = PlantBench::<R>::new()?;
+    // The order the host repeats natively (hil-host pil.rs, `plant_bench_native`).
+    for _ in 0..COUNTED_STEPS {
+        let b = core::hint::black_box(&mut b);
+        counted(ehvva, || b.step_ehvva());
+        let rpm = b.next_engine_rpm();
+        counted(evvt, || b.step_evvt(rpm));
+        counted(vacuum, || b.step_vacuum());
+    }
+    Ok(b.state())
+}
+
+/// Runs the plant bench and sends its record; an empty interval first (the host subtracts
+/// its count, the call instruction of `pil_end`, from every interval).
+pub fn run_plants(link: &mut Link) -> Result<(), &'static str> {
+    for _ in 0..4 {
+        counted(pil_begin_empty, || ());
+    }
+    let f = plants::<f32>(pil_begin_ehvva_plant_f32, pil_begin_evvt_plant_f32, pil_begin_vacuum_plant_f32)?;
+    let q = plants::<Q32>(pil_begin_ehvva_plant_q32, pil_begin_evvt_plant_q32, pil_begin_vacuum_plant_q32)?;
+    let mut words = [0u64; 2 * N_STATE];
+    for k in 0..N_STATE {
+        words[k] = u64::from(f[k].to_bits());
+        words[N_STATE + k] = q[k].to_bits() as u64;
+    }
+    let mut record = [0u8; 3 + 8 * 2 * N_STATE + 2];
+    record[..2].copy_from_slice(&PLANT_REPORT_MAGIC);
+    record[2] = words.len() as u8;
+    for (k, w) in words.iter().enumerate() {
+        record[3 + 8 * k..11 + 8 * k].copy_from_slice(&w.to_le_bytes());
+    }
+    let end = record.len() - 2;
+    let crc = crc16(&record[2..end]);
+    record[end..].copy_from_slice(&crc.to_le_bytes());
+    link.write(&record);
+    Ok(())
+}
+
+/// `EcuCore::step` with every task counted and the whole step counted around them.
+pub fn counted_step(core: &mut EcuCore, s: &SensorFrame) -> ActuatorFrame {
+    counted(pil_begin_core_step, || {
+        core.step_probed(s, |part, begin| {
+            if begin {
+                match part {
+                    StepPart::Supervisor => pil_begin_supervisor(),
+                    StepPart::Ehvva => pil_begin_ehvva(),
+                    StepPart::Evvt => pil_begin_evvt(),
+                    StepPart::Vacuum => pil_begin_vacuum(),
+                }
+            } else {
+                pil_end();
+            }
+        })
+    })
+}
