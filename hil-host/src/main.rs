@@ -25,6 +25,15 @@ commands:
       EVVT plant α/(s(s+β)) per operating point from closed-loop PRBS logs (Yang 2015: q-Markov
       cover of the closed loop, open loop by G = H(I-H)^-1 K^-1, integrator pole at zero) and
       the LPV tables α(N, V), β(N, V)
+  pil [scenario.toml] [--elf path] [--out dir] [--until s] [--corrupt-every n] [--drop-every m] [--compare-native]
+      processor in the loop: the same closed loop as `run`, with the ECU core as firmware on
+      QEMU's emulated STM32F405 (netduinoplus2) in lockstep over its UART; builds firmware-qemu
+      when no --elf is given; prints PIL steps per second and the link's bad-frame counters;
+      --corrupt-every/--drop-every inject faults on sensor frames (retransmitted: lossless);
+      --compare-native also runs natively and compares every actuator frame
+  target-bench [--elf path] [--out dir] [--steps N]
+      instructions per task step and per plant step (f32, Q32) on the emulated Cortex-M4
+      (QEMU TCG plugin tools/qemu-plugin), and the plant states checked against the host
 plants: vacuum, ehvva, evvt, positioner
 ";
 
@@ -36,6 +45,8 @@ fn main() -> ExitCode {
         Some("generate") => run_generate(&args[1..]),
         Some("run") => run_scenario(&args[1..]),
         Some("identify") => run_identify(&args[1..]),
+        Some("pil") => run_pil(&args[1..]),
+        Some("target-bench") => run_target_bench(&args[1..]),
         Some("-h") | Some("--help") | Some("help") => {
             print!("{USAGE}");
             Ok(())
@@ -191,6 +202,73 @@ fn run_scenario(args: &[String]) -> Result<(), CliError> {
     let summary = run(&scenario, Some(&out)).map_err(CliError::Failed)?;
     print!("{}", summary.text(&scenario.name));
     println!("logs (DATA-FORMAT) and plots in {}", out.display());
+    Ok(())
+}
+
+/// `pil`: the scenario with the ECU core on QEMU (hil_host::pil).
+fn run_pil(args: &[String]) -> Result<(), CliError> {
+    use hil_host::pil::{self, LinkFaults};
+    use hil_host::run::Scenario;
+    // --compare-native takes no value: strip it before the `--name value` parser.
+    let compare_native = args.iter().any(|a| a == "--compare-native");
+    let rest: Vec<String> = args.iter().filter(|a| *a != "--compare-native").cloned().collect();
+    let a = parse_args(&rest, &["elf", "out", "until", "corrupt-every", "drop-every"])?;
+    let scenario = match a.positional.as_slice() {
+        [] => Scenario::default_scenario(),
+        [file] => {
+            let text = std::fs::read_to_string(file).map_err(|e| CliError::Failed(format!("{file}: {e}")))?;
+            Scenario::from_toml(Path::new(file), &text).map_err(CliError::Failed)?
+        }
+        _ => return Err(CliError::Usage("pil takes at most one scenario file".into())),
+    };
+    let number = |name: &str| -> Result<Option<u32>, CliError> {
+        a.get(name).map(|v| v.parse::<u32>().map_err(|_| CliError::Usage(format!("--{name} {v}: not a whole number")))).transpose()
+    };
+    let faults = LinkFaults { corrupt_every: number("corrupt-every")?, drop_every: number("drop-every")? };
+    let until_s = a.get("until").map(|v| v.parse::<f64>().map_err(|_| CliError::Usage(format!("--until {v}: not a number")))).transpose()?;
+    let out = PathBuf::from(a.get("out").map(String::from).unwrap_or_else(|| format!("out/{}-pil", scenario.name)));
+    let elf = match a.get("elf") {
+        Some(e) => PathBuf::from(e),
+        None => pil::build_firmware().map_err(CliError::Failed)?,
+    };
+    let r = pil::run_scenario(&scenario, &elf, faults, until_s, compare_native, &out).map_err(CliError::Failed)?;
+    print!("{}", r.output.summary.text(&scenario.name));
+    print!("{}", r.text());
+    let written = hil_host::run::write_outputs(&scenario, &r.output, &out).map_err(|e| CliError::Failed(format!("{}: {e}", out.display())))?;
+    println!("logs (DATA-FORMAT), plots and the firmware's defmt stream (defmt.bin: defmt-print -e {} < defmt.bin) in {} ({} files)", elf.display(), out.display(), written.len());
+    if r.first_difference.is_some() {
+        return Err(CliError::Failed("the PIL run differs from the native run".into()));
+    }
+    Ok(())
+}
+
+/// `target-bench`: instruction counts on the emulated target (hil_host::pil::target_bench).
+fn run_target_bench(args: &[String]) -> Result<(), CliError> {
+    use hil_host::pil::{self, OpenLoopFeed};
+    let a = parse_args(args, &["elf", "out", "steps"])?;
+    if !a.positional.is_empty() {
+        return Err(CliError::Usage("target-bench takes only options".into()));
+    }
+    let steps = match a.get("steps") {
+        Some(v) => v.parse::<usize>().map_err(|_| CliError::Usage(format!("--steps {v}: not a whole number")))?,
+        None => 2000,
+    };
+    let out = PathBuf::from(a.get("out").unwrap_or("out/target-bench"));
+    let elf = match a.get("elf") {
+        Some(e) => PathBuf::from(e),
+        None => pil::build_firmware().map_err(CliError::Failed)?,
+    };
+    // Open-loop frames (engine at 3000 rpm, healthy sensors): every task runs, the fast ones
+    // every step, the 10 ms and 12.5 ms ones steps/200 and steps/250 times.
+    let mut feed = OpenLoopFeed::new(3000.0);
+    let frames: Vec<_> = (0..steps).map(|_| feed.next_frame()).collect();
+    let b = pil::target_bench(&elf, &frames, &out).map_err(CliError::Failed)?;
+    print!("{}", b.text());
+    println!("raw counts in {}", out.join("insn-counts.txt").display());
+    let n = model_core::plant_bench::N_STATE;
+    if b.plant_bits_target[n..] != b.plant_bits_host[n..] || !b.answers_equal_native {
+        return Err(CliError::Failed("the target's results differ from the host's".into()));
+    }
     Ok(())
 }
 

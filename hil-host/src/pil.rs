@@ -529,3 +529,298 @@ pub fn run_frames_native(frames: &[SensorFrame]) -> Result<Vec<ActuatorFrame>, S
     let mut core = EcuCore::new(model_core::ecu::lockstep::EcuCoreConfig::default()).map_err(|e| format!("ECU core calibration: {e}"))?;
     Ok(frames.iter().map(|f| core.step(f)).collect())
 }
+
+/// A symbol of an ELF32 little-endian image (the firmware).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ElfSymbol {
+    pub name: String,
+    pub addr: u32,
+    pub size: u32,
+}
+
+/// The symbol table of an ELF32 little-endian file (what the marker addresses come from).
+pub fn elf_symbols(path: &Path) -> Result<Vec<ElfSymbol>, String> {
+    let data = std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let bad = |what: &str| format!("{}: not a 32-bit little-endian ELF file ({what})", path.display());
+    let u16_at = |at: usize| data.get(at..at + 2).map(|b| u16::from_le_bytes([b[0], b[1]]));
+    let u32_at = |at: usize| data.get(at..at + 4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
+    if data.get(..6) != Some(&[0x7F, b'E', b'L', b'F', 1, 1]) {
+        return Err(bad("header"));
+    }
+    let shoff = u32_at(0x20).ok_or_else(|| bad("e_shoff"))? as usize;
+    let shentsize = u16_at(0x2E).ok_or_else(|| bad("e_shentsize"))? as usize;
+    let shnum = u16_at(0x30).ok_or_else(|| bad("e_shnum"))? as usize;
+    let section = |k: usize| -> Option<(u32, usize, usize, usize)> {
+        let h = shoff + k * shentsize;
+        Some((u32_at(h + 4)?, u32_at(h + 16)? as usize, u32_at(h + 20)? as usize, u32_at(h + 24)? as usize))
+    };
+    const SHT_SYMTAB: u32 = 2;
+    let (_, sym_off, sym_size, strtab) = (0..shnum)
+        .filter_map(section)
+        .find(|s| s.0 == SHT_SYMTAB)
+        .ok_or_else(|| format!("{}: no symbol table (stripped?)", path.display()))?;
+    let (_, str_off, str_size, _) = section(strtab).ok_or_else(|| bad("string table"))?;
+    let strings = data.get(str_off..str_off + str_size).ok_or_else(|| bad("string table bounds"))?;
+    let mut out = Vec::new();
+    for at in (sym_off..sym_off + sym_size).step_by(16) {
+        let (Some(name), Some(addr), Some(size)) = (u32_at(at), u32_at(at + 4), u32_at(at + 8)) else {
+            return Err(bad("symbol bounds"));
+        };
+        let name = strings.get(name as usize..).unwrap_or(&[]);
+        let name = &name[..name.iter().position(|&b| b == 0).unwrap_or(name.len())];
+        if !name.is_empty() {
+            out.push(ElfSymbol { name: String::from_utf8_lossy(name).into_owned(), addr, size });
+        }
+    }
+    Ok(out)
+}
+
+/// Instruction counts of one label over its intervals.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CountStats {
+    pub label: String,
+    pub n: usize,
+    pub mean: f64,
+    pub min: u64,
+    pub max: u64,
+}
+
+/// What `target-bench` measured.
+#[derive(Clone, Debug)]
+pub struct TargetBench {
+    /// Per label, the marker overhead (the `empty` interval) subtracted.
+    pub counts: Vec<CountStats>,
+    /// Instructions of an empty interval (the call of the end marker).
+    pub empty_overhead: u64,
+    /// Final plant states, raw bits: f32 first, then Q32, in `PlantBench::state` order.
+    pub plant_bits_target: Vec<u64>,
+    pub plant_bits_host: Vec<u64>,
+    /// The lockstep part (the frames sent to count the tasks).
+    pub lockstep: FramesRun,
+    pub answers_equal_native: bool,
+}
+
+/// The plant bench's final states computed natively, as raw bits (f32 then Q32).
+pub fn plant_bench_native() -> Result<Vec<u64>, String> {
+    use model_core::plant_bench::{PlantBench, COUNTED_STEPS};
+    use model_core::Real;
+    fn run<R: Real>() -> Result<[R; model_core::plant_bench::N_STATE], String> {
+        let mut b = PlantBench::<R>::new().map_err(str::to_string)?;
+        // The firmware's order (firmware-qemu/src/bench.rs, `plants`).
+        for _ in 0..COUNTED_STEPS {
+            b.step_ehvva();
+            let rpm = b.next_engine_rpm();
+            b.step_evvt(rpm);
+            b.step_vacuum();
+        }
+        Ok(b.state())
+    }
+    let f = run::<f32>()?;
+    let q = run::<model_core::Q32>()?;
+    Ok(f.iter().map(|x| u64::from(x.to_bits())).chain(q.iter().map(|x| x.to_bits() as u64)).collect())
+}
+
+/// Runs the firmware's bench mode under the instruction-counting plugin: the plant steps,
+/// then `frames` through the lockstep link with every task counted.
+pub fn target_bench(elf: &Path, frames: &[SensorFrame], log_dir: &Path) -> Result<TargetBench, String> {
+    let plugin = plugin_path();
+    if !plugin.is_file() {
+        return Err(format!("{}: missing; run tools/setup-qemu.sh (it builds the plugin with gcc)", plugin.display()));
+    }
+    let symbols = elf_symbols(elf)?;
+    let mut spec = plugin.display().to_string();
+    for s in symbols.iter().filter(|s| s.name.starts_with("pil_begin_")) {
+        spec.push_str(&format!(",begin={}:{:#x}:{}", &s.name["pil_begin_".len()..], s.addr, s.size));
+    }
+    let end = symbols.iter().find(|s| s.name == "pil_end").ok_or_else(|| format!("{}: no pil_end marker", elf.display()))?;
+    std::fs::create_dir_all(log_dir).map_err(|e| format!("{}: {e}", log_dir.display()))?;
+    let counts_file = log_dir.join("insn-counts.txt");
+    spec.push_str(&format!(",end={:#x}:{},out={}", end.addr, end.size, counts_file.display()));
+    let qemu = QemuOptions { args: vec!["bench".into()], plugin: Some(spec), log_dir: Some(log_dir.to_path_buf()) };
+    // Counting every instruction slows the emulation: generous answer timeout.
+    let mut link = PilLink::start(elf, PilOptions { qemu, answer_timeout: Duration::from_millis(500), ..PilOptions::default() })?;
+    let plant_bits_target = read_plant_record(&mut link)?;
+    let lockstep = run_frames(&mut link, frames)?;
+    drop(link);
+    let native = run_frames_native(frames)?;
+    let answers_equal_native =
+        native.iter().zip(&lockstep.answers).all(|(n, p)| *n == ActuatorFrame { bad_frames: 0, ..*p }) && native.len() == lockstep.answers.len();
+
+    let text = std::fs::read_to_string(&counts_file).map_err(|e| format!("{}: {e}", counts_file.display()))?;
+    let mut by_label: Vec<(String, Vec<u64>)> = Vec::new();
+    for (k, line) in text.lines().enumerate() {
+        let mut it = line.split_whitespace();
+        let (Some(label), Some(count), None) = (it.next(), it.next(), it.next()) else {
+            return Err(format!("{}:{}: expected `label count`", counts_file.display(), k + 1));
+        };
+        let count: u64 = count.parse().map_err(|_| format!("{}:{}: bad count {count}", counts_file.display(), k + 1))?;
+        match by_label.iter_mut().find(|(l, _)| l == label) {
+            Some((_, v)) => v.push(count),
+            None => by_label.push((label.to_string(), vec![count])),
+        }
+    }
+    let empty_overhead = by_label
+        .iter()
+        .find(|(l, _)| l == "empty")
+        .and_then(|(_, v)| v.iter().min().copied())
+        .ok_or_else(|| format!("{}: no `empty` interval", counts_file.display()))?;
+    let counts = by_label
+        .into_iter()
+        .filter(|(l, _)| l != "empty")
+        .map(|(label, v)| {
+            let v: Vec<u64> = v.iter().map(|c| c.saturating_sub(empty_overhead)).collect();
+            CountStats {
+                label,
+                n: v.len(),
+                mean: v.iter().sum::<u64>() as f64 / v.len() as f64,
+                min: v.iter().copied().min().unwrap_or(0),
+                max: v.iter().copied().max().unwrap_or(0),
+            }
+        })
+        .collect();
+    Ok(TargetBench { counts, empty_overhead, plant_bits_target, plant_bits_host: plant_bench_native()?, lockstep, answers_equal_native })
+}
+
+/// The bench's plant-state record (`firmware-qemu/src/bench.rs`): magic 0x50 0xB7, a word
+/// count, the words (u64 LE), CRC-16/CCITT-FALSE over count and words.
+fn read_plant_record(link: &mut PilLink) -> Result<Vec<u64>, String> {
+    const MAGIC: [u8; 2] = [0x50, 0xB7];
+    let words = 2 * model_core::plant_bench::N_STATE;
+    let total = 3 + 8 * words + 2;
+    let mut buf: Vec<u8> = Vec::new();
+    let stream = link.board().stream();
+    // The plant steps run under the plugin first: seconds, not minutes.
+    stream.set_read_timeout(Some(Duration::from_secs(60))).map_err(|e| e.to_string())?;
+    let mut chunk = [0u8; 256];
+    loop {
+        if let Some(at) = buf.windows(2).position(|w| w == MAGIC) {
+            if buf.len() >= at + total {
+                let rec = &buf[at..at + total];
+                let crc = u16::from_le_bytes([rec[total - 2], rec[total - 1]]);
+                if rec[2] as usize != words || model_core::ecu::frame::crc16(&rec[2..total - 2]) != crc {
+                    return Err("the plant-state record from the target is corrupt".into());
+                }
+                return Ok((0..words).map(|k| u64::from_le_bytes(rec[3 + 8 * k..11 + 8 * k].try_into().unwrap_or([0; 8]))).collect());
+            }
+        }
+        let n = stream.read(&mut chunk).map_err(|e| format!("waiting for the plant bench's record: {e}"))?;
+        if n == 0 {
+            return Err("QEMU closed the link before the plant bench's record".into());
+        }
+        buf.extend_from_slice(&chunk[..n]);
+    }
+}
+
+impl crate::run::EcuLink for PilLink {
+    fn exchange(&mut self, sensors: &SensorFrame) -> Result<ActuatorFrame, String> {
+        PilLink::exchange(self, sensors)
+    }
+}
+
+/// A scenario run on the emulated board.
+#[derive(Clone, Debug)]
+pub struct PilRun {
+    pub output: crate::run::RunOutput,
+    pub stats: LinkStats,
+    pub wall_s: f64,
+    /// With a native comparison: the steps compared and the first that differs.
+    pub compared_steps: Option<usize>,
+    pub first_difference: Option<(usize, ActuatorFrame, ActuatorFrame)>,
+}
+
+impl PilRun {
+    pub fn steps_per_s(&self) -> f64 {
+        self.stats.steps as f64 / self.wall_s.max(1e-9)
+    }
+
+    /// The summary lines of the PIL part (speed, link counters, native comparison).
+    pub fn text(&self) -> String {
+        let s = &self.stats;
+        let mut t = format!(
+            "PIL on {MACHINE}: {} lockstep steps in {:.1} s wall = {:.0} steps/s ({:.4} simulated s per wall s)\n\
+             link: {} transmissions, {} corrupted and {} dropped by injection, {} Nacks, {} answer timeouts, \
+             {} bad frames from the ECU, {} stale answers, {} safe-state reports; the ECU counted {} bad frames\n",
+            s.steps,
+            self.wall_s,
+            self.steps_per_s(),
+            self.steps_per_s() * f64::from(model_core::ecu::lockstep::STEP_US) * 1e-6,
+            s.transmissions,
+            s.corrupted_injected,
+            s.dropped_injected,
+            s.nacks_received,
+            s.answer_timeouts,
+            s.bad_frames_received,
+            s.stale_answers,
+            s.safe_state_reports,
+            s.ecu_bad_frames,
+        );
+        match (self.compared_steps, &self.first_difference) {
+            (Some(n), None) => t.push_str(&format!("native run: all {n} actuator frames bit-identical\n")),
+            (Some(n), Some((k, a, b))) => t.push_str(&format!("native run: {n} steps compared, first difference at step {k}:\n  native {a:?}\n  PIL    {b:?}\n")),
+            _ => {}
+        }
+        t
+    }
+}
+
+/// Runs `scenario` with the ECU core on QEMU (closed loop through [`crate::run::run_with`]);
+/// with `compare_native`, also natively, and compares every actuator frame.
+pub fn run_scenario(
+    scenario: &crate::run::Scenario,
+    elf: &Path,
+    faults: LinkFaults,
+    until_s: Option<f64>,
+    compare_native: bool,
+    log_dir: &Path,
+) -> Result<PilRun, String> {
+    use crate::run::{run_with, NativeLink, RunOptions};
+    let opts = RunOptions { until_s, keep_frames: compare_native };
+    let qemu = QemuOptions { log_dir: Some(log_dir.to_path_buf()), ..QemuOptions::default() };
+    let mut link = PilLink::start(elf, PilOptions { qemu, faults, ..PilOptions::default() })?;
+    let start = Instant::now();
+    let output = run_with(scenario, &mut link, &opts)?;
+    let wall_s = start.elapsed().as_secs_f64();
+    let stats = link.stats();
+    drop(link);
+    let (mut compared_steps, mut first_difference) = (None, None);
+    if compare_native {
+        let native = run_with(scenario, &mut NativeLink::new()?, &opts)?;
+        compared_steps = Some(native.frames.len().min(output.frames.len()));
+        first_difference = native
+            .frames
+            .iter()
+            .zip(&output.frames)
+            .enumerate()
+            .find(|(_, ((_, n), (_, p)))| *n != ActuatorFrame { bad_frames: 0, ..*p })
+            .map(|(k, ((_, n), (_, p)))| (k, *n, *p));
+        if native.frames.len() != output.frames.len() && first_difference.is_none() {
+            return Err(format!("native run has {} steps, PIL run {}", native.frames.len(), output.frames.len()));
+        }
+    }
+    Ok(PilRun { output, stats, wall_s, compared_steps, first_difference })
+}
+
+impl TargetBench {
+    /// The instruction-count table.
+    pub fn text(&self) -> String {
+        let mut t = String::from("instructions per step on the emulated Cortex-M4 (QEMU TCG plugin; marker calls subtracted)\n");
+        t.push_str(&format!("{:<22} {:>6} {:>10} {:>9} {:>9}\n", "what", "steps", "mean", "min", "max"));
+        for c in &self.counts {
+            t.push_str(&format!("{:<22} {:>6} {:>10.0} {:>9} {:>9}\n", c.label, c.n, c.mean, c.min, c.max));
+        }
+        let n = model_core::plant_bench::N_STATE;
+        let f32_exact = self.plant_bits_target[..n] == self.plant_bits_host[..n];
+        let q32_exact = self.plant_bits_target[n..] == self.plant_bits_host[n..];
+        t.push_str(&format!(
+            "plant states after the counted steps, target vs host: f32 {}, Q32 {}\n",
+            if f32_exact { "bit-identical" } else { "DIFFERENT" },
+            if q32_exact { "bit-identical" } else { "DIFFERENT" }
+        ));
+        t.push_str(&format!(
+            "lockstep part: {} steps, actuator frames {} the native core's\n",
+            self.lockstep.answers.len(),
+            if self.answers_equal_native { "equal to" } else { "DIFFERENT from" }
+        ));
+        t
+    }
+}
