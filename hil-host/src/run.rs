@@ -904,17 +904,18 @@ pub fn write_outputs(sc: &Scenario, o: &RunOutput, dir: &Path) -> std::io::Resul
     // Times to the nanosecond: products of steps carry float noise a log should not show.
     let times = |t: &mut dyn Iterator<Item = f64>| -> Vec<f64> { t.map(|x| (x * 1e9).round() / 1e9).collect() };
     let flag = |b: bool| if b { 1.0 } else { 0.0 };
-    let meta = |plant: &str, rate: f64, extra: Vec<(String, String)>| {
-        let mut m = vec![
-            ("plant".to_string(), plant.to_string()),
-            ("source".into(), format!("hil-host run, scenario `{}` (native lockstep: model-core EcuCore every {STEP_US} µs against model-core plants)", sc.name)),
-            ("sample_rate_hz".into(), format!("{rate}")),
-        ];
+    // Only the format's known keys (`source` and `controller` are free text).
+    let meta = |plant: &str, what: &str, rate: f64, controller: &str| {
+        let mut source = format!("hil-host run, scenario `{}`{what} (lockstep: the ECU's EcuCore every {STEP_US} µs against model-core plants)", sc.name);
         if !o.summary.faults_injected.is_empty() {
-            m.push(("faults_injected".into(), o.summary.faults_injected.join("; ")));
+            source += &format!("; faults injected: {}", o.summary.faults_injected.join(", "));
         }
-        m.extend(extra);
-        m
+        vec![
+            ("plant".to_string(), plant.to_string()),
+            ("source".into(), source),
+            ("sample_rate_hz".into(), format!("{rate}")),
+            ("controller".into(), controller.to_string()),
+        ]
     };
     let mut written = Vec::new();
     let mut put = |name: &str, text: String| -> std::io::Result<()> {
@@ -931,7 +932,7 @@ pub fn write_outputs(sc: &Scenario, o: &RunOutput, dir: &Path) -> std::io::Resul
     put(
         "evvt.csv",
         format_log(
-            &meta("evvt", 1.0 / (EVVT_LOG_EVERY as f64 * STEP_S), vec![("controller".into(), "model-core ecu::evvt_task (scheduled PI), motor command = duty x 6000 rpm - ring speed".into())]),
+            &meta("evvt", "", 1e6 / (EVVT_LOG_EVERY as f64 * f64::from(STEP_US)), "model-core ecu::evvt_task (scheduled PI); motor_cmd_rpm = duty x 6000 rpm - ring speed"),
             &[("t_s", &et), ("motor_cmd_rpm", &e_cmd), ("engine_rpm", &e_rpm), ("u_batt_V", &e_u), ("phase_ref_deg", &e_ref), ("phase_deg", &e_ph)],
         ),
     )?;
@@ -946,7 +947,7 @@ pub fn write_outputs(sc: &Scenario, o: &RunOutput, dir: &Path) -> std::io::Resul
         put(
             file,
             format_log(
-                &meta("vacuum", 1.0 / (VACUUM_LOG_EVERY as f64 * STEP_S), vec![("actuator".into(), (*what).into()), ("controller".into(), "model-core ecu::vacuum_task (inverse model + supply-voltage compensation)".into())]),
+                &meta("vacuum", &format!(", {what}"), 1e6 / (VACUUM_LOG_EVERY as f64 * f64::from(STEP_US)), "model-core ecu::vacuum_task (inverse model + supply-voltage compensation, no position feedback)"),
                 &[("t_s", &vt), ("duty_pct", &duty), ("u_batt_V", &v_u), ("p_amb_kPa", &v_amb), ("p_tank_kPa", &v_tank), ("x_pct", &x), ("p_act_kPa", &p)],
             ),
         )?;
@@ -967,7 +968,7 @@ pub fn write_outputs(sc: &Scenario, o: &RunOutput, dir: &Path) -> std::io::Resul
     put(
         "ehvva.csv",
         format_log(
-            &meta("ehvva", 1.0 / STEP_S, vec![("controller".into(), "model-core ecu::ehvva_task (crank-angle events advanced by td, pilot peak-and-hold); u_pilot = pilot valve open".into())]),
+            &meta("ehvva", "", 1e6 / f64::from(STEP_US), "model-core ecu::ehvva_task (crank-angle events advanced by td, pilot peak-and-hold); u_pilot = pilot valve open"),
             &[("t_s", &wt), ("u_pilot", &w_u), ("p_supply_MPa", &w_ph), ("p_back_MPa", &w_pl), ("temp_C", &w_t), ("lift_high", &w_lh), ("snubber_on", &w_sn), ("lift_mm", &w_lift)],
         ),
     )?;
