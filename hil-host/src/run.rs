@@ -64,7 +64,7 @@ impl Profile {
             return Err(format!("profile `{name}` is empty"));
         }
         for w in self.0.windows(2) {
-            if !(w[1].0 > w[0].0) {
+            if w[1].0 <= w[0].0 || w[1].0.is_nan() {
                 return Err(format!("profile `{name}`: times must increase ({} then {})", w[0].0, w[1].0));
             }
         }
@@ -568,7 +568,7 @@ impl Engine {
         let theta0 = self.theta_deg;
         let theta1 = theta0 + rpm.max(0.0) * 6.0 * STEP_S;
         self.theta_deg = theta1;
-        if !(theta1 > theta0) {
+        if theta1 <= theta0 || theta1.is_nan() {
             return;
         }
         let tooth = f64::from(self.wheel.tooth_deg());
@@ -608,7 +608,7 @@ pub fn run_with(scenario: &Scenario, link: &mut dyn EcuLink, opts: &RunOptions) 
     let started = std::time::Instant::now();
     let err = |what: &str, e: &dyn std::fmt::Debug| format!("{what}: {e:?}");
     let until_s = opts.until_s.map_or(sc.duration_s, |u| u.min(sc.duration_s));
-    if !(until_s > 0.0) {
+    if until_s <= 0.0 || until_s.is_nan() {
         return Err(format!("run length {until_s} s: nothing to run"));
     }
     let n_steps = (until_s / STEP_S).round() as u64;
