@@ -5,11 +5,12 @@
 //! (tools/test.sh sets it), in which case they fail. The firmware image is built through cargo
 //! in the workspace's target directory (tools/test.sh builds it before `cargo test`, so this
 //! is a no-op there).
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::{Mutex, OnceLock};
 use std::time::Duration;
 
-use hil_host::pil::{self, LinkFaults, OpenLoopFeed, PilLink, PilOptions};
+use hil_host::pil::{self, LinkFaults, PilLink, PilOptions};
+use hil_host::run::{run_with, NativeLink, RunOptions, Scenario};
 use model_core::ecu::frame::{ActuatorFrame, SensorFrame};
 use model_core::ecu::board::SolenoidCmd;
 
@@ -42,8 +43,7 @@ fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
 }
 
 fn feed(n: usize) -> Vec<SensorFrame> {
-    let mut f = OpenLoopFeed::new(3000.0);
-    (0..n).map(|_| f.next_frame()).collect()
+    closed_loop_frames().into_iter().take(n).collect()
 }
 
 fn assert_bit_exact(native: &[ActuatorFrame], pil: &[ActuatorFrame]) {
@@ -63,19 +63,82 @@ fn assert_bit_exact(native: &[ActuatorFrame], pil: &[ActuatorFrame]) {
     }
 }
 
+/// A short closed-loop scenario: at 4000 rpm the crank decoder syncs and valve events run
+/// within the first 0.1 s; phase and wastegate steps at 50 ms.
+fn short_scenario() -> Scenario {
+    let text = r#"
+name = "pil-agreement"
+duration_s = 0.15
+engine_rpm = [[0.0, 4000.0]]
+cam_phase_setpoint_deg = [[0.0, 10.0], [0.05, 10.0], [0.0501, 30.0]]
+wastegate_setpoint_pct = [[0.0, 20.0], [0.05, 20.0], [0.0501, 60.0]]
+"#;
+    Scenario::from_toml(Path::new("pil-agreement.toml"), text).unwrap()
+}
+
+/// The sensor frames of the short scenario's native closed-loop run.
+fn closed_loop_frames() -> Vec<SensorFrame> {
+    static FRAMES: OnceLock<Vec<SensorFrame>> = OnceLock::new();
+    FRAMES
+        .get_or_init(|| {
+            let out = run_with(&short_scenario(), &mut NativeLink::new().unwrap(), &RunOptions { until_s: None, keep_frames: true }).unwrap();
+            out.frames.into_iter().map(|(s, _)| s).collect()
+        })
+        .clone()
+}
+
+/// f32 agreement: the core's arithmetic is IEEE-754 single precision on both sides (SSE on
+/// the host, the Cortex-M4F's FPU under QEMU) with the same software exp/sin/atan/sqrt from
+/// micromath and libm, and no fused multiply-add on either side: every actuator frame is
+/// expected bit for bit, so the tolerance is zero.
 #[test]
-fn pil_answers_equal_native_core_bit_for_bit() {
+fn closed_loop_pil_run_equals_native_run_bit_for_bit() {
     let Some(elf) = firmware() else { return };
     let _one = one_at_a_time();
-    let frames = feed(2000);
-    let native = pil::run_frames_native(&frames).unwrap();
-    let mut link = PilLink::start(&elf, PilOptions::default()).unwrap();
-    let run = pil::run_frames(&mut link, &frames).unwrap();
-    eprintln!("{} PIL steps in {:.2} s: {:.0} steps/s, {:?}", run.answers.len(), run.wall_s, run.steps_per_s(), run.stats);
-    assert_bit_exact(&native, &run.answers);
-    assert!(native.iter().any(|a| a.pilot == SolenoidCmd::Full), "no valve event in the compared steps");
-    assert_eq!(run.stats.ecu_bad_frames, 0);
-    assert_eq!(run.stats.bad_frames_received, 0);
+    let dir = std::env::temp_dir().join(format!("pil-agreement-{}", std::process::id()));
+    let r = pil::run_scenario(&short_scenario(), &elf, LinkFaults::default(), None, true, &dir).unwrap();
+    eprint!("{}", r.text());
+    assert_eq!(r.stats.steps, 3000);
+    assert_eq!(r.compared_steps, Some(3000));
+    assert!(r.first_difference.is_none(), "{}", r.text());
+    let pilots: Vec<SolenoidCmd> = r.output.frames.iter().map(|(_, a)| a.pilot).collect();
+    assert!(pilots.contains(&SolenoidCmd::Full), "no valve event in the compared steps");
+    assert!(r.output.frames.iter().any(|(_, a)| a.motor_duty != 0.0), "EVVT never commanded");
+    assert_eq!(r.stats.ecu_bad_frames, 0);
+    assert_eq!(r.stats.bad_frames_received, 0);
+    assert_eq!(r.stats.safe_state_reports, 0);
+}
+
+/// Instruction counts on the target, and the fixed-point paths bit-exact: the Q32 plant steps
+/// on the emulated Cortex-M4 end in the same bits as on the host (integer arithmetic), and so
+/// do the f32 ones (IEEE single precision, see above).
+#[test]
+fn target_bench_counts_every_task_and_plant_and_matches_the_host() {
+    let Some(elf) = firmware() else { return };
+    let _one = one_at_a_time();
+    let frames: Vec<SensorFrame> = closed_loop_frames().into_iter().take(300).collect();
+    let dir = std::env::temp_dir().join(format!("pil-bench-{}", std::process::id()));
+    let b = pil::target_bench(&elf, &frames, &dir).unwrap();
+    eprint!("{}", b.text());
+    let n = model_core::plant_bench::N_STATE;
+    assert_eq!(b.plant_bits_target[n..], b.plant_bits_host[n..], "Q32 plant states differ");
+    assert_eq!(b.plant_bits_target[..n], b.plant_bits_host[..n], "f32 plant states differ");
+    assert!(b.answers_equal_native);
+    let count = |label: &str| b.counts.iter().find(|c| c.label == label).unwrap_or_else(|| panic!("no {label} count: {:?}", b.counts)).clone();
+    for (label, n) in [("core_step", 300), ("ehvva", 300), ("supervisor", 2), ("evvt", 2), ("vacuum", 2)] {
+        let c = count(label);
+        assert_eq!(c.n, n, "{label}: {c:?}");
+        assert!(c.min > 50, "{label}: {c:?}");
+    }
+    // The whole step holds its tasks.
+    assert!(count("core_step").max >= count("vacuum").max + count("ehvva").min);
+    for plant in ["ehvva_plant", "evvt_plant", "vacuum_plant"] {
+        let (f, q) = (count(&format!("{plant}_f32")), count(&format!("{plant}_q32")));
+        assert_eq!((f.n, q.n), (8, 8));
+        // The FPU does f32 in single instructions; Q32.32 needs 64-bit multiplies and
+        // divisions in software.
+        assert!(q.mean > 5.0 * f.mean, "{plant}: f32 {f:?} vs Q32 {q:?}");
+    }
 }
 
 #[test]
