@@ -25,6 +25,10 @@ commands:
       EVVT plant α/(s(s+β)) per operating point from closed-loop PRBS logs (Yang 2015: q-Markov
       cover of the closed loop, open loop by G = H(I-H)^-1 K^-1, integrator pole at zero) and
       the LPV tables α(N, V), β(N, V)
+  identify ehvva <bench log>... [--json out.json]
+      EHVVA calibration (Li 2018 Sec. 5.2) over a test matrix of valve events: per (Ph, T)
+      condition td (VO, VC) from the command edges to the lift response, τp and Cd by
+      trust-region least squares on the lift; the tables td(Ph, T), τp(Ph, T), Cd(T)
   pil [scenario.toml] [--elf path] [--out dir] [--until s] [--corrupt-every n] [--drop-every m] [--compare-native]
       processor in the loop: the same closed loop as `run`, with the ECU core as firmware on
       QEMU's emulated STM32F405 (netduinoplus2) in lockstep over its UART; builds firmware-qemu
@@ -286,6 +290,7 @@ fn generate_evvt_prbs_grid(seed: u64, dir: &Path) -> Result<(), CliError> {
 fn run_identify(args: &[String]) -> Result<(), CliError> {
     match args.first().map(String::as_str) {
         Some("evvt") => identify_evvt(&args[1..]),
+        Some("ehvva") => identify_ehvva(&args[1..]),
         _ => Err(CliError::Usage("identify takes an actuator: evvt or ehvva".into())),
     }
 }
@@ -310,6 +315,31 @@ fn identify_evvt(args: &[String]) -> Result<(), CliError> {
     print!("{}", evvt::tables_text(&points));
     if let Some(out) = a.get("json") {
         let text = serde_json::to_string_pretty(&evvt::to_json(&points)).map_err(|e| CliError::Failed(e.to_string()))?;
+        std::fs::write(out, text + "\n").map_err(|e| CliError::Failed(format!("{out}: {e}")))?;
+        eprintln!("tables written to {out}");
+    }
+    Ok(())
+}
+
+fn identify_ehvva(args: &[String]) -> Result<(), CliError> {
+    use hil_host::diagnose::ehvva::Events;
+    use hil_host::identify::ehvva;
+    let a = parse_args(args, &["json"])?;
+    if a.positional.is_empty() {
+        return Err(CliError::Usage("identify ehvva takes one or more bench logs of valve events".into()));
+    }
+    let mut sets = Vec::new();
+    for path in &a.positional {
+        let log = read_log(Path::new(path), Some(Plant::Ehvva)).map_err(|e| CliError::Failed(e.to_string()))?;
+        for n in &log.notices {
+            eprintln!("notice: {}: {n}", log.file);
+        }
+        sets.push(Events::from_log(&log).map_err(CliError::Failed)?);
+    }
+    let id = ehvva::identify(&sets, &ehvva::default_options(), &mut |k, n| eprintln!("condition {k}/{n} ...")).map_err(CliError::Failed)?;
+    print!("{}", id.text());
+    if let Some(out) = a.get("json") {
+        let text = serde_json::to_string_pretty(&id.json()).map_err(|e| CliError::Failed(e.to_string()))?;
         std::fs::write(out, text + "\n").map_err(|e| CliError::Failed(format!("{out}: {e}")))?;
         eprintln!("tables written to {out}");
     }

@@ -284,11 +284,25 @@ pub fn apply_knobs(base: &EhvvaParams, knobs: &[Knob], x: &[f64]) -> EhvvaParams
 /// Fits `knobs` (starting at `x0`) on the lift simulation error of `set` by the trust-region
 /// solver: the calibration problem of eqs. (16)-(20), shared by `diagnose` and `identify`.
 pub fn calibrate(base: &EhvvaParams, knobs: &[Knob], x0: &[f64], set: &Events, opts: &LsqOptions) -> Result<LsqResult, String> {
+    calibrate_with(base, knobs, x0, set, opts, &|_| Ok(()))
+}
+
+/// As [`calibrate`], with `derive` completing the parameters from the knobs before each
+/// simulation (`identify` sets td from the lift onset there).
+pub fn calibrate_with(
+    base: &EhvvaParams,
+    knobs: &[Knob],
+    x0: &[f64],
+    set: &Events,
+    opts: &LsqOptions,
+    derive: &(dyn Fn(&mut EhvvaParams) -> Result<(), String> + Sync),
+) -> Result<LsqResult, String> {
     let measured = set.measured();
     let lo: Vec<f64> = knobs.iter().map(|k| k.lo).collect();
     let hi: Vec<f64> = knobs.iter().map(|k| k.hi).collect();
     let residual = |x: &[f64], out: &mut [f64]| -> Result<(), String> {
-        let p = apply_knobs(base, knobs, x);
+        let mut p = apply_knobs(base, knobs, x);
+        derive(&mut p)?;
         simulate_all(&p, set, out)?;
         for (o, y) in out.iter_mut().zip(&measured) {
             *o -= y;
@@ -299,8 +313,23 @@ pub fn calibrate(base: &EhvvaParams, knobs: &[Knob], x0: &[f64], set: &Events, o
 }
 
 /// Times at which the lift crosses 1 % of the stroke after the rising edge and 99 % after the
-/// falling edge (first crossing, linearly interpolated), in ms from the respective edge.
+/// falling edge (first crossing, linearly interpolated), in ms from the respective edge. The
+/// lift is first smoothed by a centred moving average over ±0.25 ms: the first passage of a
+/// noisy signal through a level comes early where the lift leaves its stop slowly, and
+/// measured and simulated lifts are treated alike.
 pub fn edge_delays_ms(lift: &[f64], on_index: usize, off_index: Option<usize>, stroke_mm: f64, dt_ms: f64) -> (Option<f64>, Option<f64>) {
+    let half = ((0.25 / dt_ms).round() as usize).max(1);
+    let n = lift.len();
+    let mut prefix = vec![0.0; n + 1];
+    for (k, v) in lift.iter().enumerate() {
+        prefix[k + 1] = prefix[k] + v;
+    }
+    let lift: Vec<f64> = (0..n)
+        .map(|k| {
+            let (a, b) = (k.saturating_sub(half), (k + half + 1).min(n));
+            (prefix[b] - prefix[a]) / (b - a) as f64
+        })
+        .collect();
     let cross = |from: usize, level: f64, rising: bool| -> Option<f64> {
         (from.max(1)..lift.len()).find_map(|k| {
             let (a, b) = (lift[k - 1], lift[k]);

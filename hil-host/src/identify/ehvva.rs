@@ -1,0 +1,390 @@
+//! `identify ehvva`: the EHVVA calibration of Li 2018 Sec. 5.2 from bench logs of valve events
+//! over a test matrix like Table 1: per test condition (supply pressure Ph, temperature T) the
+//! main-valve time constant τp and the discharge coefficient Cd by the trust-region solver on
+//! the lift simulation error (eqs. (16)-(20), [`calibrate`], the same fit `diagnose` uses), and
+//! the actuation delays td (VO, VC) from the command edges to the lift's response; then the
+//! tables td(Ph, T), τp(Ph, T), Cd(T), also resampled onto model-core's breakpoints
+//! ([`EhvvaTableData`]).
+//!
+//! The logs carry no pilot pressure (the paper reads td from it), so td is read from the lift:
+//! the delay from the rising command to 1 % of the stroke, and from the falling command to
+//! 99 %, less the time the model itself takes from a zero-delay command to those levels with
+//! the condition's τp and Cd. The solver varies (τp, Cd); for each pair it tries, td follows
+//! from the onset before the lift is simulated, so the three are consistent at the solution. Geometry, masses and the snubbers are the
+//! paper's (`EhvvaParams::paper_default`): only the varying parameters are calibrated, as in
+//! the paper.
+//!
+//! A condition is every event within 0.25 MPa and 3 °C of the condition's first event; its
+//! value is the mean of its events'. Events of one condition may differ in back pressure, lift
+//! and switch valve: the model takes those as inputs.
+
+use model_core::ehvva::{EhvvaParams, EhvvaTableData};
+use serde_json::{json, Value};
+
+use crate::diagnose::ehvva::{apply_knobs, calibrate_with, edge_delays_ms, simulate_all, Events, Knob};
+use crate::lsq::LsqOptions;
+
+/// Delay of the reference simulation in [`td_from_onset`], ms.
+const REFERENCE_TD_MS: f64 = 1.0;
+/// Events closer than these belong to one test condition.
+const SAME_P_MPA: f64 = 0.25;
+const SAME_T_C: f64 = 3.0;
+
+/// The calibrated knobs of one condition: uniform τp and Cd tables.
+pub const CONDITION_KNOBS: [Knob; 2] = [
+    Knob {
+        name: "tau_p_ms",
+        lo: 0.01,
+        hi: 1.0,
+        apply: |p, v| p.tables.tau_ms = [[v; 3]; 2],
+    },
+    Knob { name: "cd", lo: 0.05, hi: 0.95, apply: |p, v| p.tables.cd = [v; 4] },
+];
+
+/// Sets uniform td tables (VO and VC).
+fn set_td(p: &mut EhvvaParams, td_open_ms: f64, td_close_ms: f64) {
+    p.tables.td_open_ms = [[td_open_ms; 5]; 4];
+    p.tables.td_close_ms = [[td_close_ms; 5]; 4];
+}
+
+/// The model for one condition: the paper's geometry with uniform tables.
+pub fn condition_params(td_open_ms: f64, td_close_ms: f64, tau_p_ms: f64, cd: f64) -> EhvvaParams {
+    let mut p = EhvvaParams::paper_default();
+    set_td(&mut p, td_open_ms, td_close_ms);
+    apply_knobs(&p, &CONDITION_KNOBS, &[tau_p_ms, cd])
+}
+
+/// What one condition gave.
+#[derive(Clone, Debug)]
+pub struct ConditionFit {
+    pub p_supply_mpa: f64,
+    pub temp_c: f64,
+    pub events: usize,
+    pub td_open_ms: f64,
+    pub td_close_ms: f64,
+    pub tau_p_ms: f64,
+    pub cd: f64,
+    /// 95 % half-widths of τp and Cd (None on a bound or not identifiable).
+    pub tau_p_ci95: Option<f64>,
+    pub cd_ci95: Option<f64>,
+    /// Of the last solver run.
+    pub iterations: usize,
+    pub cost: f64,
+    pub initial_cost: f64,
+}
+
+/// td (VO, VC) of `set` for the model `p` (its td tables are ignored) with the model's own
+/// response time removed (module doc); `None` when no event shows the edge.
+pub fn td_from_onset(p: &EhvvaParams, set: &Events) -> Result<(Option<f64>, Option<f64>), String> {
+    // The model's own response is taken at a reference delay, not at zero: at td = 0 the
+    // delay line cannot interpolate inside the step and adds part of a step.
+    let mut p0 = *p;
+    set_td(&mut p0, REFERENCE_TD_MS, REFERENCE_TD_MS);
+    let mut sim = vec![0.0; set.samples];
+    simulate_all(&p0, set, &mut sim)?;
+    let (mut on, mut off) = (Vec::new(), Vec::new());
+    for ev in &set.events {
+        let stroke = ev.stroke_mm(&p0);
+        let (m_on, m_off) = edge_delays_ms(&ev.lift_mm, ev.on_index, ev.off_index, stroke, set.dt_ms);
+        let (s_on, s_off) = edge_delays_ms(&sim[ev.start..ev.start + ev.lift_mm.len()], ev.on_index, ev.off_index, stroke, set.dt_ms);
+        if let (Some(m), Some(s)) = (m_on, s_on) {
+            on.push(m - s + REFERENCE_TD_MS);
+        }
+        if let (Some(m), Some(s)) = (m_off, s_off) {
+            off.push(m - s + REFERENCE_TD_MS);
+        }
+    }
+    let mean = |v: &[f64]| (!v.is_empty()).then(|| (v.iter().sum::<f64>() / v.len() as f64).max(0.0));
+    Ok((mean(&on), mean(&off)))
+}
+
+/// Sets `p`'s td tables from the lift onset (VC = VO where no closing edge was logged).
+fn derive_td(p: &mut EhvvaParams, set: &Events) -> Result<(f64, f64), String> {
+    let (on, off) = td_from_onset(p, set)?;
+    let on = on.ok_or_else(|| format!("{}: the valve never opens to 1 % of its stroke after a command at this condition", set.file))?;
+    let off = off.unwrap_or(on);
+    set_td(p, on, off);
+    Ok((on, off))
+}
+
+/// Calibrates one condition (all of `set`'s events): τp and Cd by the solver, td from the
+/// onset for every (τp, Cd) the solver tries, so the three stay consistent.
+pub fn fit_condition(set: &Events, opts: &LsqOptions) -> Result<ConditionFit, String> {
+    if set.events.is_empty() {
+        return Err(format!("{}: a condition without events", set.file));
+    }
+    let base = EhvvaParams::paper_default();
+    // Start: Cd from a coarse scan at τp = 0.1 ms (from a Cd far off, the first steps can
+    // drive τp onto its bound, where the solver holds it).
+    let measured = set.measured();
+    let mut sim = vec![0.0; set.samples];
+    let mut start = (f64::INFINITY, 0.4);
+    for cd in [0.15, 0.2, 0.25, 0.3, 0.35, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9] {
+        let mut p = apply_knobs(&base, &CONDITION_KNOBS, &[0.1, cd]);
+        if derive_td(&mut p, set).is_err() || simulate_all(&p, set, &mut sim).is_err() {
+            continue;
+        }
+        let cost: f64 = sim.iter().zip(&measured).map(|(a, b)| (a - b).powi(2)).sum();
+        if cost < start.0 {
+            start = (cost, cd);
+        }
+    }
+    let r = calibrate_with(&base, &CONDITION_KNOBS, &[0.1, start.1], set, opts, &|p| derive_td(p, set).map(|_| ()))?;
+    let mut p = apply_knobs(&base, &CONDITION_KNOBS, &r.x);
+    let td = derive_td(&mut p, set)?;
+    let n = set.events.len() as f64;
+    Ok(ConditionFit {
+        p_supply_mpa: set.events.iter().map(|e| e.inputs.p_supply_mpa).sum::<f64>() / n,
+        temp_c: set.events.iter().map(|e| e.inputs.temp_c).sum::<f64>() / n,
+        events: set.events.len(),
+        td_open_ms: td.0,
+        td_close_ms: td.1,
+        tau_p_ms: r.x[0],
+        cd: r.x[1],
+        tau_p_ci95: r.ci95[0],
+        cd_ci95: r.ci95[1],
+        iterations: r.iterations,
+        cost: r.cost,
+        initial_cost: r.initial_cost,
+    })
+}
+
+/// Groups the events of several logs into test conditions (module doc).
+pub fn conditions(sets: &[Events]) -> Vec<Events> {
+    let mut groups: Vec<(f64, f64, Events)> = Vec::new();
+    for set in sets {
+        for (i, ev) in set.events.iter().enumerate() {
+            let (p, t) = (ev.inputs.p_supply_mpa, ev.inputs.temp_c);
+            let one = set.subset(|e| std::ptr::eq(e, &set.events[i]));
+            match groups.iter_mut().find(|(gp, gt, g)| (gp - p).abs() <= SAME_P_MPA && (gt - t).abs() <= SAME_T_C && g.dt_ms == set.dt_ms) {
+                Some((_, _, g)) => {
+                    let mut e = one.events[0].clone();
+                    e.start = g.samples;
+                    g.samples += e.lift_mm.len();
+                    g.events.push(e);
+                }
+                None => groups.push((p, t, one)),
+            }
+        }
+    }
+    groups.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
+    groups.into_iter().map(|(_, _, g)| g).collect()
+}
+
+/// The identified tables.
+#[derive(Clone, Debug)]
+pub struct Identified {
+    pub conditions: Vec<ConditionFit>,
+}
+
+/// Interpolates per-condition values at (p, t): bilinear on the grid of the conditions' distinct
+/// pressures and temperatures when every grid point was tested (clamped outside it), otherwise
+/// inverse-distance weighting of the nearest conditions (1 MPa ~ 20 °C).
+fn interpolate(points: &[(f64, f64, f64)], p: f64, t: f64) -> f64 {
+    let mut ps: Vec<f64> = Vec::new();
+    let mut ts: Vec<f64> = Vec::new();
+    for &(pp, tt, _) in points {
+        if !ps.iter().any(|x| (x - pp).abs() <= SAME_P_MPA) {
+            ps.push(pp);
+        }
+        if !ts.iter().any(|x| (x - tt).abs() <= SAME_T_C) {
+            ts.push(tt);
+        }
+    }
+    ps.sort_by(f64::total_cmp);
+    ts.sort_by(f64::total_cmp);
+    let at = |pp: f64, tt: f64| points.iter().find(|q| (q.0 - pp).abs() <= SAME_P_MPA && (q.1 - tt).abs() <= SAME_T_C).map(|q| q.2);
+    let complete = ps.iter().all(|&pp| ts.iter().all(|&tt| at(pp, tt).is_some()));
+    if complete && !ps.is_empty() {
+        let bracket = |g: &[f64], x: f64| -> (usize, usize, f64) {
+            if g.len() == 1 || x <= g[0] {
+                return (0, 0, 0.0);
+            }
+            if x >= g[g.len() - 1] {
+                return (g.len() - 1, g.len() - 1, 0.0);
+            }
+            let i = g.windows(2).position(|w| x >= w[0] && x <= w[1]).unwrap_or(0);
+            (i, i + 1, (x - g[i]) / (g[i + 1] - g[i]))
+        };
+        let (i0, i1, fp) = bracket(&ps, p);
+        let (j0, j1, ft) = bracket(&ts, t);
+        let v = |i: usize, j: usize| at(ps[i], ts[j]).unwrap_or(f64::NAN);
+        let a = v(i0, j0) * (1.0 - ft) + v(i0, j1) * ft;
+        let b = v(i1, j0) * (1.0 - ft) + v(i1, j1) * ft;
+        return a * (1.0 - fp) + b * fp;
+    }
+    let mut num = 0.0;
+    let mut den = 0.0;
+    for &(pp, tt, v) in points {
+        let d2 = (pp - p).powi(2) + ((tt - t) / 20.0).powi(2);
+        if d2 < 1e-12 {
+            return v;
+        }
+        num += v / d2;
+        den += 1.0 / d2;
+    }
+    num / den
+}
+
+impl Identified {
+    fn points(&self, f: impl Fn(&ConditionFit) -> f64) -> Vec<(f64, f64, f64)> {
+        self.conditions.iter().map(|c| (c.p_supply_mpa, c.temp_c, f(c))).collect()
+    }
+
+    /// Cd(T): the mean over the conditions at each temperature, interpolated linearly in T
+    /// (clamped outside the tested range).
+    pub fn cd_at(&self, t: f64) -> f64 {
+        let mut by_t: Vec<(f64, f64, usize)> = Vec::new();
+        for c in &self.conditions {
+            match by_t.iter_mut().find(|(tt, _, _)| (tt - c.temp_c).abs() <= SAME_T_C) {
+                Some(e) => {
+                    e.1 += c.cd;
+                    e.2 += 1;
+                }
+                None => by_t.push((c.temp_c, c.cd, 1)),
+            }
+        }
+        let mut pts: Vec<(f64, f64)> = by_t.into_iter().map(|(t, s, n)| (t, s / n as f64)).collect();
+        pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+        if pts.is_empty() {
+            return f64::NAN;
+        }
+        if t <= pts[0].0 {
+            return pts[0].1;
+        }
+        for w in pts.windows(2) {
+            if t <= w[1].0 {
+                return w[0].1 + (w[1].1 - w[0].1) * (t - w[0].0) / (w[1].0 - w[0].0);
+            }
+        }
+        pts[pts.len() - 1].1
+    }
+
+    /// The tables on model-core's breakpoints (paper's grid), ready for `EhvvaParams::tables`.
+    pub fn table_data(&self) -> EhvvaTableData {
+        let mut d = EhvvaTableData::paper_default();
+        let vo = self.points(|c| c.td_open_ms);
+        let vc = self.points(|c| c.td_close_ms);
+        let tau = self.points(|c| c.tau_p_ms);
+        for (i, &p) in d.td_p_supply_mpa.iter().enumerate() {
+            for (j, &t) in d.td_temp_c.iter().enumerate() {
+                d.td_open_ms[i][j] = interpolate(&vo, p, t);
+                d.td_close_ms[i][j] = interpolate(&vc, p, t);
+            }
+        }
+        for (i, &p) in d.tau_p_supply_mpa.iter().enumerate() {
+            for (j, &t) in d.tau_temp_c.iter().enumerate() {
+                d.tau_ms[i][j] = interpolate(&tau, p, t);
+            }
+        }
+        for (k, &t) in d.cd_temp_c.iter().enumerate() {
+            d.cd[k] = self.cd_at(t);
+        }
+        d
+    }
+
+    /// The human-readable report: per condition (solver evidence), then the tables.
+    pub fn text(&self) -> String {
+        let mut s = String::from("per test condition (td from the command edges to the lift response; tau_p and Cd by trust-region least squares on the lift):\n");
+        s.push_str("  Ph MPa   T °C  events  td VO ms  td VC ms   tau_p ms (± 95 %)      Cd (± 95 %)        iterations  cost (initial)\n");
+        let ci = |c: Option<f64>| c.map_or("   n/a".to_string(), |v| format!("{v:.4}"));
+        for c in &self.conditions {
+            s.push_str(&format!(
+                "  {:6.2} {:6.1} {:7}  {:8.3}  {:8.3}   {:.4} ± {:<8}  {:.4} ± {:<8}  {:10}  {:.3e} ({:.3e})\n",
+                c.p_supply_mpa,
+                c.temp_c,
+                c.events,
+                c.td_open_ms,
+                c.td_close_ms,
+                c.tau_p_ms,
+                ci(c.tau_p_ci95),
+                c.cd,
+                ci(c.cd_ci95),
+                c.iterations,
+                c.cost,
+                c.initial_cost,
+            ));
+        }
+        let d = self.table_data();
+        let grid = |title: &str, ps: &[f64], ts: &[f64], v: &dyn Fn(usize, usize) -> f64| {
+            let mut g = format!("\n{title}\n  Ph \\ T °C");
+            for t in ts {
+                g.push_str(&format!("{t:>9.0}"));
+            }
+            g.push('\n');
+            for (i, p) in ps.iter().enumerate() {
+                g.push_str(&format!("  {p:>6.1} MPa"));
+                for j in 0..ts.len() {
+                    g.push_str(&format!("{:>9.3}", v(i, j)));
+                }
+                g.push('\n');
+            }
+            g
+        };
+        s.push_str(&grid("td VO (ms) on model-core's breakpoints", &d.td_p_supply_mpa, &d.td_temp_c, &|i, j| d.td_open_ms[i][j]));
+        s.push_str(&grid("td VC (ms)", &d.td_p_supply_mpa, &d.td_temp_c, &|i, j| d.td_close_ms[i][j]));
+        s.push_str(&grid("tau_p (ms)", &d.tau_p_supply_mpa, &d.tau_temp_c, &|i, j| d.tau_ms[i][j]));
+        s.push_str("\nCd(T)\n  T °C    ");
+        for t in d.cd_temp_c {
+            s.push_str(&format!("{t:>9.0}"));
+        }
+        s.push_str("\n  Cd      ");
+        for c in d.cd {
+            s.push_str(&format!("{c:>9.3}"));
+        }
+        s.push('\n');
+        s
+    }
+
+    /// The JSON report: per condition, the tables at the tested points, and `EhvvaTableData`.
+    pub fn json(&self) -> Value {
+        let d = self.table_data();
+        json!({
+            "conditions": self.conditions.iter().map(|c| json!({
+                "p_supply_MPa": c.p_supply_mpa,
+                "temp_C": c.temp_c,
+                "events": c.events,
+                "td_open_ms": c.td_open_ms,
+                "td_close_ms": c.td_close_ms,
+                "tau_p_ms": c.tau_p_ms,
+                "tau_p_ci95_ms": c.tau_p_ci95,
+                "cd": c.cd,
+                "cd_ci95": c.cd_ci95,
+                "iterations": c.iterations,
+                "cost": c.cost,
+                "initial_cost": c.initial_cost,
+            })).collect::<Vec<_>>(),
+            "ehvva_table_data": {
+                "td_p_supply_mpa": d.td_p_supply_mpa,
+                "td_temp_c": d.td_temp_c,
+                "td_open_ms": d.td_open_ms,
+                "td_close_ms": d.td_close_ms,
+                "tau_p_supply_mpa": d.tau_p_supply_mpa,
+                "tau_temp_c": d.tau_temp_c,
+                "tau_ms": d.tau_ms,
+                "cd_temp_c": d.cd_temp_c,
+                "cd": d.cd,
+            }
+        })
+    }
+}
+
+/// Solver settings of the per-condition fits.
+pub fn default_options() -> LsqOptions {
+    LsqOptions { max_iterations: 40, cost_tolerance: 1e-9, fd_step: 1e-5, ..LsqOptions::default() }
+}
+
+/// Identifies the tables from the events of several logs; `progress` is told each condition.
+pub fn identify(sets: &[Events], opts: &LsqOptions, progress: &mut dyn FnMut(usize, usize)) -> Result<Identified, String> {
+    let groups = conditions(sets);
+    if groups.is_empty() {
+        return Err("no valve events in the logs".into());
+    }
+    let mut out = Vec::with_capacity(groups.len());
+    for (k, g) in groups.iter().enumerate() {
+        progress(k + 1, groups.len());
+        out.push(fit_condition(g, opts)?);
+    }
+    Ok(Identified { conditions: out })
+}
+
