@@ -75,6 +75,38 @@ impl Profile {
     }
 }
 
+/// An on/off request over time: `true` / `false`, or a profile of 0 and 1 values
+/// (`[[0.0, 1.0], [0.5, 0.0]]`: on, off from 0.5 s).
+#[derive(Clone, Debug, Deserialize)]
+#[serde(untagged)]
+pub enum Switch {
+    Constant(bool),
+    Profile(Profile),
+}
+
+impl Default for Switch {
+    fn default() -> Self {
+        Switch::Constant(false)
+    }
+}
+
+impl Switch {
+    pub fn at(&self, t: f64) -> bool {
+        match self {
+            Switch::Constant(on) => *on,
+            Switch::Profile(p) => p.at(t) >= 0.5,
+        }
+    }
+    fn check(&self, name: &str) -> Result<(), String> {
+        let Switch::Profile(p) = self else { return Ok(()) };
+        p.check(name)?;
+        if let Some((t, v)) = p.0.iter().find(|(_, v)| *v != 0.0 && *v != 1.0) {
+            return Err(format!("switch `{name}` at {t} s: {v} is neither 0 (off) nor 1 (on)"));
+        }
+        Ok(())
+    }
+}
+
 fn constant(v: f64) -> Profile {
     Profile(vec![(0.0, v)])
 }
@@ -218,9 +250,9 @@ pub struct Scenario {
     pub valve_close_deg: Profile,
     /// Requested lift valve (high lift) and snubber switch (soft seating) states.
     #[serde(default)]
-    pub lift_high: bool,
+    pub lift_high: Switch,
     #[serde(default)]
-    pub snubber_on: bool,
+    pub snubber_on: Switch,
     #[serde(default, rename = "fault")]
     pub faults: Vec<FaultSpec>,
 }
@@ -286,8 +318,8 @@ impl Scenario {
             hpc_bypass_setpoint_pct: d_bypass(),
             valve_open_deg: d_open(),
             valve_close_deg: d_close(),
-            lift_high: true,
-            snubber_on: true,
+            lift_high: Switch::Constant(true),
+            snubber_on: Switch::Constant(true),
             faults: Vec::new(),
         }
     }
@@ -310,6 +342,8 @@ impl Scenario {
         for (name, p) in self.profiles() {
             p.check(name)?;
         }
+        self.lift_high.check("lift_high")?;
+        self.snubber_on.check("snubber_on")?;
         for (i, f) in self.faults.iter().enumerate() {
             f.check(i)?;
         }
@@ -626,7 +660,7 @@ pub fn run_with(scenario: &Scenario, link: &mut dyn EcuLink, opts: &RunOptions) 
         lift_high,
         snubber_on,
     };
-    let mut valve = EhvvaReduced::<f32>::new(&ehvva_params, &ehvva_inputs(0.0, sc.lift_high, sc.snubber_on), EHVVA_DT_MS).map_err(|e| err("EHVVA plant", &e))?;
+    let mut valve = EhvvaReduced::<f32>::new(&ehvva_params, &ehvva_inputs(0.0, sc.lift_high.at(0.0), sc.snubber_on.at(0.0)), EHVVA_DT_MS).map_err(|e| err("EHVVA plant", &e))?;
     let mut coil = RlCoil::<f64>::new(&solenoid);
     let (mut pilot_armed, mut pilot_dropped) = (false, false);
     let mut evvt = EvvtPlant::<f32>::new(&EvvtParams::default()).map_err(|e| err("EVVT plant", &e))?;
@@ -698,8 +732,8 @@ pub fn run_with(scenario: &Scenario, link: &mut dyn EcuLink, opts: &RunOptions) 
             valve: ValveRequest {
                 open_deg: sc.valve_open_deg.at(t) as f32,
                 close_deg: sc.valve_close_deg.at(t) as f32,
-                high_lift: sc.lift_high,
-                soft_seat: sc.snubber_on,
+                high_lift: sc.lift_high.at(t),
+                soft_seat: sc.snubber_on.at(t),
                 enabled: true,
             },
             cam_phase_set_deg: sc.cam_phase_setpoint_deg.at(t) as f32,
@@ -1066,6 +1100,17 @@ mod tests {
             let e = parse(text).unwrap_err();
             assert!(e.starts_with("f.toml:") && e.contains(needle), "{text}: {e}");
         }
+    }
+
+    #[test]
+    fn switches_are_booleans_or_0_1_profiles() {
+        let parse = |text: &str| Scenario::from_toml(Path::new("w.toml"), &format!("name = \"x\"\nduration_s = 1.0\n{text}"));
+        let s = parse("lift_high = [[0.0, 1.0], [0.5, 0.0]]\nsnubber_on = true\n").unwrap();
+        assert!(s.lift_high.at(0.2) && !s.lift_high.at(0.7) && s.snubber_on.at(0.7));
+        let e = parse("lift_high = [[0.0, 0.3]]\n").unwrap_err();
+        assert!(e.contains("lift_high") && e.contains("neither"), "{e}");
+        let e = parse("snubber_on = \"yes\"\n").unwrap_err();
+        assert!(e.starts_with("w.toml:") && e.contains("snubber_on"), "{e}");
     }
 
     #[test]

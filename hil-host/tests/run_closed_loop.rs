@@ -1,7 +1,7 @@
 //! `hil-host run`: the ECU's code (model-core `EcuCore` in lockstep every 50 µs) against the
 //! plant models, on the default scenario and on short constant-speed runs.
 use hil_host::log::read_log;
-use hil_host::run::{run, run_with, NativeLink, Profile, RunOptions, RunOutput, Scenario};
+use hil_host::run::{run, run_with, NativeLink, Profile, RunOptions, RunOutput, Scenario, Switch};
 use model_core::ehvva::{run_event, EhvvaInputs, EhvvaParams, EhvvaReduced, EhvvaTables, ValveEvent};
 
 fn native(sc: &Scenario) -> RunOutput {
@@ -114,8 +114,8 @@ fn snubber_switch_output_softens_the_seating() {
             engine_rpm: constant(1500.0),
             temp_c: constant(22.0),
             p_supply_mpa: constant(8.0),
-            lift_high: true,
-            snubber_on,
+            lift_high: Switch::Constant(true),
+            snubber_on: Switch::Constant(snubber_on),
             ..Scenario::default_scenario()
         };
         let o = native(&sc);
@@ -126,6 +126,32 @@ fn snubber_switch_output_softens_the_seating() {
     let (on, off) = (seat(true), seat(false));
     assert!((0.18..=0.32).contains(&on), "switch on: {on} m/s");
     assert!((0.55..=0.85).contains(&off), "switch off: {off} m/s");
+}
+
+/// A lift change requested mid-run: the ECU switches the lift valve only while the engine
+/// valve is seated (10 ms after the pilot went off), and the plant's stroke follows: 7.5 mm
+/// (S1) before, 4 mm (S2) after.
+#[test]
+fn lift_valve_switches_only_while_the_valve_is_seated() {
+    let sc = Scenario {
+        name: "lift".into(),
+        duration_s: 1.0,
+        engine_rpm: constant(1500.0),
+        temp_c: constant(22.0),
+        lift_high: Switch::Profile(Profile(vec![(0.0, 1.0), (0.5, 1.0), (0.5001, 0.0)])),
+        ..Scenario::default_scenario()
+    };
+    let o = native(&sc);
+    let rows = &o.ehvva;
+    let k = rows.iter().position(|r| !r.lift_high).expect("lift valve never switched");
+    assert!(rows[k].t_s >= 0.5 && rows[k].t_s < 0.59, "switched at {} s", rows[k].t_s);
+    let last_pilot = rows[..k].iter().rposition(|r| r.u_pilot).unwrap();
+    assert!(rows[k].t_s - rows[last_pilot].t_s >= 0.01, "switched {} s after the pilot", rows[k].t_s - rows[last_pilot].t_s);
+    assert!(rows[k].lift_mm < 1e-6, "lift {} mm at the switch", rows[k].lift_mm);
+    assert!(rows[k..].iter().all(|r| !r.lift_high));
+    let max_lift = |t0: f64, t1: f64| rows.iter().filter(|r| r.t_s >= t0 && r.t_s < t1).map(|r| r.lift_mm).fold(0.0, f64::max);
+    let (before, after) = (max_lift(0.2, 0.5), max_lift(rows[k].t_s, 1.0));
+    assert!((before - 7.5).abs() < 0.1 && (after - 4.0).abs() < 0.1, "max lift {before} then {after} mm");
 }
 
 #[test]
