@@ -333,8 +333,9 @@ impl Scenario {
     }
 
     fn check(&self) -> Result<(), String> {
-        if !(self.duration_s > 0.0 && self.duration_s <= 3600.0) {
-            return Err(format!("duration_s = {} must lie in (0, 3600]", self.duration_s));
+        // The logs are held in memory until written (the EHVVA log at 20 kHz: ~90 B a row).
+        if !(self.duration_s > 0.0 && self.duration_s <= MAX_DURATION_S) {
+            return Err(format!("duration_s = {} must lie in (0, {MAX_DURATION_S}] s", self.duration_s));
         }
         if !(self.p_tank_initial_kpa.is_finite() && (1.0..=110.0).contains(&self.p_tank_initial_kpa)) {
             return Err(format!("p_tank_initial_kpa = {} must lie in 1..110", self.p_tank_initial_kpa));
@@ -570,6 +571,8 @@ pub struct RunOutput {
 }
 
 const STEP_S: f64 = STEP_US as f64 * 1e-6;
+/// Longest scenario: its logs (about 2 MB per simulated second) stay in memory.
+pub const MAX_DURATION_S: f64 = 120.0;
 /// The EHVVA model's step: 5 per lockstep step.
 const EHVVA_DT_MS: f64 = 0.01;
 const EHVVA_SUBSTEPS: usize = 5;
