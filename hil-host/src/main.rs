@@ -35,9 +35,10 @@ commands:
       when no --elf is given; prints PIL steps per second and the link's bad-frame counters;
       --corrupt-every/--drop-every inject faults on sensor frames (retransmitted: lossless);
       --compare-native also runs natively and compares every actuator frame
-  target-bench [--elf path] [--out dir] [--steps N]
-      instructions per task step and per plant step (f32, Q32) on the emulated Cortex-M4
-      (QEMU TCG plugin tools/qemu-plugin), and the plant states checked against the host
+  target-bench [scenario.toml] [--elf path] [--out dir] [--steps N]
+      instructions per task step (the scenario's first N lockstep steps, default 2000) and
+      per plant step (f32, Q32) on the emulated Cortex-M4 (QEMU TCG plugin tools/qemu-plugin),
+      with the plant states and actuator frames checked against the host
 plants: vacuum, ehvva, evvt, positioner
 ";
 
@@ -248,13 +249,19 @@ fn run_pil(args: &[String]) -> Result<(), CliError> {
 
 /// `target-bench`: instruction counts on the emulated target (hil_host::pil::target_bench).
 fn run_target_bench(args: &[String]) -> Result<(), CliError> {
-    use hil_host::pil::{self, OpenLoopFeed};
+    use hil_host::pil;
+    use hil_host::run::{run_with, NativeLink, RunOptions, Scenario};
     let a = parse_args(args, &["elf", "out", "steps"])?;
-    if !a.positional.is_empty() {
-        return Err(CliError::Usage("target-bench takes only options".into()));
-    }
+    let scenario = match a.positional.as_slice() {
+        [] => Scenario::default_scenario(),
+        [file] => {
+            let text = std::fs::read_to_string(file).map_err(|e| CliError::Failed(format!("{file}: {e}")))?;
+            Scenario::from_toml(Path::new(file), &text).map_err(CliError::Failed)?
+        }
+        _ => return Err(CliError::Usage("target-bench takes at most one scenario file".into())),
+    };
     let steps = match a.get("steps") {
-        Some(v) => v.parse::<usize>().map_err(|_| CliError::Usage(format!("--steps {v}: not a whole number")))?,
+        Some(v) => v.parse::<u32>().map_err(|_| CliError::Usage(format!("--steps {v}: not a whole number")))?,
         None => 2000,
     };
     let out = PathBuf::from(a.get("out").unwrap_or("out/target-bench"));
@@ -262,10 +269,12 @@ fn run_target_bench(args: &[String]) -> Result<(), CliError> {
         Some(e) => PathBuf::from(e),
         None => pil::build_firmware().map_err(CliError::Failed)?,
     };
-    // Open-loop frames (engine at 3000 rpm, healthy sensors): every task runs, the fast ones
-    // every step, the 10 ms and 12.5 ms ones steps/200 and steps/250 times.
-    let mut feed = OpenLoopFeed::new(3000.0);
-    let frames: Vec<_> = (0..steps).map(|_| feed.next_frame()).collect();
+    // The sensor frames of the scenario's first `steps` lockstep steps, closed loop natively;
+    // the target then steps its core on the same frames with every task counted.
+    let until_s = f64::from(steps) * f64::from(model_core::ecu::lockstep::STEP_US) * 1e-6;
+    let native = run_with(&scenario, &mut NativeLink::new().map_err(CliError::Failed)?, &RunOptions { until_s: Some(until_s), keep_frames: true })
+        .map_err(CliError::Failed)?;
+    let frames: Vec<_> = native.frames.iter().map(|(s, _)| *s).collect();
     let b = pil::target_bench(&elf, &frames, &out).map_err(CliError::Failed)?;
     print!("{}", b.text());
     println!("raw counts in {}", out.join("insn-counts.txt").display());

@@ -334,7 +334,7 @@ impl PilLink {
     /// Sends one frame, or corrupts or drops it as the fault plan says.
     fn transmit(&mut self, frame: &[u8]) -> Result<(), String> {
         let k = self.stats.transmissions + self.stats.dropped_injected + 1;
-        let due = |every: Option<u32>| every.is_some_and(|n| n > 0 && k % u64::from(n) == 0);
+        let due = |every: Option<u32>| every.is_some_and(|n| n > 0 && k.is_multiple_of(u64::from(n)));
         if due(self.opts.faults.drop_every) {
             self.stats.dropped_injected += 1;
             return Ok(());
@@ -435,67 +435,6 @@ impl PilLink {
                 return Ok(self.safe_reports[before..].to_vec());
             }
             self.fill(deadline - now)?;
-        }
-    }
-}
-
-/// A sensor stream without plants (open loop): the engine at constant speed on a 60-2 crank
-/// wheel with the cam edge once per cycle, healthy sensor readings, fixed setpoints. Enough to
-/// make every task of the core work (crank sync, valve events, EVVT and vacuum control); the
-/// closed-loop runs come from `run`.
-#[derive(Clone, Debug)]
-pub struct OpenLoopFeed {
-    pub rpm: f64,
-    pub adc_counts: [u16; model_core::ecu::supervisor::N_CHANNELS],
-    next_tooth: u64,
-    seq: u32,
-}
-
-impl OpenLoopFeed {
-    pub fn new(rpm: f64) -> Self {
-        let cfg = model_core::ecu::supervisor::SupervisorConfig::default();
-        // Battery, supply and back pressure, oil temperature, tank, ambient, LPT/HPT/HPC
-        // positions, ECU temperature (Channel order).
-        let values = [13.8f32, 6.0, 2.0, 80.0, 40.0, 100.0, 20.0, 40.0, 60.0, 50.0];
-        Self { rpm, adc_counts: std::array::from_fn(|k| cfg.scales[k].counts_for(values[k])), next_tooth: 1, seq: 0 }
-    }
-
-    /// The next step's frame (`seq` from 1, `t_us = seq · STEP_US`).
-    pub fn next_frame(&mut self) -> SensorFrame {
-        use model_core::ecu::board::{Edge, EdgeSource};
-        use model_core::ecu::ehvva_task::ValveRequest;
-        use model_core::ecu::frame::MAX_EDGES;
-        self.seq += 1;
-        let t_us = self.seq * model_core::ecu::lockstep::STEP_US;
-        let mut edges = [SensorFrame::NO_EDGE; MAX_EDGES];
-        let mut n = 0;
-        let us_per_tooth = 1e6 / (self.rpm * 6.0) * 6.0;
-        loop {
-            let t = (self.next_tooth as f64 * us_per_tooth) as u32;
-            if t > t_us {
-                break;
-            }
-            // Teeth 58 and 59 of each revolution are the gap.
-            if self.next_tooth % 60 < 58 && n < MAX_EDGES {
-                edges[n] = Edge { source: EdgeSource::CrankTooth, t_us: t };
-                n += 1;
-            }
-            if self.next_tooth % 120 == 73 && n < MAX_EDGES {
-                edges[n] = Edge { source: EdgeSource::CamSync, t_us: t + 1 };
-                n += 1;
-            }
-            self.next_tooth += 1;
-        }
-        SensorFrame {
-            seq: self.seq,
-            t_us,
-            n_edges: n as u8,
-            edges,
-            adc_counts: self.adc_counts,
-            valve: ValveRequest { open_deg: 100.0, close_deg: 400.0, high_lift: true, soft_seat: true, enabled: true },
-            cam_phase_set_deg: 20.0,
-            vacuum_x_set_pct: [20.0, 40.0, 60.0],
-            motor_driver_fault: false,
         }
     }
 }

@@ -26,7 +26,7 @@ use super::CORE_CLOCK_HZ;
 const CLOCKS_PER_PERIOD: u32 = CORE_CLOCK_HZ / 1000;
 /// Core clocks per embassy-time tick (1 µs at the default 1 MHz tick rate).
 const CLOCKS_PER_TICK: u64 = CORE_CLOCK_HZ as u64 / TICK_HZ;
-const _: () = assert!(CORE_CLOCK_HZ as u64 % TICK_HZ == 0 && CLOCKS_PER_PERIOD <= 1 << 24);
+const _: () = assert!((CORE_CLOCK_HZ as u64).is_multiple_of(TICK_HZ) && CLOCKS_PER_PERIOD <= 1 << 24);
 
 struct SysTickDriver {
     /// Completed SysTick periods since start.
