@@ -1,7 +1,7 @@
 //! `identify ehvva`: the EHVVA calibration of Li 2018 Sec. 5.2 from bench logs of valve events
 //! over a test matrix like Table 1: per test condition (supply pressure Ph, temperature T) the
 //! main-valve time constant τp and the discharge coefficient Cd by the trust-region solver on
-//! the lift simulation error (eqs. (16)-(20), [`calibrate`], the same fit `diagnose` uses), and
+//! the lift simulation error (eqs. (16)-(20), [`calibrate_with`], the same fit `diagnose` uses), and
 //! the actuation delays td (VO, VC) from the command edges to the lift's response; then the
 //! tables td(Ph, T), τp(Ph, T), Cd(T), also resampled onto model-core's breakpoints
 //! ([`EhvvaTableData`]).
