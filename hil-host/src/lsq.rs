@@ -13,7 +13,40 @@
 //! A residual function may fail (a simulation that diverges): it returns `Err`, and the solver
 //! treats the point as infinitely costly (a rejected step, a smaller region).
 
+use std::cell::RefCell;
 use std::fmt;
+use std::sync::Arc;
+
+/// Told the number of each solver iteration as it starts (a progress display's feed).
+pub type IterationObserver = Arc<dyn Fn(usize) + Send + Sync>;
+
+thread_local! {
+    /// The observer of the fits that run on this thread (see [`with_iteration_observer`]).
+    static ITERATION_OBSERVER: RefCell<Option<IterationObserver>> = const { RefCell::new(None) };
+}
+
+/// Runs `body` with `observer` told of every iteration of every [`solve`] called on this
+/// thread inside it; the previous observer is restored afterwards (also on a panic). The
+/// fits' own code (the families) need not know: the progress of a long diagnosis is fed from
+/// here.
+pub fn with_iteration_observer<T>(observer: IterationObserver, body: impl FnOnce() -> T) -> T {
+    struct Restore(Option<IterationObserver>);
+    impl Drop for Restore {
+        fn drop(&mut self) {
+            let previous = self.0.take();
+            ITERATION_OBSERVER.with(|o| *o.borrow_mut() = previous);
+        }
+    }
+    let _restore = Restore(ITERATION_OBSERVER.with(|o| o.borrow_mut().replace(observer)));
+    body()
+}
+
+fn notify_iteration(iteration: usize) {
+    // Cloned out first, so an observer that starts a fit of its own cannot hit the borrow.
+    if let Some(observer) = ITERATION_OBSERVER.with(|o| o.borrow().clone()) {
+        observer(iteration);
+    }
+}
 
 /// Options; the defaults suit simulation-error fits of a handful of parameters.
 #[derive(Clone, Debug)]
@@ -117,6 +150,7 @@ where
 
     'outer: while iterations < opts.max_iterations {
         iterations += 1;
+        notify_iteration(iterations);
         evaluations += jacobian(&residual, &x, &r, lo, hi, opts, &mut jac);
         let h_mat = jtj(&jac, n_residuals, p);
         let g = jtr(&jac, &r, n_residuals, p);
@@ -406,6 +440,32 @@ mod tests {
         let res = solve(r, &[-1.2, 1.0], &[-5.0, -5.0], &[5.0, 5.0], 2, &opts()).unwrap();
         assert!((res.x[0] - 1.0).abs() < 1e-6 && (res.x[1] - 1.0).abs() < 1e-6, "{:?}", res);
         assert!(res.cost < 1e-12);
+    }
+
+    /// The observer hears every iteration of the solves inside its scope, in order, and no
+    /// other: not those of another thread, not those after the scope.
+    #[test]
+    fn iteration_observer_hears_each_iteration_inside_its_scope() {
+        use std::sync::Mutex;
+        let r = |x: &[f64], out: &mut [f64]| {
+            out[0] = 10.0 * (x[1] - x[0] * x[0]);
+            out[1] = 1.0 - x[0];
+            Ok(())
+        };
+        let heard = Arc::new(Mutex::new(Vec::new()));
+        let sink = heard.clone();
+        let observer: IterationObserver = Arc::new(move |i| sink.lock().unwrap().push(i));
+        let (a, b) = with_iteration_observer(observer, || {
+            let a = solve(r, &[-1.2, 1.0], &[-5.0, -5.0], &[5.0, 5.0], 2, &opts()).unwrap();
+            // A fit on another thread is not this scope's.
+            std::thread::spawn(move || solve(r, &[-1.2, 1.0], &[-5.0, -5.0], &[5.0, 5.0], 2, &opts()).unwrap()).join().unwrap();
+            let b = solve(r, &[0.5, 0.5], &[-5.0, -5.0], &[5.0, 5.0], 2, &opts()).unwrap();
+            (a, b)
+        });
+        solve(r, &[-1.2, 1.0], &[-5.0, -5.0], &[5.0, 5.0], 2, &opts()).unwrap();
+        let expected: Vec<usize> = (1..=a.iterations).chain(1..=b.iterations).collect();
+        assert!(a.iterations > 5, "{}", a.iterations);
+        assert_eq!(*heard.lock().unwrap(), expected);
     }
 
     #[test]

@@ -148,8 +148,18 @@ fn run_diagnose(args: &[String]) -> Result<(), CliError> {
         eprintln!("notice: {n}");
     }
     let family = diagnose::family_for(plant).map_err(CliError::Failed)?;
-    let mut progress = |what: &str| eprintln!("fitting {what} ...");
-    let d = diagnose::diagnose(family.as_ref(), &est, &val, tail, &Rules::default(), &mut progress).map_err(CliError::Failed)?;
+    // A bar redrawn in place on a terminal, plain lines per fit otherwise.
+    let mut line = diagnose::progress::ProgressLine::for_stderr();
+    let mut progress = |p: &diagnose::Progress| {
+        if let Some(text) = line.render(p) {
+            eprint!("{text}");
+        }
+    };
+    let d = diagnose::diagnose(family.as_ref(), &est, &val, tail, &Rules::default(), &mut progress);
+    if let Some(text) = line.finish() {
+        eprint!("{text}");
+    }
+    let d = d.map_err(CliError::Failed)?;
     print!("{}", report::summary(&d));
     if let Some(out) = a.get("json") {
         let text = serde_json::to_string_pretty(&report::to_json(&d)).map_err(|e| CliError::Failed(e.to_string()))?;

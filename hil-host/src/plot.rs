@@ -115,8 +115,10 @@ fn escape(t: &str) -> String {
     t.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
 }
 
-/// Writes the diagnosis plots into `dir`: measured vs baseline vs extended, the residuals, and
-/// the residual autocorrelation with its 99 % band. Returns the files written.
+/// Writes the diagnosis plots into `dir`: measured vs baseline vs extended, the residuals, the
+/// residual autocorrelation with its 99 % band and the baseline residual's cross-correlation
+/// with the (up to three) regressors it is most correlated with, with the same band. Returns
+/// the files written.
 pub fn diagnosis_plots(d: &Diagnosis, dir: &Path) -> std::io::Result<Vec<PathBuf>> {
     fs::create_dir_all(dir)?;
     let n = d.baseline.measured.len();
@@ -175,6 +177,30 @@ pub fn diagnosis_plots(d: &Diagnosis, dir: &Path) -> std::io::Result<Vec<PathBuf
             &[d.whiteness.band, -d.whiteness.band],
         ),
     )?;
+    // The residual's correlation with the regressors it is most correlated with.
+    let mut worst: Vec<&crate::residuals::CrossCheck> = d.cross.iter().filter(|c| !c.correlation.is_empty()).collect();
+    worst.sort_by(|a, b| (b.max_abs / b.band).total_cmp(&(a.max_abs / a.band)));
+    worst.truncate(3);
+    if let Some(first) = worst.first() {
+        let half = (first.correlation.len() / 2) as f64;
+        let lag_x: Vec<f64> = (0..first.correlation.len()).map(|i| i as f64 - half).collect();
+        let colours = ["#d62728", "#2ca02c", "#9467bd"];
+        let series: Vec<Series> = worst
+            .iter()
+            .zip(colours)
+            .map(|(c, colour)| Series { label: &c.name, colour, x: &lag_x[..c.correlation.len().min(lag_x.len())], y: &c.correlation })
+            .collect();
+        put(
+            "cross_correlation.svg",
+            line_plot(
+                "baseline residual cross-correlation with the 99 % band (most correlated regressors)",
+                "lag (samples; positive: the signal leads the residual)",
+                "normalised cross-correlation",
+                &series,
+                &[first.band, -first.band],
+            ),
+        )?;
+    }
     Ok(written)
 }
 

@@ -6,6 +6,9 @@
 //!   99 % quantile.
 //! - Cross-correlation of the residual with each input and candidate regressor at lags
 //!   −L..L, against the same band.
+//! - The residual grouped by operating condition: its mean and RMSE in each group of a
+//!   condition signal (each value of a sign or flag, else the signal's low, middle and high
+//!   third), and whether the group means differ by more than noise explains.
 
 /// Root mean square of `e`.
 pub fn rmse(e: &[f64]) -> f64 {
@@ -131,6 +134,8 @@ pub struct CrossCheck {
     pub at_lag: isize,
     pub band: f64,
     pub pass: bool,
+    /// The normalised cross-correlation at lags −L..=L (index L is lag 0), for the plot.
+    pub correlation: Vec<f64>,
 }
 
 pub fn cross_check(name: &str, e: &[f64], u: &[f64], lags: usize) -> CrossCheck {
@@ -144,12 +149,146 @@ pub fn cross_check(name: &str, e: &[f64], u: &[f64], lags: usize) -> CrossCheck 
         }
     }
     let band = band99(e.len().min(u.len()));
-    CrossCheck { name: name.to_string(), max_abs, at_lag, band, pass: max_abs <= band }
+    CrossCheck { name: name.to_string(), max_abs, at_lag, band, pass: max_abs <= band, correlation: c }
+}
+
+/// The residual in one group of an operating condition.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Group {
+    pub label: String,
+    pub samples: usize,
+    pub mean: f64,
+    pub rmse: f64,
+}
+
+/// The residual grouped by one operating condition.
+#[derive(Clone, Debug)]
+pub struct GroupCheck {
+    pub name: String,
+    pub groups: Vec<Group>,
+    /// The largest difference between two group means, in standard errors.
+    pub z: f64,
+    /// Passes when no two group means differ by `Z_GROUPS` standard errors or more.
+    pub pass: bool,
+}
+
+/// Group means this many standard errors apart are a bias tied to the condition: the 99 % level
+/// of the other residual tests, two-sided, for a standard error from 40 blocks (Student t with
+/// 39 degrees of freedom: 2.71).
+pub const Z_GROUPS: f64 = 2.71;
+
+/// Groups smaller than this share of the samples (or than 30 samples) are left out: their means
+/// are too uncertain to say anything.
+const MIN_GROUP_SHARE: f64 = 0.02;
+
+/// The residual `e` grouped by `condition` (same length). A condition with at most three
+/// distinct values (signs, flags) is grouped by value; others into thirds by their 1/3 and 2/3
+/// quantiles. The residual is correlated from sample to sample and the conditions come in
+/// stretches (stitched test points), so the standard error of a difference of group means is
+/// cluster-robust: the record is cut into 40 contiguous blocks and the difference's variance is
+/// estimated from the blocks' contributions (as `improvement_z` does for two models), not from
+/// thousands of samples taken as independent.
+pub fn group_check(name: &str, e: &[f64], condition: &[f64]) -> GroupCheck {
+    let n = e.len().min(condition.len());
+    let (e, c) = (&e[..n], &condition[..n]);
+    let mut values: Vec<f64> = c.iter().copied().filter(|v| v.is_finite()).collect();
+    values.sort_by(f64::total_cmp);
+    values.dedup();
+    type GroupOf = Box<dyn Fn(f64) -> Option<usize>>;
+    let (labels, group_of): (Vec<String>, GroupOf) = if values.len() <= 3 {
+        let vals = values.clone();
+        (values.iter().map(|v| format!("= {v}")).collect(), Box::new(move |x: f64| vals.iter().position(|v| *v == x)))
+    } else {
+        let mut sorted: Vec<f64> = c.iter().copied().filter(|v| v.is_finite()).collect();
+        sorted.sort_by(f64::total_cmp);
+        let q = |f: f64| sorted[((sorted.len() - 1) as f64 * f).round() as usize];
+        let (q1, q2) = (q(1.0 / 3.0), q(2.0 / 3.0));
+        (
+            vec![format!("low (< {})", short(q1)), format!("middle ({}..{})", short(q1), short(q2)), format!("high (≥ {})", short(q2))],
+            Box::new(move |x: f64| x.is_finite().then_some(if x < q1 { 0 } else if x < q2 { 1 } else { 2 })),
+        )
+    };
+    let blocks = 40.min(n / 10).max(2);
+    let size = n.div_ceil(blocks).max(1);
+    // Per group and block: count and residual sum; per group: sum of squares.
+    let mut count = vec![vec![0usize; blocks]; labels.len()];
+    let mut sum = vec![vec![0.0f64; blocks]; labels.len()];
+    let mut sum2 = vec![0.0f64; labels.len()];
+    for (k, (&r, &x)) in e.iter().zip(c).enumerate() {
+        if let Some(g) = group_of(x) {
+            count[g][k / size] += 1;
+            sum[g][k / size] += r;
+            sum2[g] += r * r;
+        }
+    }
+    let min_samples = ((n as f64 * MIN_GROUP_SHARE).ceil() as usize).max(30);
+    let mut groups = Vec::new();
+    let mut kept = Vec::new();
+    for (g, label) in labels.into_iter().enumerate() {
+        let total: usize = count[g].iter().sum();
+        if total < min_samples {
+            continue;
+        }
+        let mean = sum[g].iter().sum::<f64>() / total as f64;
+        groups.push(Group { label, samples: total, mean, rmse: (sum2[g] / total as f64).sqrt() });
+        kept.push(g);
+    }
+    let mut z = 0.0f64;
+    for (a, &i) in kept.iter().enumerate() {
+        for (b, &j) in kept.iter().enumerate().skip(a + 1) {
+            let (mi, mj) = (groups[a].mean, groups[b].mean);
+            let (ni, nj) = (groups[a].samples as f64, groups[b].samples as f64);
+            // Linearised contribution of each block to the difference of the two means.
+            let var: f64 = (0..blocks)
+                .map(|k| ((sum[i][k] - mi * count[i][k] as f64) / ni - (sum[j][k] - mj * count[j][k] as f64) / nj).powi(2))
+                .sum::<f64>()
+                * blocks as f64
+                / (blocks - 1) as f64;
+            let d = (mi - mj).abs();
+            z = z.max(if var > 0.0 { d / var.sqrt() } else if d > 0.0 { f64::INFINITY } else { 0.0 });
+        }
+    }
+    GroupCheck { name: name.to_string(), groups, z, pass: z < Z_GROUPS }
+}
+
+/// A group boundary for a label: 4 significant digits.
+fn short(x: f64) -> String {
+    format!("{}", (x * 1e4).round() / 1e4).chars().take(10).collect()
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn grouped_residual_finds_a_bias_in_one_condition() {
+        let noise = white(6000, 0x9E37_79B9_7F4A_7C15);
+        // A slow operating condition (a supply voltage stepping between levels).
+        let volt: Vec<f64> = (0..6000).map(|k| 10.0 + ((k / 500) % 4) as f64).collect();
+        let plain = group_check("supply voltage", &noise, &volt);
+        assert!(plain.pass && plain.groups.len() == 3, "{plain:?}");
+        // The same noise plus an offset of a third of its RMS where the voltage is high (the
+        // upper third: 12 and 13 V of the four levels).
+        let biased: Vec<f64> = noise.iter().zip(&volt).map(|(e, v)| e + if *v >= 12.0 { 0.1 } else { 0.0 }).collect();
+        let g = group_check("supply voltage", &biased, &volt);
+        assert!(!g.pass && g.z > 8.0, "{g:?}");
+        let high = g.groups.iter().find(|g| g.label.starts_with("high")).unwrap();
+        assert!((high.mean - 0.1).abs() < 0.02 && high.samples == 3000, "{high:?}");
+        // A sign is grouped by value; a group too small to judge is left out.
+        let mut sign: Vec<f64> = (0..6000).map(|k| if (k / 300) % 2 == 0 { 1.0 } else { -1.0 }).collect();
+        sign[17] = 0.0;
+        let s = group_check("velocity sign", &noise, &sign);
+        assert_eq!(s.groups.iter().map(|g| g.label.as_str()).collect::<Vec<_>>(), ["= -1", "= 1"]);
+        assert!(s.pass, "{s:?}");
+        // A slowly wandering residual: its correlation widens the standard error, so a slow
+        // drift that happens to line up with a condition is not called a bias as easily.
+        let mut y = 0.0;
+        let drift: Vec<f64> = noise.iter().map(|&v| { y = 0.995 * y + 0.1 * v; y }).collect();
+        let d = group_check("supply voltage", &drift, &volt);
+        let naive_se = (d.groups.iter().map(|g| g.rmse * g.rmse / g.samples as f64).sum::<f64>()).sqrt();
+        let spread = d.groups.iter().map(|g| g.mean).fold(f64::MIN, f64::max) - d.groups.iter().map(|g| g.mean).fold(f64::MAX, f64::min);
+        assert!(d.z < spread / naive_se / 5.0, "z {} vs naive {}", d.z, spread / naive_se);
+    }
 
     /// A deterministic white sequence (xorshift), zero mean.
     fn white(n: usize, seed: u64) -> Vec<f64> {

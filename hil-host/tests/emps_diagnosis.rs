@@ -47,9 +47,26 @@ fn names_coulomb_friction_with_the_published_parameters() {
     assert!((gain - 100.0 * (rb - re) / rb).abs() < 1e-9);
     assert!(gain > 50.0, "gain {gain}");
     assert_eq!(r["residual_tests"]["whiteness_pass"], false);
-    for f in ["fit.svg", "residuals.svg", "autocorrelation.svg"] {
+    // Grouped by the direction of motion, the baseline residual force has a different mean
+    // each way: the Coulomb friction it lacks (the missing +Fc·sign(v) shows as a positive
+    // residual force moving forwards, a negative one backwards).
+    let by_sign = r["residual_tests"]["grouped_by_condition"].as_array().unwrap().iter().find(|g| g["condition"] == "velocity sign").unwrap();
+    assert_eq!(by_sign["pass"], false, "{by_sign}");
+    // (The sign is decimated with the other regressors, so it is grouped in thirds.)
+    let mean = |third: &str| by_sign["groups"].as_array().unwrap().iter().find(|g| g["group"].as_str().unwrap().starts_with(third)).unwrap()["mean"].as_f64().unwrap();
+    assert!(mean("high") > 2.0 && mean("low") < -2.0, "{by_sign}");
+    assert_eq!(r["residual_tests"]["grouped_by_condition_pass"], false);
+    for f in ["fit.svg", "residuals.svg", "autocorrelation.svg", "cross_correlation.svg"] {
         assert!(dir.join("plots").join(f).exists(), "{f} missing");
     }
+    // The cross-correlation plot shows the 99 % band (two dashed lines) and the velocity sign.
+    let svg = std::fs::read_to_string(dir.join("plots/cross_correlation.svg")).unwrap();
+    assert_eq!(svg.matches("stroke-dasharray").count(), 2);
+    assert!(svg.contains("velocity sign"), "the most correlated regressors should include the velocity sign");
+    // Not a terminal: one plain progress line per fit, no carriage returns.
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("fitting baseline (1/3) ...\nfitting coulomb-friction (2/3) ...\nfitting asymmetric-friction (3/3) ...\n"), "{stderr}");
+    assert!(!stderr.contains('\r'));
     std::fs::remove_dir_all(&dir).ok();
 }
 

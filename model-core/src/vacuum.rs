@@ -604,7 +604,13 @@ pub struct VacuumValveActuator<R: Real> {
     v_pct_s: R,
     friction_kpa: R,
     x_valve_pct: R,
+    /// Largest rod integration step, s ([`Self::with_rod_step_s`]).
+    rod_step_max_s: f64,
 }
+
+/// Longest rod step [`VacuumValveActuator::with_rod_step_s`] accepts: the semi-implicit
+/// Euler step of the stiffest spring mode (~250 rad/s) is stable below 2/ω = 8 ms.
+const ROD_STEP_MAX_S: f64 = 0.005;
 
 impl<R: Real> VacuumValveActuator<R> {
     /// Builds the actuator at rest, vented to `p_amb_ref_kpa` (valve closed, x at the spring's
@@ -643,7 +649,24 @@ impl<R: Real> VacuumValveActuator<R> {
             v_pct_s: R::ZERO,
             friction_kpa: R::ZERO,
             x_valve_pct: x0,
+            rod_step_max_s: H_MAX_S,
         })
+    }
+
+    /// The same actuator with its rod (eqs. (6), (7), (10)) integrated in steps of at most
+    /// `h_max_s` instead of the default 0.5 ms: a coarser step trades accuracy for speed where
+    /// many simulations run (the host diagnosis fits at 1 ms). Between 1 µs and 5 ms.
+    pub fn with_rod_step_s(mut self, h_max_s: f64) -> Result<Self, VacuumParamError> {
+        if !(h_max_s.is_finite() && (1e-6..=ROD_STEP_MAX_S).contains(&h_max_s)) {
+            return Err(VacuumParamError::BadParameter("rod_step_max_s"));
+        }
+        self.rod_step_max_s = h_max_s;
+        Ok(self)
+    }
+
+    /// Largest rod integration step, s.
+    pub fn rod_step_s(&self) -> f64 {
+        self.rod_step_max_s
     }
 
     /// The duty the valve acts on: eq. (1) with the `supply-voltage` effect, else the duty.
@@ -698,33 +721,17 @@ impl<R: Real> VacuumValveActuator<R> {
     }
 
     /// Advances by `dt_s`. Pressure eq. (4) is integrated exactly over the step; the rod
-    /// (eqs. (6), (7), (10)) in substeps of at most 0.5 ms with the chamber pressure
-    /// interpolated across the step.
+    /// (eqs. (6), (7), (10)) in substeps of at most 0.5 ms (or [`Self::with_rod_step_s`]) with
+    /// the chamber pressure interpolated across the step.
     pub fn step(&mut self, inputs: &VacuumInputs<R>, dt_s: R) -> VacuumOutputs<R> {
-        let hundred = R::from_f64(100.0);
-        let p_amb = inputs.p_amb_kpa;
         let p_stat = self.static_pressure_kpa(inputs);
         if !positive(dt_s) {
             return self.outputs(p_stat, R::ZERO);
         }
         let p_old = self.p_act_kpa;
-        let x_old = self.x_mem_pct;
-        let volume_old = self.volume_l(x_old);
-
-        // Eq. (4), exact for a constant target: p += (p_stat − p)(1 − e^(−dt/τ)).
-        let tau = if self.effects.pressure_direction && p_stat < p_old { self.tau_fall_s } else { self.tau_rise_s };
-        let p_new = p_old + (p_stat - p_old) * one_minus_exp_neg(dt_s / tau);
-        self.p_act_kpa = p_new;
-
-        let n = substeps(dt_s, H_MAX_S);
-        let n_r = R::from_f64(n);
-        let h = dt_s / n_r;
-        let dp_step = (p_new - p_old) / n_r;
-        let mut p_sub = p_old;
-        for _ in 0..(n as u32) {
-            p_sub += dp_step;
-            self.mechanics_substep(p_amb - p_sub, h, hundred);
-        }
+        let volume_old = self.volume_l(self.x_mem_pct);
+        self.advance(inputs, dt_s);
+        let p_new = self.p_act_kpa;
 
         // Mass flows into the tank. Leakage eq. (3) through the Fig. 13 area, from the chamber.
         let u = self.effective_duty_pct(inputs.duty_pct, inputs.u_batt_v);
@@ -735,6 +742,40 @@ impl<R: Real> VacuumValveActuator<R> {
         let pv_change = p_new * self.volume_l(self.x_mem_pct) - p_old * volume_old;
         let evacuation = (-pv_change).max(R::ZERO) * self.c_mass / dt_s;
         self.outputs(p_stat, leak + evacuation)
+    }
+
+    /// [`Self::step`] without the mass flows to the tank: the same pressure and positions, for
+    /// simulations that only compare those (the host diagnosis runs millions of steps).
+    pub fn advance(&mut self, inputs: &VacuumInputs<R>, dt_s: R) {
+        if !positive(dt_s) {
+            return;
+        }
+        let p_old = self.p_act_kpa;
+        let p_new = self.advance_pressure(inputs, dt_s);
+        let n = substeps(dt_s, self.rod_step_max_s);
+        let n_r = R::from_f64(n);
+        let h = dt_s / n_r;
+        let dp_step = (p_new - p_old) / n_r;
+        let hundred = R::from_f64(100.0);
+        let mut p_sub = p_old;
+        for _ in 0..(n as u32) {
+            p_sub += dp_step;
+            self.mechanics_substep(inputs.p_amb_kpa - p_sub, h, hundred);
+        }
+    }
+
+    /// Advances the chamber pressure alone (eq. (4)) by `dt_s` and returns it; the rod stays
+    /// where it is. Eq. (4) does not depend on the rod, so a pressure model can be fitted to a
+    /// logged chamber pressure at a fraction of the cost of the whole actuator.
+    pub fn advance_pressure(&mut self, inputs: &VacuumInputs<R>, dt_s: R) -> R {
+        if positive(dt_s) {
+            let p_stat = self.static_pressure_kpa(inputs);
+            let p_old = self.p_act_kpa;
+            // Eq. (4), exact for a constant target: p += (p_stat − p)(1 − e^(−dt/τ)).
+            let tau = if self.effects.pressure_direction && p_stat < p_old { self.tau_fall_s } else { self.tau_rise_s };
+            self.p_act_kpa = p_old + (p_stat - p_old) * one_minus_exp_neg(dt_s / tau);
+        }
+        self.p_act_kpa
     }
 
     /// One semi-implicit Euler step of the normalized force balance eq. (7) with mass and
@@ -1113,6 +1154,45 @@ mod tests {
                     prop_assert!((30.0 - 1e-9..=100.0 + 1e-9).contains(&o.p_act_kpa));
                     prop_assert!(o.flow_to_tank_mg_s >= 0.0);
                 }
+            }
+        }
+    }
+
+    /// `advance` is `step` without the flows, `advance_pressure` its pressure alone; the rod
+    /// step is a setting: the default reproduced exactly, a coarser one close, bad ones named.
+    #[test]
+    fn advance_and_rod_step_settings_keep_the_model() {
+        // Ramps up over 1.5 s and steps down: 25..100 % reaches every preset's travel.
+        let duty = |k: usize| if (k / 150).is_multiple_of(2) { 25.0 + (k % 150) as f64 * 0.5 } else { 100.0 - (k % 90) as f64 };
+        for p in [VacuumParams::lpt(), VacuumParams::hpt(), VacuumParams::hpc()] {
+            let base = VacuumValveActuator::<f64>::new(&p).unwrap();
+            assert_eq!(base.rod_step_s(), 0.0005);
+            let (mut stepped, mut advanced, mut pressure_only) = (base, base, base);
+            let mut same_step = base.with_rod_step_s(0.0005).unwrap();
+            let mut coarse = base.with_rod_step_s(0.002).unwrap();
+            let mut dev_coarse = 0.0f64;
+            let mut span = (f64::MAX, f64::MIN);
+            for k in 0..1500 {
+                let i = inp(duty(k), 11.0 + (k % 7) as f64 * 0.3, 25.0);
+                let o = stepped.step(&i, 0.01);
+                advanced.advance(&i, 0.01);
+                same_step.step(&i, 0.01);
+                coarse.advance(&i, 0.01);
+                let x_before = pressure_only.x_pct();
+                assert_eq!(pressure_only.advance_pressure(&i, 0.01), o.p_act_kpa);
+                assert_eq!(pressure_only.x_pct(), x_before, "the rod must stay");
+                assert_eq!((advanced.p_act_kpa(), advanced.x_pct(), advanced.x_membrane_pct()), (o.p_act_kpa, o.x_pct, o.x_membrane_pct));
+                assert_eq!((same_step.p_act_kpa(), same_step.x_pct()), (o.p_act_kpa, o.x_pct));
+                assert_eq!(coarse.p_act_kpa(), o.p_act_kpa);
+                dev_coarse = dev_coarse.max((coarse.x_pct() - o.x_pct).abs());
+                span = (span.0.min(o.x_pct), span.1.max(o.x_pct));
+            }
+            // The rod really moves, and a 4x coarser rod step stays within 2 % of stroke of it
+            // while not being the same computation.
+            assert!(span.1 - span.0 > 30.0, "{span:?}");
+            assert!(dev_coarse > 1e-9 && dev_coarse < 2.0, "coarse rod step deviates {dev_coarse} %");
+            for bad in [0.0, -0.001, 0.006, f64::NAN] {
+                assert_eq!(base.with_rod_step_s(bad).unwrap_err(), VacuumParamError::BadParameter("rod_step_max_s"), "{bad}");
             }
         }
     }

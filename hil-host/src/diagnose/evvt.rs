@@ -816,27 +816,6 @@ mod tests {
         assert!(fit.rmse < 0.4, "rmse {}", fit.rmse);
     }
 
-    /// Timing: a 100 000-sample log (40 stitched points), held-out tail, every candidate,
-    /// under 5 s. Meaningful in release only:
-    /// `cargo test -p hil-host --release --lib diagnosis_of_100k -- --ignored --nocapture`.
-    #[test]
-    #[ignore]
-    fn diagnosis_of_100k_samples_is_fast() {
-        let sizes = gen::Sizes { estimation_points: 40, estimation_point_s: 25.0, ..gen::Sizes::default() };
-        for effect in ["none", "supply-voltage", "engine-speed", "direction", "belt-vibration"] {
-            let case = gen::generate_sized(effect, 42, &sizes).unwrap();
-            let start = std::time::Instant::now();
-            let log = parse_log("long.csv", &case.estimation_csv, None).unwrap();
-            assert_eq!(log.len(), 100_000);
-            let (est, val) = crate::diagnose::split_tail(&log, 0.3);
-            let d = crate::diagnose::diagnose(&EvvtFamily::default(), &est, &val, true, &crate::diagnose::Rules::default(), &mut |_| {}).unwrap();
-            let secs = start.elapsed().as_secs_f64();
-            println!("{effect:<16} named {:<16} gain {:5.1} %  {secs:.2} s (parse + diagnose)", d.cause, d.gain_pct);
-            assert_eq!(d.cause, effect);
-            assert!(secs < 5.0, "{effect}: {secs:.2} s");
-        }
-    }
-
     #[test]
     fn open_loop_windows_when_the_loop_is_not_logged() {
         let (mut est, mut val, t) = logs("none", 33);

@@ -10,11 +10,16 @@
 pub mod ehvva;
 pub mod evvt;
 pub mod positioner;
+pub mod progress;
 pub mod report;
 pub mod vacuum;
 
+use std::sync::{mpsc, Arc};
+use std::time::Instant;
+
 use crate::log::{Log, Plant};
-use crate::residuals::{cross_check, fit_pct, rmse, whiteness, CrossCheck, Whiteness};
+use crate::lsq::with_iteration_observer;
+use crate::residuals::{cross_check, fit_pct, group_check, rmse, whiteness, CrossCheck, GroupCheck, Whiteness};
 
 /// One calibrated model and how it does on the validation data.
 #[derive(Clone, Debug)]
@@ -143,6 +148,8 @@ pub struct Diagnosis {
     pub baseline: Fit,
     pub whiteness: Whiteness,
     pub cross: Vec<CrossCheck>,
+    /// The baseline residual grouped by each regressor as an operating condition.
+    pub grouped: Vec<GroupCheck>,
     pub candidates: Vec<Candidate>,
     pub cause: String,
     pub extended: Fit,
@@ -166,24 +173,85 @@ pub fn split_tail(log: &Log, tail: f64) -> (Log, Log) {
     (part(0..cut, " (first 70 %)"), part(cut..n, " (last 30 %, held out)"))
 }
 
-/// Runs the whole diagnosis. `progress` is told each fit as it starts.
-pub fn diagnose(family: &dyn Family, est: &Log, val: &Log, validation_is_tail: bool, rules: &Rules, progress: &mut dyn FnMut(&str)) -> Result<Diagnosis, String> {
-    progress("baseline");
-    let baseline = family.fit(None, est, val)?;
+/// Where a diagnosis stands, for a progress display ([`progress::ProgressLine`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Progress<'a> {
+    /// `baseline` or the catalogue effect being fitted.
+    pub fit: &'a str,
+    /// Position of this fit, 1-based (the baseline is 1), among `total` = 1 + candidates.
+    pub index: usize,
+    pub total: usize,
+    /// Solver iterations of this fit so far, over all its solver stages (0 as it starts).
+    pub iteration: usize,
+    /// Seconds since the diagnosis began.
+    pub elapsed_s: f64,
+}
+
+/// What the fitting thread tells the progress relay.
+enum Tick {
+    Fit { name: String, index: usize },
+    Iteration,
+}
+
+/// Runs the whole diagnosis. `progress` is told each fit as it starts (iteration 0) and each
+/// solver iteration of it (heard through [`crate::lsq::with_iteration_observer`], so the
+/// families need not report). It is called in order from a helper thread while the fits run
+/// on this one, and never after `diagnose` returns.
+pub fn diagnose(family: &dyn Family, est: &Log, val: &Log, validation_is_tail: bool, rules: &Rules, progress: &mut (dyn FnMut(&Progress) + Send)) -> Result<Diagnosis, String> {
+    let start = Instant::now();
+    let total = 1 + family.effects().len();
+    let (tx, rx) = mpsc::channel::<Tick>();
+    std::thread::scope(|s| {
+        s.spawn(move || {
+            let (mut name, mut index, mut iteration) = (String::new(), 0, 0);
+            // Ends when the fitting side has dropped every sender.
+            for tick in rx {
+                match tick {
+                    Tick::Fit { name: n, index: i } => (name, index, iteration) = (n, i, 0),
+                    Tick::Iteration => iteration += 1,
+                }
+                progress(&Progress { fit: &name, index, total, iteration, elapsed_s: start.elapsed().as_secs_f64() });
+            }
+        });
+        let fit = |effect: Option<&str>, index: usize| -> Result<Fit, String> {
+            let _ = tx.send(Tick::Fit { name: effect.unwrap_or("baseline").to_string(), index });
+            let iterations = tx.clone();
+            with_iteration_observer(Arc::new(move |_| drop(iterations.send(Tick::Iteration))), || family.fit(effect, est, val))
+        };
+        let result = diagnose_fits(family, est, val, validation_is_tail, rules, &fit);
+        drop(tx);
+        result
+    })
+}
+
+/// Calibrates one model (`None`: the baseline) as fit number `index`, and reports it.
+type FitOne<'a> = dyn Fn(Option<&str>, usize) -> Result<Fit, String> + 'a;
+
+/// The diagnosis proper; `fit(effect, index)` calibrates one model (and reports it).
+fn diagnose_fits(
+    family: &dyn Family,
+    est: &Log,
+    val: &Log,
+    validation_is_tail: bool,
+    rules: &Rules,
+    fit: &FitOne,
+) -> Result<Diagnosis, String> {
+    let baseline = fit(None, 1)?;
     let e0 = baseline.residual();
     let lags = (e0.len() / 20).clamp(5, 50);
     let white = whiteness(&e0, lags);
-    let cross: Vec<CrossCheck> = family.regressors(val).iter().map(|(name, u)| cross_check(name, &e0, u, lags)).collect();
+    let regressors = family.regressors(val);
+    let cross: Vec<CrossCheck> = regressors.iter().map(|(name, u)| cross_check(name, &e0, u, lags)).collect();
+    let grouped: Vec<GroupCheck> = regressors.iter().map(|(name, u)| group_check(name, &e0, u)).collect();
 
     let mut candidates = Vec::new();
-    for effect in family.effects() {
-        progress(effect);
-        let fit = match family.fit(Some(effect), est, val) {
+    for (i, effect) in family.effects().iter().enumerate() {
+        let fit = match fit(Some(effect), 2 + i) {
             Ok(f) => f,
             Err(e) => {
                 // A candidate that cannot be fitted is reported, not fatal.
                 let mut f = baseline.clone();
-                f.effect = format!("{effect}");
+                f.effect = effect.to_string();
                 f.rmse = f64::INFINITY;
                 f.fit_pct = f64::NEG_INFINITY;
                 f.params = vec![(format!("error: {e}"), f64::NAN)];
@@ -241,6 +309,10 @@ pub fn diagnose(family: &dyn Family, est: &Log, val: &Log, validation_is_tail: b
     for c in cross.iter().filter(|c| !c.pass) {
         evidence.push(format!("residual correlates with {} ({:.2} at lag {}, band ±{:.3})", c.name, c.max_abs, c.at_lag, c.band));
     }
+    for g in grouped.iter().filter(|g| !g.pass) {
+        let means: Vec<String> = g.groups.iter().map(|m| format!("{} {:+.4} (RMSE {:.4}, {} samples)", m.label, m.mean, m.rmse, m.samples)).collect();
+        evidence.push(format!("residual mean differs by {} (z = {:.1}): {}", g.name, g.z, means.join("; ")));
+    }
     let (cause, extended, gain_pct) = match best {
         Some(b) => {
             let c = &candidates[b];
@@ -268,6 +340,7 @@ pub fn diagnose(family: &dyn Family, est: &Log, val: &Log, validation_is_tail: b
         baseline,
         whiteness: white,
         cross,
+        grouped,
         candidates,
         cause,
         extended,
@@ -289,6 +362,75 @@ pub fn family_for(plant: Plant) -> Result<Box<dyn Family>, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A family whose fits are small solver runs: y = a·u (+ b·u² with the effect), so the
+    /// progress reports can be checked against the solver's own iteration counts.
+    struct Quadratic;
+
+    impl Family for Quadratic {
+        fn plant(&self) -> Plant {
+            Plant::Positioner
+        }
+        fn output(&self) -> &'static str {
+            "pos_m"
+        }
+        fn formulation(&self) -> &'static str {
+            "test"
+        }
+        fn effects(&self) -> &'static [&'static str] {
+            &["square", "square-again"]
+        }
+        fn fit(&self, effect: Option<&str>, _est: &Log, _val: &Log) -> Result<Fit, String> {
+            let u: Vec<f64> = (0..200).map(|k| k as f64 / 100.0).collect();
+            let y: Vec<f64> = u.iter().map(|u| 2.0 * u + 0.5 * u * u + 0.01 * (u * 977.0).sin()).collect();
+            let with_b = effect.is_some();
+            let model = |x: &[f64], u: f64| x[0] * u + if with_b { x[1] * u * u } else { 0.0 };
+            let r = crate::lsq::solve(
+                |x: &[f64], out: &mut [f64]| {
+                    for (k, o) in out.iter_mut().enumerate() {
+                        // Exponentiated so the fit is nonlinear and takes several iterations.
+                        *o = model(&[x[0].exp(), x[1].exp()], u[k]) - y[k];
+                    }
+                    Ok(())
+                },
+                &[-2.0, -3.0],
+                &[-10.0, -10.0],
+                &[10.0, 10.0],
+                u.len(),
+                &crate::lsq::LsqOptions::default(),
+            )
+            .map_err(|e| e.to_string())?;
+            let x = [r.x[0].exp(), r.x[1].exp()];
+            let predicted = u.iter().map(|&u| model(&x, u)).collect();
+            Ok(Fit::new(effect.unwrap_or("baseline"), vec![("a".into(), x[0]), ("b".into(), x[1])], vec![None, None], y, predicted, r.iterations))
+        }
+        fn regressors(&self, _val: &Log) -> Vec<(String, Vec<f64>)> {
+            Vec::new()
+        }
+    }
+
+    #[test]
+    fn progress_reports_every_fit_and_each_solver_iteration() {
+        let log = crate::log::parse_log("p.csv", "# plant: positioner\nt_s,force_N,pos_m\n0,0,0\n0.001,1,0\n", None).unwrap();
+        let mut seen: Vec<(String, usize, usize, usize, f64)> = Vec::new();
+        let d = diagnose(&Quadratic, &log, &log, false, &Rules::default(), &mut |p: &Progress| {
+            seen.push((p.fit.to_string(), p.index, p.total, p.iteration, p.elapsed_s))
+        })
+        .unwrap();
+        assert_eq!(d.cause, "square");
+        let fits = [("baseline", &d.baseline), ("square", &d.candidates[0].fit), ("square-again", &d.candidates[1].fit)];
+        for (i, (name, fit)) in fits.iter().enumerate() {
+            let reports: Vec<usize> = seen.iter().filter(|s| s.1 == i + 1).map(|s| s.3).collect();
+            assert!(seen.iter().filter(|s| s.1 == i + 1).all(|s| s.0 == *name && s.2 == 3));
+            // The fit's start, then one report per solver iteration, counted up.
+            let expected: Vec<usize> = (0..=fit.iterations).collect();
+            assert!(fit.iterations > 2, "{name}: {} iterations", fit.iterations);
+            assert_eq!(reports, expected, "{name}");
+        }
+        // In order of the fits, and time never runs backwards.
+        assert!(seen.windows(2).all(|w| w[0].1 <= w[1].1 && w[0].4 <= w[1].4));
+        assert_eq!(seen.len(), fits.iter().map(|f| f.1.iterations + 1).sum::<usize>());
+    }
 
     #[test]
     fn improvement_z_separates_signal_from_noise() {

@@ -48,6 +48,18 @@ pub fn to_json(d: &Diagnosis) -> Value {
         .iter()
         .map(|c| json!({"signal": c.name, "max_abs": json_number(c.max_abs), "lag": c.at_lag, "band": json_number(c.band), "pass": c.pass}))
         .collect();
+    let grouped: Vec<Value> = d
+        .grouped
+        .iter()
+        .map(|g| {
+            let groups: Vec<Value> = g
+                .groups
+                .iter()
+                .map(|m| json!({"group": m.label, "samples": m.samples, "mean": json_number(m.mean), "rmse": json_number(m.rmse)}))
+                .collect();
+            json!({"condition": g.name, "groups": groups, "z": json_number(g.z), "pass": g.pass})
+        })
+        .collect();
     json!({
         "plant": d.plant.name(),
         "output": d.output,
@@ -69,6 +81,8 @@ pub fn to_json(d: &Diagnosis) -> Value {
             "max_autocorrelation_lag": d.whiteness.max_lag,
             "band_99": json_number(d.whiteness.band),
             "cross_correlation": cross,
+            "grouped_by_condition_pass": d.grouped.iter().all(|g| g.pass),
+            "grouped_by_condition": grouped,
         },
         "candidates": candidates,
         "cause": d.cause,

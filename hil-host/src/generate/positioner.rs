@@ -152,11 +152,16 @@ fn log_text(kind: &str, seed: u64, reference: &[f64], force: &[f64], pos: &[f64]
 }
 
 pub fn generate(effect: &str, seed: u64) -> Result<Case, String> {
+    generate_sized(effect, seed, 25.0, 15.0)
+}
+
+/// A case with chosen experiment lengths in seconds (1 kHz: 100 s is a 100 000-sample log).
+pub fn generate_sized(effect: &str, seed: u64, estimation_s: f64, validation_s: f64) -> Result<Case, String> {
     let mut rng = Rng::new(seed);
     let (params, truth) = draw_params(effect, &mut rng);
-    let est_ref = estimation_reference(&mut rng, 25.0);
+    let est_ref = estimation_reference(&mut rng, estimation_s);
     let (ef, ep) = run_loop(&params, &est_ref, &[], &mut rng)?;
-    let val_ref = validation_reference(&mut rng, 15.0);
+    let val_ref = validation_reference(&mut rng, validation_s);
     // Force pulses on the controller output: 50 ms, ±40..120 N, every 1-2 s.
     let mut pulses = vec![0.0; val_ref.len()];
     let mut k = 500;
