@@ -4,7 +4,7 @@
 //! actuator frame.
 //!
 //! The link is lossless above a lossy line: a Nack (the firmware rejected a frame) or no
-//! answer within [`PilOptions::answer_timeout`] makes the host send the same frame again; the
+//! answer within [`PilOptions::answer_timeout`] (doubling while it lasts) makes the host send the same frame again; the
 //! firmware answers a repeated `seq` with its previous answer without stepping twice. Frames
 //! that fail the host's checks are counted and never used. [`LinkFaults`] injects corrupted
 //! and dropped sensor frames to exercise exactly that.
@@ -258,16 +258,17 @@ pub struct LinkStats {
 pub struct PilOptions {
     pub qemu: QemuOptions,
     pub faults: LinkFaults,
-    /// How long to wait for an answer before sending the frame again. Shorter than the
-    /// firmware's 100 ms link timeout, so a dropped frame does not make its outputs go safe.
+    /// How long to wait for an answer before sending the frame again (doubled after each
+    /// timeout of the same frame, up to 1 s: a stalled emulator is not flooded). Well below
+    /// the firmware's 100 ms link timeout, so a dropped frame does not make its outputs go safe.
     pub answer_timeout: Duration,
-    /// Transmissions of one frame before the run is given up.
+    /// Transmissions of one frame before the run is given up (12 at 25 ms: about 8 s).
     pub max_attempts: u32,
 }
 
 impl Default for PilOptions {
     fn default() -> Self {
-        Self { qemu: QemuOptions::default(), faults: LinkFaults::default(), answer_timeout: Duration::from_millis(40), max_attempts: 20 }
+        Self { qemu: QemuOptions::default(), faults: LinkFaults::default(), answer_timeout: Duration::from_millis(25), max_attempts: 12 }
     }
 }
 
@@ -310,16 +311,20 @@ impl PilLink {
     pub fn exchange(&mut self, sensors: &SensorFrame) -> Result<ActuatorFrame, String> {
         let mut wire = [0u8; MAX_FRAME_BYTES];
         let n = encode(&Frame::Sensor(*sensors), &mut wire).map_err(|e| format!("encoding sensor frame {}: {e:?}", sensors.seq))?;
+        let mut wait = self.opts.answer_timeout;
         for _ in 0..self.opts.max_attempts {
             self.transmit(&wire[..n])?;
-            match self.wait_reply(sensors)? {
+            match self.wait_reply(sensors, wait)? {
                 Reply::Answer(a) => {
                     self.stats.steps += 1;
                     self.stats.ecu_bad_frames = a.bad_frames;
                     return Ok(a);
                 }
                 Reply::Nack => self.stats.nacks_received += 1,
-                Reply::Timeout => self.stats.answer_timeouts += 1,
+                Reply::Timeout => {
+                    self.stats.answer_timeouts += 1;
+                    wait = (wait * 2).min(Duration::from_secs(1));
+                }
             }
         }
         Err(format!(
@@ -356,8 +361,8 @@ impl PilLink {
     }
 
     /// Reads until the answer to `sent`, a Nack, or the answer timeout.
-    fn wait_reply(&mut self, sent: &SensorFrame) -> Result<Reply, String> {
-        let deadline = Instant::now() + self.opts.answer_timeout;
+    fn wait_reply(&mut self, sent: &SensorFrame, wait: Duration) -> Result<Reply, String> {
+        let deadline = Instant::now() + wait;
         loop {
             while let Some(decoded) = self.next_decoded() {
                 match decoded {

@@ -1,15 +1,18 @@
 //! The embassy-time driver on SysTick.
 //!
 //! What QEMU's SysTick counts: with CLKSOURCE = 1 it decrements at the board's `cpuclk`,
-//! 168 MHz on the netduinoplus2, of QEMU's *virtual* clock. Without `-icount` that clock follows
-//! the host's monotonic clock while the machine runs, so one emulated millisecond is one host
-//! millisecond, whatever the guest executes in it (a slow host runs fewer instructions per
-//! millisecond; it does not stretch time). Timeouts here are therefore host-time timeouts.
+//! 168 MHz on the netduinoplus2, of QEMU's *virtual* clock (a `ptimer`). Without `-icount` that
+//! clock follows the host's clock while the machine runs, not the instructions executed: a
+//! busy guest gets fewer instructions per emulated millisecond, not longer milliseconds. On a
+//! heavily loaded host (load 8-10 on 2 cores) emulated time was measured 17-20 % behind host
+//! time (10.0 emulated s in 12.2-12.6 host s: QEMU's timer thread serves the periods late).
+//! Only the link timeouts and log time stamps use this clock; lockstep time comes from the
+//! frames.
 //!
-//! SysTick is 24 bit: it reloads every millisecond (168 000 core clocks) and its interrupt
-//! counts the periods; `now` adds the count down within the period. Alarms are checked in that
-//! interrupt, so a timer fires on the first millisecond boundary at or after its deadline
-//! (1 ms resolution is plenty for the link timeout and the heartbeat).
+//! SysTick is 24 bit: it reloads every [`PERIOD_MS`] ms and its interrupt counts the periods;
+//! `now` adds the count down within the period (1 µs resolution). Alarms are checked in that
+//! interrupt, so a timer fires on the first period boundary at or after its deadline (10 ms
+//! resolution: plenty for the 100 ms link timeout).
 use core::cell::{Cell, RefCell};
 use core::task::Waker;
 
@@ -22,8 +25,10 @@ use embassy_time_queue_utils::Queue;
 
 use super::CORE_CLOCK_HZ;
 
-/// Core clocks per SysTick period (1 ms).
-const CLOCKS_PER_PERIOD: u32 = CORE_CLOCK_HZ / 1000;
+/// SysTick period (the alarm resolution).
+pub const PERIOD_MS: u32 = 10;
+/// Core clocks per SysTick period.
+const CLOCKS_PER_PERIOD: u32 = CORE_CLOCK_HZ / 1000 * PERIOD_MS;
 /// Core clocks per embassy-time tick (1 µs at the default 1 MHz tick rate).
 const CLOCKS_PER_TICK: u64 = CORE_CLOCK_HZ as u64 / TICK_HZ;
 const _: () = assert!((CORE_CLOCK_HZ as u64).is_multiple_of(TICK_HZ) && CLOCKS_PER_PERIOD <= 1 << 24);
@@ -84,7 +89,7 @@ impl Driver for SysTickDriver {
     }
 }
 
-/// Starts SysTick from the core clock with its interrupt every millisecond.
+/// Starts SysTick from the core clock with its interrupt every period.
 pub fn start(syst: &mut SYST) {
     syst.disable_counter();
     syst.set_clock_source(SystClkSource::Core);
