@@ -113,7 +113,7 @@ impl Events {
                 let mut v: Vec<f64> = if rest.len() >= 3 { x[rest.clone()].to_vec() } else { x[s..e].to_vec() };
                 median(&mut v)
             };
-            let off_index = (s + on..e).filter(|&k| u[k] <= 0.5 && u[k - 1] > 0.5).last().map(|k| k - s);
+            let off_index = (s + on + 1..e).rev().find(|&k| u[k] <= 0.5 && u[k - 1] > 0.5).map(|k| k - s);
             let inputs = EhvvaInputs {
                 p_supply_mpa: setpoint(ph),
                 p_back_mpa: setpoint(pl),
