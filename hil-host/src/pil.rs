@@ -423,6 +423,26 @@ impl PilLink {
         }
     }
 
+    /// Sends raw bytes as they are (a hand-made bad frame, say).
+    pub fn send_raw(&mut self, bytes: &[u8]) -> Result<(), String> {
+        self.board.stream().write_all(bytes).map_err(|e| format!("writing to {QEMU}'s serial port: {e}"))
+    }
+
+    /// The next frame (or decode error) from the firmware within `wait`.
+    pub fn next_frame(&mut self, wait: Duration) -> Result<Option<Result<Frame, FrameError>>, String> {
+        let deadline = Instant::now() + wait;
+        loop {
+            if let Some(decoded) = self.next_decoded() {
+                return Ok(Some(decoded));
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                return Ok(None);
+            }
+            self.fill(deadline - now)?;
+        }
+    }
+
     /// Sends nothing for `silence` and collects what the firmware reports meanwhile (its
     /// link timeout's safe state).
     pub fn stay_silent(&mut self, silence: Duration) -> Result<Vec<ActuatorFrame>, String> {

@@ -11,7 +11,7 @@ use std::time::Duration;
 
 use hil_host::pil::{self, LinkFaults, PilLink, PilOptions};
 use hil_host::run::{run_with, NativeLink, RunOptions, Scenario};
-use model_core::ecu::frame::{ActuatorFrame, SensorFrame};
+use model_core::ecu::frame::{crc16, encode, ActuatorFrame, Frame, FrameError, SensorFrame, FRAME_VERSION, MAX_FRAME_BYTES};
 use model_core::ecu::board::SolenoidCmd;
 
 /// The firmware image, or `None` (with the reason printed) when QEMU is not installed.
@@ -192,6 +192,50 @@ fn a_silent_link_drives_the_safe_outputs_and_stepping_resumes() {
     assert_eq!((r.motor_duty, r.vacuum_duty), (0.0, [0.0; 3]));
     // The core was not disturbed: the next frames step on as natively.
     let second = pil::run_frames(&mut link, &frames[150..]).unwrap();
+    let mut all = first.answers;
+    all.extend(second.answers);
+    assert_bit_exact(&native, &all);
+}
+
+/// Frames that pass the CRC but not the other checks are rejected too: a wrong version and
+/// an ADC count above 12 bits each get a Nack naming the reason, are counted, and change
+/// nothing: the next valid frames are answered exactly as by a core that never saw them.
+#[test]
+fn well_formed_but_invalid_frames_are_answered_with_a_nack_and_never_used() {
+    let Some(elf) = firmware() else { return };
+    let _one = one_at_a_time();
+    let frames = feed(40);
+    let native = pil::run_frames_native(&frames).unwrap();
+    let mut link = PilLink::start(&elf, PilOptions::default()).unwrap();
+    let first = pil::run_frames(&mut link, &frames[..20]).unwrap();
+    // Frame 21 as it should be, then spoiled two ways with a correct CRC.
+    let mut wire = [0u8; MAX_FRAME_BYTES];
+    let n = encode(&Frame::Sensor(frames[20]), &mut wire).unwrap();
+    let reseal = |mut bytes: Vec<u8>| {
+        let end = bytes.len() - 2;
+        let crc = crc16(&bytes[2..end]);
+        bytes[end..].copy_from_slice(&crc.to_le_bytes());
+        bytes
+    };
+    let mut wrong_version = wire[..n].to_vec();
+    wrong_version[2] = FRAME_VERSION + 1;
+    // The first ADC count sits after seq, t_us, the edge count and the edges.
+    let mut count_too_big = wire[..n].to_vec();
+    let at = 5 + 9 + 5 * frames[20].n_edges as usize;
+    count_too_big[at..at + 2].copy_from_slice(&4096u16.to_le_bytes());
+    for (bytes, why, bad_so_far) in [(reseal(wrong_version), FrameError::BadVersion, 1), (reseal(count_too_big), FrameError::BadPayload, 2)] {
+        link.send_raw(&bytes).unwrap();
+        match link.next_frame(Duration::from_secs(5)).unwrap() {
+            Some(Ok(Frame::Nack(nack))) => {
+                assert_eq!(nack.reason, why as u8);
+                assert_eq!(nack.bad_frames, bad_so_far);
+                assert_eq!(nack.seq_expected, frames[20].seq, "the ECU still expects frame 21");
+            }
+            other => panic!("expected a Nack for {why:?}, got {other:?}"),
+        }
+    }
+    let second = pil::run_frames(&mut link, &frames[20..]).unwrap();
+    assert_eq!(second.stats.ecu_bad_frames, 2);
     let mut all = first.answers;
     all.extend(second.answers);
     assert_bit_exact(&native, &all);
