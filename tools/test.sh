@@ -14,13 +14,13 @@ rustup target add thumbv7em-none-eabihf >/dev/null
 echo "== firmware for QEMU's netduinoplus2 (thumbv7em-none-eabihf, release)"
 cargo build --release --locked -p firmware-qemu --target thumbv7em-none-eabihf
 
-echo "== host tests (model-core, paper tests, hil-host)"
+echo "== host tests (model-core, paper tests, hil-host) [${SECONDS} s]"
 # The PIL tests fail rather than skip when QEMU is missing.
 HIL_REQUIRE_QEMU=1 cargo test --workspace --locked
 
-echo "== firmware for the STM32F405 (thumbv7em-none-eabihf, release)"
+echo "== firmware for the STM32F405 (thumbv7em-none-eabihf, release) [${SECONDS} s]"
 cargo build --release --locked -p firmware --target thumbv7em-none-eabihf
-elf=target/thumbv7em-none-eabihf/release/firmware
+elf="${CARGO_TARGET_DIR:-target}/thumbv7em-none-eabihf/release/firmware"
 if command -v size >/dev/null 2>&1; then
   # text = flash code + rodata, data = initialised RAM (also in flash), bss = zeroed RAM.
   size -A "$elf" | awk '/^\.(vector_table|text|rodata|data|bss|uninit)/ {print}'
@@ -33,3 +33,4 @@ if command -v size >/dev/null 2>&1; then
     if (flash >= 96 * 1024 || ram >= 24 * 1024) print "WARNING: firmware over its size goal";
   }'
 fi
+echo "== all done in ${SECONDS} s"
