@@ -984,7 +984,7 @@ pub fn write_outputs(sc: &Scenario, o: &RunOutput, dir: &Path) -> std::io::Resul
         put(
             file,
             format_log(
-                &meta("vacuum", &format!(", {what}"), 1e6 / (VACUUM_LOG_EVERY as f64 * f64::from(STEP_US)), "model-core ecu::vacuum_task (inverse model + supply-voltage compensation, no position feedback)"),
+                &meta("vacuum", &format!(", {what}"), 1e6 / (VACUUM_LOG_EVERY as f64 * f64::from(STEP_US)), "model-core ecu::vacuum_task (inverse model + supply-voltage compensation + position PI, control::vacuum_position)"),
                 &[("t_s", &vt), ("duty_pct", &duty), ("u_batt_V", &v_u), ("p_amb_kPa", &v_amb), ("p_tank_kPa", &v_tank), ("x_pct", &x), ("p_act_kPa", &p)],
             ),
         )?;

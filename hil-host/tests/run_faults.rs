@@ -125,10 +125,16 @@ fn battery_sag_to_8_v_is_compensated_without_a_fault() {
     // and the wastegate holds its position.
     let at = |t: f64| o.vacuum.iter().find(|r| r.t_s >= t).unwrap();
     let (b, d, a) = (at(0.55), at(1.0), at(1.9));
+    // After the recovery ramp the position loop (vacuum task: feedforward + PI) trims what the
+    // ramp's 80 Hz lag moved through the rod's friction, so the duty does not simply return
+    // to its value before (as it did feedforward only): the valves move back towards their
+    // set-points (wastegate 40 %, HPT bypass 30 %).
+    let (ramped, set) = (at(1.45), [40.0, 30.0]);
     for i in 0..2 {
         let (vb, vd) = (b.duty_pct[i] * b.u_batt_v, d.duty_pct[i] * d.u_batt_v);
         assert!(vb > 0.0 && (vd - vb).abs() < 0.01 * vb, "actuator {i}: duty·U {vb} before, {vd} in the sag");
-        assert!((a.duty_pct[i] - b.duty_pct[i]).abs() < 1e-3 * b.duty_pct[i], "actuator {i} after recovery");
+        let (e_ramped, e_after) = ((ramped.x_pct[i] - set[i]).abs(), (a.x_pct[i] - set[i]).abs());
+        assert!(e_after < e_ramped - 0.3, "actuator {i} after recovery: {e_ramped} % off at 1.45 s, {e_after} % at 1.9 s");
     }
     // On the sag's plateau the wastegate stays where it was (uncompensated, the valve would
     // see 8/14 of the duty). Across the 0.1 s ramps the 80 Hz duty lags the voltage by up to

@@ -18,9 +18,15 @@
 //!   conservative fixed limit.
 //! - Enable conditions: disabled → 0 % duty (the valve vents and the spring holds its safe
 //!   default position, Sec. 2.2); a position sensor fault → open loop (feedforward and voltage
-//!   compensation only; the integrator is cleared).
+//!   compensation only; the integrator is cleared); a supply below the compensator's range →
+//!   feedforward plus the integrator frozen at its value (eq. (15) no longer holds duty·U, so
+//!   the position error is the supply's, not friction's; the learnt friction offset stays
+//!   valid and the return to control is bumpless).
+//!
+//! This is the project's one vacuum position control law: the firmware's vacuum task
+//! ([`crate::ecu::vacuum_task`]) runs one of these per valve.
 
-use crate::pwm_comp::{PwmCompError, PwmCompensator};
+use crate::pwm_comp::{Compensated, PwmCompError, PwmCompensator};
 use crate::real::Real;
 use crate::vacuum::{VacuumParamError, VacuumParams, VacuumStaticModel};
 
@@ -30,6 +36,9 @@ pub enum VacuumPositionFault {
     None,
     /// Position signal missing or out of range: open loop.
     PositionSensor,
+    /// Supply below the compensator's `u_min_v` (set by the controller itself, never needed
+    /// as an input): feedforward plus the frozen integral.
+    SupplyLow,
 }
 
 /// What the controller did this step.
@@ -137,6 +146,8 @@ pub struct VacuumPositionOutput<R: Real> {
     pub pump_request: bool,
     /// The pressure target or the duty hit a limit.
     pub limited: bool,
+    /// The supply was below the compensator's range (the integrator was frozen).
+    pub supply_low: bool,
 }
 
 /// The controller.
@@ -203,10 +214,27 @@ impl<R: Real> VacuumPositionController<R> {
         self.integral_kpa
     }
 
+    /// The open-loop part alone: the chamber pressure that holds `setpoint_pct` without
+    /// friction (inverse of eq. (8)/(9)) and the compensated duty that gives it (inverse of
+    /// eq. (2)/(5), then eq. (15)).
+    pub fn feedforward(&self, setpoint_pct: R, p_amb_kpa: R, u_batt_v: R) -> (R, Compensated<R>) {
+        let p_ff = self.feedforward_pressure_kpa(setpoint_pct, p_amb_kpa);
+        (p_ff, self.duty_for_pressure(p_ff, p_amb_kpa, u_batt_v))
+    }
+
+    fn feedforward_pressure_kpa(&self, setpoint_pct: R, p_amb_kpa: R) -> R {
+        let setpoint = setpoint_pct.clamp(self.setpoint_min, self.setpoint_max);
+        self.model.pressure_for_position_kpa(setpoint, p_amb_kpa).clamp(R::ZERO, p_amb_kpa)
+    }
+
+    fn duty_for_pressure(&self, p_kpa: R, p_amb_kpa: R, u_batt_v: R) -> Compensated<R> {
+        self.comp.apply(self.model.duty_for_pressure_pct(p_kpa, p_amb_kpa), u_batt_v)
+    }
+
     /// One control period of length `dt_s`.
     pub fn step(&mut self, i: &VacuumPositionInputs<R>, dt_s: R) -> VacuumPositionOutput<R> {
         let setpoint = i.setpoint_pct.clamp(self.setpoint_min, self.setpoint_max);
-        let p_ff = self.model.pressure_for_position_kpa(setpoint, i.p_amb_kpa).clamp(R::ZERO, i.p_amb_kpa);
+        let p_ff = self.feedforward_pressure_kpa(setpoint, i.p_amb_kpa);
         let p_tank_needed = p_ff - self.pump_margin;
         let pump_request = i.enabled && i.p_tank_kpa > p_tank_needed;
         if !i.enabled {
@@ -219,12 +247,21 @@ impl<R: Real> VacuumPositionController<R> {
                 p_tank_needed_kpa: p_tank_needed,
                 pump_request,
                 limited: false,
+                supply_low: false,
             };
         }
-        let closed_loop = i.fault == VacuumPositionFault::None;
+        let supply_low = self.comp.apply(R::ZERO, i.u_batt_v).supply_low;
         let lo = i.p_tank_kpa.min(i.p_amb_kpa);
         let hi = i.p_amb_kpa;
-        let (p_target, mode) = if closed_loop {
+        // A NaN reading is a sensor fault whatever the caller says (it would poison the PI).
+        let sensor_bad = i.fault == VacuumPositionFault::PositionSensor || i.measured_x_pct.partial_cmp(&i.measured_x_pct).is_none();
+        let (p_target, mode) = if sensor_bad {
+            self.integral_kpa = R::ZERO;
+            (p_ff, VacuumPositionMode::OpenLoop(VacuumPositionFault::PositionSensor))
+        } else if supply_low {
+            // Frozen, not cleared: neither wound by the supply's error nor lost.
+            (p_ff - self.integral_kpa, VacuumPositionMode::OpenLoop(VacuumPositionFault::SupplyLow))
+        } else {
             let error = setpoint - i.measured_x_pct;
             // More position needs more vacuum: the correction lowers the pressure.
             let unclamped = p_ff - self.kp * error - self.integral_kpa;
@@ -236,13 +273,9 @@ impl<R: Real> VacuumPositionController<R> {
             }
             let p = p_ff - self.kp * error - self.integral_kpa;
             (p, VacuumPositionMode::Control)
-        } else {
-            self.integral_kpa = R::ZERO;
-            (p_ff, VacuumPositionMode::OpenLoop(i.fault))
         };
         let p_reachable = p_target.clamp(lo, hi);
-        let u_corr = self.model.duty_for_pressure_pct(p_reachable, i.p_amb_kpa);
-        let compensated = self.comp.apply(u_corr, i.u_batt_v);
+        let compensated = self.duty_for_pressure(p_reachable, i.p_amb_kpa, i.u_batt_v);
         VacuumPositionOutput {
             duty_pct: compensated.duty_pct,
             mode,
@@ -251,6 +284,7 @@ impl<R: Real> VacuumPositionController<R> {
             p_tank_needed_kpa: p_tank_needed,
             pump_request,
             limited: p_reachable != p_target || compensated.duty_limited,
+            supply_low,
         }
     }
 }
