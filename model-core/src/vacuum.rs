@@ -440,17 +440,28 @@ impl<R: Real> VacuumStaticModel<R> {
     }
 }
 
+/// (−1)^(k+1)/k!, k = 1..=16: the Taylor coefficients of 1 − e^(−x).
+const ONE_MINUS_EXP_NEG_COEFFS: [f64; 16] = {
+    let mut c = [0.0; 16];
+    let mut term = 1.0;
+    let mut k = 0;
+    while k < 16 {
+        term /= (k + 1) as f64;
+        c[k] = if k % 2 == 0 { term } else { -term };
+        k += 1;
+    }
+    c
+};
+
 /// 1 − e^(−x) for x >= 0, accurate for small x where `1 - exp(-x)` would cancel (f32's exp
-/// loses ~1e-6 absolute): Taylor series to x¹⁶ below 1 (truncation < 3e-14), the direct
-/// form above.
+/// loses ~1e-6 absolute): Taylor series to x¹⁶ below 1 (truncation < 3e-14) by Horner's rule
+/// with the coefficients precomputed (multiplications only: a division chain cost the host
+/// diagnosis, which runs this every rod substep, twice its time), the direct form above.
 fn one_minus_exp_neg<R: Real>(x: R) -> R {
     if x < R::ONE {
-        // x(1 − x/2(1 − x/3(1 − ... (1 − x/16))))
-        let mut s = R::ONE;
-        let mut k = 16;
-        while k >= 2 {
-            s = R::ONE - x * s / R::from_f64(k as f64);
-            k -= 1;
+        let mut s = R::ZERO;
+        for c in ONE_MINUS_EXP_NEG_COEFFS.iter().rev() {
+            s = R::from_f64(*c) + x * s;
         }
         x * s
     } else {
@@ -606,6 +617,11 @@ pub struct VacuumValveActuator<R: Real> {
     x_valve_pct: R,
     /// Largest rod integration step, s ([`Self::with_rod_step_s`]).
     rod_step_max_s: f64,
+    /// Eq. (4)'s 1 − e^(−dt/τ) for rising and falling pressure at the step `decay_dt_s` (0: none
+    /// yet): steps come at a fixed rate, so they are computed once per rate.
+    decay_dt_s: R,
+    decay_rise: R,
+    decay_fall: R,
 }
 
 /// Longest rod step [`VacuumValveActuator::with_rod_step_s`] accepts: the semi-implicit
@@ -650,6 +666,9 @@ impl<R: Real> VacuumValveActuator<R> {
             friction_kpa: R::ZERO,
             x_valve_pct: x0,
             rod_step_max_s: H_MAX_S,
+            decay_dt_s: R::ZERO,
+            decay_rise: R::ZERO,
+            decay_fall: R::ZERO,
         })
     }
 
@@ -772,8 +791,13 @@ impl<R: Real> VacuumValveActuator<R> {
             let p_stat = self.static_pressure_kpa(inputs);
             let p_old = self.p_act_kpa;
             // Eq. (4), exact for a constant target: p += (p_stat − p)(1 − e^(−dt/τ)).
-            let tau = if self.effects.pressure_direction && p_stat < p_old { self.tau_fall_s } else { self.tau_rise_s };
-            self.p_act_kpa = p_old + (p_stat - p_old) * one_minus_exp_neg(dt_s / tau);
+            if dt_s != self.decay_dt_s {
+                self.decay_dt_s = dt_s;
+                self.decay_rise = one_minus_exp_neg(dt_s / self.tau_rise_s);
+                self.decay_fall = one_minus_exp_neg(dt_s / self.tau_fall_s);
+            }
+            let decay = if self.effects.pressure_direction && p_stat < p_old { self.decay_fall } else { self.decay_rise };
+            self.p_act_kpa = p_old + (p_stat - p_old) * decay;
         }
         self.p_act_kpa
     }
