@@ -76,7 +76,7 @@
 //! | mep, ks1, ds1, xp0 | `valve.pilot_*` | 4 g, 20 N/mm, 0.5 mm, 0.25 mm | small solenoid spool |
 //! | wp | `valve.pilot_area_per_mm` | 8 mm²/mm | 2 mm² open pilot orifice |
 //! | mem, ks2, ds2 | `valve.main_*` | 8 g, 20 N/mm, 1 mm | main spool; 0.8 mm stroke, 12 mm² end face, 0.1 mm overlap |
-//! | – | `valve.dynamic_lag_open_ms`, `..._close_ms` | 1.20, 1.78 ms | measured own lag of this coil/pilot/main chain (command to main valve half open), taken off td so t0 + t1 + lag = td |
+//! | – | `valve.dynamic_lag_open_ms`, `..._close_ms`; `..._ms_per_mpa` | 1.19, 1.765 ms at 6.5 MPa; −0.042, +0.031 ms/MPa | measured own lag of this coil/pilot/main chain (command to main valve half open, less ln2·τp), taken off td so t0 + t1 + lag(Ph) = td |
 //! | – | `delay_nominal_p_supply_mpa` | 7 MPa | where `pressure-delay` off reads td |
 //!
 //! # Diagnosis effects (DATA-FORMAT.md, plant `ehvva`)

@@ -137,11 +137,17 @@ pub struct EhvvaValveParams {
     /// Explicit pilot delay t0 (eq. (4)) is this fraction of the table delay's pure-delay part.
     pub pilot_delay_fraction: f64,
     /// Time the solenoid, pilot spool and main spool dynamics of this model take from a command
-    /// edge to the main-valve outlet pressure's half-way point at VO, measured on the model
-    /// (test `full_model_dynamic_lag_is_calibrated`); t0 + t1 = td(Ph, T) − this.
+    /// edge to the main-valve outlet pressure's half-way point at VO, less ln2·τp (where the
+    /// reduced model's delayed Pmo is half-way), at 6.5 MPa supply, measured on the model
+    /// (test `full_model_dynamic_lag_is_calibrated`); t0 + t1 = td(Ph, T) − this lag at Ph.
     pub dynamic_lag_open_ms: f64,
     /// The same at VC.
     pub dynamic_lag_close_ms: f64,
+    /// Change of the VO lag per MPa of supply pressure: the pilot pressure that drives the
+    /// main spool is Ph, so the spool travels faster at a higher Ph.
+    pub dynamic_lag_open_ms_per_mpa: f64,
+    /// The same at VC.
+    pub dynamic_lag_close_ms_per_mpa: f64,
 }
 
 impl EhvvaValveParams {
@@ -170,8 +176,10 @@ impl EhvvaValveParams {
             main_spool_area_mm2: 12.0,
             main_overlap_mm: 0.1,
             pilot_delay_fraction: 0.5,
-            dynamic_lag_open_ms: 1.20,
-            dynamic_lag_close_ms: 1.78,
+            dynamic_lag_open_ms: 1.19,
+            dynamic_lag_close_ms: 1.765,
+            dynamic_lag_open_ms_per_mpa: -0.042,
+            dynamic_lag_close_ms_per_mpa: 0.031,
         }
     }
 }
