@@ -1,45 +1,71 @@
 //! `identify ehvva` on bench logs over a Table 1-like matrix (4 supply pressures × 5
-//! temperatures, low and high lift, switch valve on and off, dwell 8 and 20 ms):
+//! temperatures; low lift at 1 MPa back pressure with the switch valve off and on (dwell 8 and
+//! 20 ms), low lift at 3 MPa back pressure, high lift from 6 MPa, 50 kHz, lift noise 3 µm):
 //! - from the reduced model (eq. (12)), whose parameters τp, Cd and td are exactly the tables:
-//!   td and Cd within 5 %, τp within 20 % (τp barely shapes the lift once td is read from the
-//!   lift's onset: a longer τp is mostly a later onset, which td takes up);
-//! - from the ninth-order model (EhvvaFull, eq. (9)), which has no τp of its own (its main valve
-//!   pressure follows the spool dynamics; its pure delays t0 + t1 are the table's td less one
-//!   constant lag of its solenoid/pilot/main chain, calibrated at 22 °C to 0.1 ms, model-core
-//!   test `full_model_dynamic_lag_is_calibrated`): Cd(T) within 5 %, td(Ph, T) within 6 %
-//!   (the lag's 0.1 ms is 4 % of the shortest delay), and τp a first-order equivalent of the
-//!   spool dynamics between 0.02 and 0.3 ms, off its bounds.
+//!   with exact pressure and temperature channels td, τp and Cd within 5 %; with the bench's
+//!   noisy pressure channels td and Cd within 5 %, τp within 15 % (the set-points' errors move
+//!   the solution along the td-τp ridge, correlation about −0.99);
+//! - from the ninth-order model (EhvvaFull, eq. (9); matrix without the raised back pressure,
+//!   which the reduced model does not follow at 5 MPa and −20/0 °C), which has no τp of its
+//!   own: its explicit delays are the table's td less one constant lag of its
+//!   solenoid/pilot/main chain, calibrated (model-core `full_model_dynamic_lag_is_calibrated`)
+//!   so that its main-valve pressure is half-way td + ln2·τp after the command, as the reduced
+//!   model's delayed Pmo is. That half-way time is what these logs generate: the fitted
+//!   td + ln2·τp within 6 % of the tables' per condition (5.4 % measured, earlier: the reduced
+//!   model's pressure lag stands in for the main valve's metering ramp), Cd(T) within 5 %, τp
+//!   off its bounds.
+use std::f64::consts::LN_2;
+
 use hil_host::diagnose::ehvva::Events;
 use hil_host::generate::ehvva::{log_text, run_bench, BenchPlant, Sensors, Test};
 use hil_host::generate::Rng;
 use hil_host::identify::ehvva::{default_options, identify, Identified};
 use hil_host::log::parse_log;
-use model_core::ehvva::{EhvvaFull, EhvvaInputs, EhvvaParams, EhvvaReduced, EhvvaTableData};
 
+use model_core::ehvva::{EhvvaFull, EhvvaInputs, EhvvaParams, EhvvaReduced, EhvvaTableData, EhvvaTables};
+
+/// The raised back pressure of one event per condition, MPa.
+const BACK_HIGH_MPA: f64 = 3.0;
 /// Log period of the bench, ms (50 kHz).
 const DT_MS: f64 = 0.02;
 
 /// The test matrix (module doc); high lift from 6 MPa only, as in Table 1 (at 5 MPa the
 /// valve would float short of its 7.5 mm stop).
-fn matrix() -> Vec<Test> {
+fn matrix(raised_back: bool) -> Vec<Test> {
     let mut tests = Vec::new();
     for ph in [5.0, 6.0, 7.0, 8.0] {
         for t in [-20.0, 0.0, 22.0, 60.0, 100.0] {
-            let at = |lift_high: bool, snubber_on: bool, dwell_ms: f64| Test { inputs: EhvvaInputs { p_supply_mpa: ph, p_back_mpa: 1.0, temp_c: t, lift_high, snubber_on }, dwell_ms };
-            tests.push(at(false, false, 8.0));
-            tests.push(at(false, true, 20.0));
+            let at = |p_back_mpa: f64, lift_high: bool, snubber_on: bool, dwell_ms: f64| Test { inputs: EhvvaInputs { p_supply_mpa: ph, p_back_mpa, temp_c: t, lift_high, snubber_on }, dwell_ms };
+            tests.push(at(1.0, false, false, 8.0));
+            tests.push(at(1.0, false, true, 20.0));
+            // A raised back pressure moves the fraction of the pressure rise at which the
+            // piston starts: the onset moves by a different multiple of τp than at 1 MPa,
+            // which separates τp from td.
+            if raised_back {
+                tests.push(at(BACK_HIGH_MPA, false, false, 8.0));
+            }
             if ph >= 6.0 {
-                tests.push(at(true, true, 8.0));
-                tests.push(at(true, false, 20.0));
+                tests.push(at(1.0, true, true, 8.0));
+                tests.push(at(1.0, true, false, 20.0));
             }
         }
     }
     tests
 }
 
-fn identify_bench<P: BenchPlant>(make: impl FnMut(&EhvvaInputs<f64>) -> Result<P, String>) -> Identified {
-    let sensors = Sensors { lift_sigma_mm: 0.003, lift_lsb_mm: 0.002, p_sigma_mpa: 0.01, p_lsb_mpa: 0.005, temp_sigma_c: 0.3, temp_lsb_c: 0.1 };
-    let cols = run_bench(&matrix(), DT_MS, &sensors, &mut Rng::new(7), make).unwrap();
+/// The bench's sensors: lift 3 µm noise on 2 µm steps; pressures 0.01 MPa on 5 kPa steps and
+/// temperature 0.3 °C on 0.1 °C steps unless `exact_setpoints`.
+fn sensors(exact_setpoints: bool) -> Sensors {
+    let s = Sensors { lift_sigma_mm: 0.003, lift_lsb_mm: 0.002, p_sigma_mpa: 0.01, p_lsb_mpa: 0.005, temp_sigma_c: 0.3, temp_lsb_c: 0.1 };
+    if exact_setpoints {
+        Sensors { p_sigma_mpa: 0.0, p_lsb_mpa: 0.0, temp_sigma_c: 0.0, temp_lsb_c: 0.0, ..s }
+    } else {
+        s
+    }
+}
+
+fn identify_bench<P: BenchPlant>(sensors: Sensors, raised_back: bool, make: impl FnMut(&EhvvaInputs<f64>) -> Result<P, String>) -> Identified {
+    let cols = run_bench(&matrix(raised_back), DT_MS, &sensors, &mut Rng::new(7), make).unwrap();
     let log = parse_log("bench.csv", &log_text("bench", DT_MS, &cols), None).unwrap();
     let set = Events::from_log(&log).unwrap();
     let id = identify(&[set], &default_options(), &mut |_, _| {}).unwrap();
@@ -78,24 +104,65 @@ fn worst(got: &EhvvaTableData, want: &EhvvaTableData) -> [(f64, String); 3] {
     w
 }
 
+/// With exact pressure and temperature channels (lift noise as on the bench) the joint fit
+/// recovers all three tables within 5 %: τp is identifiable from the lift although td and τp
+/// correlate at about −0.99 (the raised back-pressure event and the closing edges separate
+/// them), and the solver's CIs hold.
 #[test]
 fn tables_from_reduced_model_logs_match_the_generating_ones() {
     let p = EhvvaParams::paper_default();
-    let id = identify_bench(|i| EhvvaReduced::<f64, 1024>::new(&p, i, DT_MS).map_err(|e| format!("{e:?}")));
+    let id = identify_bench(sensors(true), true, |i| EhvvaReduced::<f64, 1024>::new(&p, i, DT_MS).map_err(|e| format!("{e:?}")));
     let [td, tau, cd] = worst(&id.table_data(), &p.tables);
     assert!(td.0 < 0.05, "{}", td.1);
-    assert!(tau.0 < 0.20, "{}", tau.1);
+    assert!(tau.0 < 0.05, "{}", tau.1);
+    assert!(cd.0 < 0.05, "{}", cd.1);
+    for c in &id.conditions {
+        let r = c.corr_td_open_tau_p.expect("JᵀJ regular");
+        assert!(r < -0.8, "td VO and tau_p trade off (later onset = slower rise): r {r}");
+    }
+}
+
+/// With the bench's noisy pressure channels, the set-points read before each command carry
+/// errors the fit cannot see (errors in variables); along the td-τp ridge they move τp by up to
+/// 15 %, while td and Cd stay within 5 %.
+#[test]
+fn tables_from_noisy_reduced_model_logs() {
+    let p = EhvvaParams::paper_default();
+    let id = identify_bench(sensors(false), true, |i| EhvvaReduced::<f64, 1024>::new(&p, i, DT_MS).map_err(|e| format!("{e:?}")));
+    let [td, tau, cd] = worst(&id.table_data(), &p.tables);
+    assert!(td.0 < 0.05, "{}", td.1);
+    assert!(tau.0 < 0.15, "{}", tau.1);
     assert!(cd.0 < 0.05, "{}", cd.1);
 }
 
 #[test]
 fn tables_from_ninth_order_logs_match_the_generating_ones() {
     let p = EhvvaParams::paper_default();
-    let id = identify_bench(|i| EhvvaFull::<f64, 1024>::new(&p, i, DT_MS).map_err(|e| format!("{e:?}")));
+    let id = identify_bench(sensors(false), false, |i| EhvvaFull::<f64, 1024>::new(&p, i, DT_MS).map_err(|e| format!("{e:?}")));
     let got = id.table_data();
     let [td, _, cd] = worst(&got, &p.tables);
     assert!(cd.0 < 0.05, "{}", cd.1);
-    assert!(td.0 < 0.06, "{}", td.1);
+    // EhvvaFull has no τp: its explicit delays are set (less its chain's own lag) so that its
+    // main-valve pressure is half-way where the reduced model's delayed Pmo is, td + ln2·τp
+    // after the command (model-core `full_model_dynamic_lag_is_calibrated`). That half-way time
+    // is what a ninth-order log generates; td and τp alone slide along the fit's td-τp ridge.
+    let tables = EhvvaTables::<f64>::new(&p).unwrap();
+    let mut worst_half = (0.0f64, String::new());
+    for c in &id.conditions {
+        let (vo, vc) = tables.t_delay_pair_ms(c.p_supply_mpa, c.temp_c);
+        let ln2_tau = LN_2 * tables.tau_p_ms(c.p_supply_mpa, c.temp_c);
+        for (edge, fit, want) in [("VO", c.td_open_ms, vo + ln2_tau), ("VC", c.td_close_ms, vc + ln2_tau)] {
+            let got = fit + LN_2 * c.tau_p_ms;
+            let r = (got / want - 1.0).abs();
+            if r > worst_half.0 {
+                worst_half = (r, format!("td + ln2 tau_p {edge} at {:.1} MPa, {:.0} °C: {got:.3} vs {want:.3} ms", c.p_supply_mpa, c.temp_c));
+            }
+        }
+    }
+    println!("worst half-way time {:.1} % ({}); td alone {:.1} % ({})", 100.0 * worst_half.0, worst_half.1, 100.0 * td.0, td.1);
+    // 5.4 % measured: the reduced model's first-order lag stands in for the ninth-order main
+    // valve's metering ramp (flow starts as the spool opens, before the pressure is half-way).
+    assert!(worst_half.0 < 0.06, "{}", worst_half.1);
     for row in got.tau_ms {
         for tau in row {
             assert!((0.02..0.3).contains(&tau), "tau_p {tau} ms");
@@ -115,3 +182,4 @@ fn tables_from_ninth_order_logs_match_the_generating_ones() {
     }
     assert!(got.cd.windows(2).all(|w| w[1] > w[0]));
 }
+

@@ -109,9 +109,15 @@ impl Events {
             let on = rising[i] - s;
             // Set-points: the samples at rest before the edge (at most PRE_MS of them).
             let rest = rising[i].saturating_sub(pre).max(s)..rising[i];
+            // The mean, not the median: the median of quantized samples is itself on the
+            // quantizer's grid (±½ LSB), the mean of noisy ones resolves below it.
             let setpoint = |x: &[f64]| {
-                let mut v: Vec<f64> = if rest.len() >= 3 { x[rest.clone()].to_vec() } else { x[s..e].to_vec() };
-                median(&mut v)
+                if rest.len() >= 3 {
+                    x[rest.clone()].iter().sum::<f64>() / rest.len() as f64
+                } else {
+                    let mut v: Vec<f64> = x[s..e].to_vec();
+                    median(&mut v)
+                }
             };
             let off_index = (s + on + 1..e).rev().find(|&k| u[k] <= 0.5 && u[k - 1] > 0.5).map(|k| k - s);
             let inputs = EhvvaInputs {

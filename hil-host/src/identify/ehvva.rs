@@ -1,28 +1,33 @@
 //! `identify ehvva`: the EHVVA calibration of Li 2018 Sec. 5.2 from bench logs of valve events
 //! over a test matrix like Table 1: per test condition (supply pressure Ph, temperature T) the
-//! main-valve time constant τp and the discharge coefficient Cd by the trust-region solver on
-//! the lift simulation error (eqs. (16)-(20), [`calibrate_with`], the same fit `diagnose` uses), and
-//! the actuation delays td (VO, VC) from the command edges to the lift's response; then the
-//! tables td(Ph, T), τp(Ph, T), Cd(T), also resampled onto model-core's breakpoints
-//! ([`EhvvaTableData`]).
+//! actuation delays td (VO, VC), the main-valve time constant τp and the discharge coefficient
+//! Cd by the trust-region solver on the lift simulation error (eqs. (16)-(20), the event
+//! simulation `diagnose` uses); then the tables td(Ph, T), τp(Ph, T), Cd(T), also resampled
+//! onto model-core's breakpoints ([`EhvvaTableData`]).
 //!
-//! The logs carry no pilot pressure (the paper reads td from it), so td is read from the lift:
-//! the delay from the rising command to 1 % of the stroke, and from the falling command to
-//! 99 %, less the time the model itself takes from a zero-delay command to those levels with
-//! the condition's τp and Cd. The solver varies (τp, Cd); for each pair it tries, td follows
-//! from the onset before the lift is simulated, so the three are consistent at the solution. Geometry, masses and the snubbers are the
-//! paper's (`EhvvaParams::paper_default`): only the varying parameters are calibrated, as in
-//! the paper.
+//! Two passes. Pass 1 ([`fit_onset`]): τp and Cd by the solver, td read from the lift for every
+//! (τp, Cd) tried: the delay from the rising command to 1 % of the stroke and from the falling
+//! command to 99 %, less the time the model itself takes to those levels ([`td_from_onset`];
+//! the logs carry no pilot pressure, from which the paper reads td). A longer τp is mostly a
+//! later onset, so there td absorbs τp. Pass 2 ([`fit_joint`]): td VO, td VC, τp and Cd
+//! together from pass 1's solution, with the td and τp tables shaped in Ph and T as pass 1's
+//! tables about the condition ([`shape_about`]: the plant reads them at the supply pressure of
+//! the moment, which dips while the accumulator feeds the piston). td and τp still correlate
+//! at about −0.99 ([`correlation`], reported per condition): events at a raised back pressure
+//! (another fraction of the pressure rise starts the piston) and the closing edges separate
+//! them, and then τp is identified as tightly as the pressure set-points are known. Geometry,
+//! masses and the snubbers are the paper's (`EhvvaParams::paper_default`): only the varying
+//! parameters are calibrated, as in the paper.
 //!
 //! A condition is every event within 0.25 MPa and 3 °C of the condition's first event; its
 //! value is the mean of its events'. Events of one condition may differ in back pressure, lift
 //! and switch valve: the model takes those as inputs.
 
-use model_core::ehvva::{EhvvaParams, EhvvaTableData};
+use model_core::ehvva::{EhvvaParams, EhvvaTableData, EhvvaTables};
 use serde_json::{json, Value};
 
 use crate::diagnose::ehvva::{apply_knobs, calibrate_with, edge_delays_ms, simulate_all, Events, Knob};
-use crate::lsq::LsqOptions;
+use crate::lsq::{invert_spd, LsqOptions};
 
 /// Delay of the reference simulation in [`td_from_onset`], ms.
 const REFERENCE_TD_MS: f64 = 1.0;
@@ -60,13 +65,25 @@ pub struct ConditionFit {
     pub p_supply_mpa: f64,
     pub temp_c: f64,
     pub events: usize,
+    /// td VO and VC fitted with τp and Cd, ms.
     pub td_open_ms: f64,
     pub td_close_ms: f64,
+    /// 95 % half-widths of td VO, VC (None on a bound or not identifiable).
+    pub td_open_ci95: Option<f64>,
+    pub td_close_ci95: Option<f64>,
+    /// td VO and VC from the command edges to the lift onset (the solver's start and a
+    /// cross-check), at the fitted τp and Cd, ms.
+    pub td_open_onset_ms: f64,
+    pub td_close_onset_ms: f64,
     pub tau_p_ms: f64,
     pub cd: f64,
     /// 95 % half-widths of τp and Cd (None on a bound or not identifiable).
     pub tau_p_ci95: Option<f64>,
     pub cd_ci95: Option<f64>,
+    /// Correlation of td VO and of td VC with τp from the solution's (JᵀJ)⁻¹ (None when
+    /// singular): near ±1 the lift cannot tell a later onset from a slower pressure rise.
+    pub corr_td_open_tau_p: Option<f64>,
+    pub corr_td_close_tau_p: Option<f64>,
     /// Of the last solver run.
     pub iterations: usize,
     pub cost: f64,
@@ -107,9 +124,95 @@ fn derive_td(p: &mut EhvvaParams, set: &Events) -> Result<(f64, f64), String> {
     Ok((on, off))
 }
 
-/// Calibrates one condition (all of `set`'s events): τp and Cd by the solver, td from the
-/// onset for every (τp, Cd) the solver tries, so the three stay consistent.
-pub fn fit_condition(set: &Events, opts: &LsqOptions) -> Result<ConditionFit, String> {
+/// The joint knobs of one condition: td VO, td VC, τp, Cd (uniform tables).
+pub const JOINT_KNOBS: [Knob; 4] = [
+    Knob { name: "td_open_ms", lo: 0.1, hi: 9.0, apply: |p, v| p.tables.td_open_ms = [[v; 5]; 4] },
+    Knob { name: "td_close_ms", lo: 0.1, hi: 9.0, apply: |p, v| p.tables.td_close_ms = [[v; 5]; 4] },
+    CONDITION_KNOBS[0],
+    CONDITION_KNOBS[1],
+];
+/// As [`JOINT_KNOBS`] when no event shows a closing edge: one td for both edges.
+const JOINT_KNOBS_ONE_TD: [Knob; 3] = [
+    Knob { name: "td_ms", lo: 0.1, hi: 9.0, apply: |p, v| set_td(p, v, v) },
+    CONDITION_KNOBS[0],
+    CONDITION_KNOBS[1],
+];
+
+/// Replaces `p`'s uniform td and τp tables (the condition's values) by `shape` scaled so that
+/// it takes those values at the condition (p_c, t_c): inside an event the supply pressure dips
+/// as the accumulator feeds the piston, and the plant reads td(Ph) and τp(Ph) at that pressure.
+pub fn shape_about(p: &mut EhvvaParams, shape: &EhvvaTableData, p_c: f64, t_c: f64) {
+    let (vo, vc, tau) = (p.tables.td_open_ms[0][0], p.tables.td_close_ms[0][0], p.tables.tau_ms[0][0]);
+    let mut q = EhvvaParams::paper_default();
+    q.tables = *shape;
+    let Ok(t) = EhvvaTables::<f64>::new(&q) else { return };
+    let (so, sc) = t.t_delay_pair_ms(p_c, t_c);
+    let st = t.tau_p_ms(p_c, t_c);
+    for i in 0..4 {
+        for j in 0..5 {
+            p.tables.td_open_ms[i][j] = shape.td_open_ms[i][j] * vo / so;
+            p.tables.td_close_ms[i][j] = shape.td_close_ms[i][j] * vc / sc;
+        }
+    }
+    for i in 0..2 {
+        for j in 0..3 {
+            p.tables.tau_ms[i][j] = shape.tau_ms[i][j] * tau / st;
+        }
+    }
+}
+
+/// Correlation matrix (row-major p×p) of the parameters at `x` from the Gauss-Newton
+/// covariance (JᵀJ)⁻¹ of the lift residual, J by central differences (relative step 1e-4);
+/// `None` when JᵀJ is singular. The solver's CIs come from the same matrix; the correlation
+/// says which parameters trade off against each other.
+pub fn correlation(base: &EhvvaParams, knobs: &[Knob], x: &[f64], set: &Events, derive: &dyn Fn(&mut EhvvaParams) -> Result<(), String>) -> Result<Option<Vec<f64>>, String> {
+    let params = |x: &[f64]| -> Result<EhvvaParams, String> {
+        let mut p = apply_knobs(base, knobs, x);
+        derive(&mut p)?;
+        Ok(p)
+    };
+    let p = x.len();
+    let mut jac = vec![vec![0.0; set.samples]; p];
+    let (mut up, mut down) = (vec![0.0; set.samples], vec![0.0; set.samples]);
+    for j in 0..p {
+        let h = 1e-4 * x[j].abs().max(1e-3);
+        let mut xu = x.to_vec();
+        let mut xd = x.to_vec();
+        xu[j] += h;
+        xd[j] -= h;
+        simulate_all(&params(&xu)?, set, &mut up)?;
+        simulate_all(&params(&xd)?, set, &mut down)?;
+        for k in 0..set.samples {
+            jac[j][k] = (up[k] - down[k]) / (2.0 * h);
+        }
+    }
+    let mut jtj = vec![0.0; p * p];
+    for a in 0..p {
+        for b in 0..p {
+            jtj[a * p + b] = jac[a].iter().zip(&jac[b]).map(|(u, v)| u * v).sum();
+        }
+    }
+    Ok(invert_spd(&jtj, p).map(|c| {
+        let mut r = vec![0.0; p * p];
+        for a in 0..p {
+            for b in 0..p {
+                r[a * p + b] = c[a * p + b] / (c[a * p + a] * c[b * p + b]).sqrt();
+            }
+        }
+        r
+    }))
+}
+
+/// The condition's mean supply pressure and temperature.
+fn condition_point(set: &Events) -> (f64, f64) {
+    let n = set.events.len() as f64;
+    (set.events.iter().map(|e| e.inputs.p_supply_mpa).sum::<f64>() / n, set.events.iter().map(|e| e.inputs.temp_c).sum::<f64>() / n)
+}
+
+/// First stage of a condition: τp and Cd by the solver with td read from the lift onset for
+/// every (τp, Cd) tried ([`td_from_onset`]), from a coarse Cd scan at τp = 0.1 ms. Its td is
+/// the onset estimate; it starts [`fit_joint`].
+pub fn fit_onset(set: &Events, opts: &LsqOptions) -> Result<ConditionFit, String> {
     if set.events.is_empty() {
         return Err(format!("{}: a condition without events", set.file));
     }
@@ -132,21 +235,81 @@ pub fn fit_condition(set: &Events, opts: &LsqOptions) -> Result<ConditionFit, St
     let r = calibrate_with(&base, &CONDITION_KNOBS, &[0.1, start.1], set, opts, &|p| derive_td(p, set).map(|_| ()))?;
     let mut p = apply_knobs(&base, &CONDITION_KNOBS, &r.x);
     let td = derive_td(&mut p, set)?;
-    let n = set.events.len() as f64;
+    let (p_c, t_c) = condition_point(set);
     Ok(ConditionFit {
-        p_supply_mpa: set.events.iter().map(|e| e.inputs.p_supply_mpa).sum::<f64>() / n,
-        temp_c: set.events.iter().map(|e| e.inputs.temp_c).sum::<f64>() / n,
+        p_supply_mpa: p_c,
+        temp_c: t_c,
         events: set.events.len(),
         td_open_ms: td.0,
         td_close_ms: td.1,
+        td_open_ci95: None,
+        td_close_ci95: None,
+        td_open_onset_ms: td.0,
+        td_close_onset_ms: td.1,
         tau_p_ms: r.x[0],
         cd: r.x[1],
         tau_p_ci95: r.ci95[0],
         cd_ci95: r.ci95[1],
+        corr_td_open_tau_p: None,
+        corr_td_close_tau_p: None,
         iterations: r.iterations,
         cost: r.cost,
         initial_cost: r.initial_cost,
     })
+}
+
+/// Second stage of a condition: td VO, td VC, τp and Cd together by the solver on the lift,
+/// from the first stage's solution `start`. With `shape` (tables from the first stage over
+/// all conditions) the model's td and τp tables keep that shape about the condition
+/// ([`shape_about`]): the plant reads them at the supply pressure of the moment, which dips
+/// during an event; without it they are uniform.
+pub fn fit_joint(set: &Events, start: &ConditionFit, shape: Option<&EhvvaTableData>, opts: &LsqOptions) -> Result<ConditionFit, String> {
+    let base = EhvvaParams::paper_default();
+    let has_close = set.events.iter().any(|e| e.off_index.is_some());
+    let (p_c, t_c) = condition_point(set);
+    let (knobs, x0): (&[Knob], Vec<f64>) = if has_close {
+        (&JOINT_KNOBS, vec![start.td_open_ms, start.td_close_ms, start.tau_p_ms, start.cd])
+    } else {
+        (&JOINT_KNOBS_ONE_TD, vec![start.td_open_ms, start.tau_p_ms, start.cd])
+    };
+    let derive = |p: &mut EhvvaParams| -> Result<(), String> {
+        if let Some(shape) = shape {
+            shape_about(p, shape, p_c, t_c);
+        }
+        Ok(())
+    };
+    let r = calibrate_with(&base, knobs, &x0, set, opts, &derive)?;
+    let corr = correlation(&base, knobs, &r.x, set, &derive)?;
+    let m = knobs.len();
+    let (tau_i, cd_i, close_i) = (m - 2, m - 1, usize::from(has_close));
+    // Cross-check: td from the onset with the solution's τp and Cd.
+    let mut p = apply_knobs(&base, &CONDITION_KNOBS, &[r.x[tau_i], r.x[cd_i]]);
+    let onset = derive_td(&mut p, set)?;
+    Ok(ConditionFit {
+        p_supply_mpa: p_c,
+        temp_c: t_c,
+        events: set.events.len(),
+        td_open_ms: r.x[0],
+        td_close_ms: r.x[close_i],
+        td_open_ci95: r.ci95[0],
+        td_close_ci95: r.ci95[close_i],
+        td_open_onset_ms: onset.0,
+        td_close_onset_ms: onset.1,
+        tau_p_ms: r.x[tau_i],
+        cd: r.x[cd_i],
+        tau_p_ci95: r.ci95[tau_i],
+        cd_ci95: r.ci95[cd_i],
+        corr_td_open_tau_p: corr.as_ref().map(|c| c[tau_i]),
+        corr_td_close_tau_p: corr.as_ref().map(|c| c[close_i * m + tau_i]),
+        iterations: start.iterations + r.iterations,
+        cost: r.cost,
+        initial_cost: start.initial_cost,
+    })
+}
+
+/// One condition on its own: [`fit_onset`], then [`fit_joint`] with uniform tables.
+pub fn fit_condition(set: &Events, opts: &LsqOptions) -> Result<ConditionFit, String> {
+    fit_joint(set, &fit_onset(set, opts)?, None, opts)
 }
 
 /// Groups the events of several logs into test conditions (module doc).
@@ -285,21 +448,28 @@ impl Identified {
 
     /// The human-readable report: per condition (solver evidence), then the tables.
     pub fn text(&self) -> String {
-        let mut s = String::from("per test condition (td from the command edges to the lift response; tau_p and Cd by trust-region least squares on the lift):\n");
-        s.push_str("  Ph MPa   T °C  events  td VO ms  td VC ms   tau_p ms (± 95 %)      Cd (± 95 %)        iterations  cost (initial)\n");
+        let mut s = String::from("per test condition (td VO, td VC, tau_p and Cd together by trust-region least squares on the lift; onset = td read from the command edges to the lift onset; r = correlation of td with tau_p):\n");
+        s.push_str("  Ph MPa   T °C  ev  td VO ms (± 95 %)   onset   td VC ms (± 95 %)   onset   tau_p ms (± 95 %)    Cd (± 95 %)        r VO   r VC   it  cost (initial)\n");
         let ci = |c: Option<f64>| c.map_or("   n/a".to_string(), |v| format!("{v:.4}"));
+        let r = |c: Option<f64>| c.map_or("  n/a".to_string(), |v| format!("{v:+.2}"));
         for c in &self.conditions {
             s.push_str(&format!(
-                "  {:6.2} {:6.1} {:7}  {:8.3}  {:8.3}   {:.4} ± {:<8}  {:.4} ± {:<8}  {:10}  {:.3e} ({:.3e})\n",
+                "  {:6.2} {:6.1} {:3}  {:.3} ± {:<8}  {:6.3}  {:.3} ± {:<8}  {:6.3}  {:.4} ± {:<8}  {:.4} ± {:<8}  {:>5}  {:>5}  {:3}  {:.3e} ({:.3e})\n",
                 c.p_supply_mpa,
                 c.temp_c,
                 c.events,
                 c.td_open_ms,
+                ci(c.td_open_ci95),
+                c.td_open_onset_ms,
                 c.td_close_ms,
+                ci(c.td_close_ci95),
+                c.td_close_onset_ms,
                 c.tau_p_ms,
                 ci(c.tau_p_ci95),
                 c.cd,
                 ci(c.cd_ci95),
+                r(c.corr_td_open_tau_p),
+                r(c.corr_td_close_tau_p),
                 c.iterations,
                 c.cost,
                 c.initial_cost,
@@ -346,6 +516,12 @@ impl Identified {
                 "events": c.events,
                 "td_open_ms": c.td_open_ms,
                 "td_close_ms": c.td_close_ms,
+                "td_open_ci95_ms": c.td_open_ci95,
+                "td_close_ci95_ms": c.td_close_ci95,
+                "td_open_onset_ms": c.td_open_onset_ms,
+                "td_close_onset_ms": c.td_close_onset_ms,
+                "corr_td_open_tau_p": c.corr_td_open_tau_p,
+                "corr_td_close_tau_p": c.corr_td_close_tau_p,
                 "tau_p_ms": c.tau_p_ms,
                 "tau_p_ci95_ms": c.tau_p_ci95,
                 "cd": c.cd,
@@ -371,7 +547,7 @@ impl Identified {
 
 /// Solver settings of the per-condition fits.
 pub fn default_options() -> LsqOptions {
-    LsqOptions { max_iterations: 40, cost_tolerance: 1e-9, fd_step: 1e-5, ..LsqOptions::default() }
+    LsqOptions { max_iterations: 40, cost_tolerance: 1e-13, step_tolerance: 1e-12, fd_step: 1e-5, ..LsqOptions::default() }
 }
 
 /// Identifies the tables from the events of several logs; `progress` is told each condition.
@@ -380,10 +556,18 @@ pub fn identify(sets: &[Events], opts: &LsqOptions, progress: &mut dyn FnMut(usi
     if groups.is_empty() {
         return Err("no valve events in the logs".into());
     }
-    let mut out = Vec::with_capacity(groups.len());
+    // Pass 1: onset td with τp and Cd per condition; its tables give the shape in Ph and T
+    // that pass 2 keeps about each condition.
+    let mut first = Vec::with_capacity(groups.len());
     for (k, g) in groups.iter().enumerate() {
-        progress(k + 1, groups.len());
-        out.push(fit_condition(g, opts)?);
+        progress(k + 1, 2 * groups.len());
+        first.push(fit_onset(g, opts)?);
+    }
+    let shape = Identified { conditions: first.clone() }.table_data();
+    let mut out = Vec::with_capacity(groups.len());
+    for (k, (g, start)) in groups.iter().zip(&first).enumerate() {
+        progress(groups.len() + k + 1, 2 * groups.len());
+        out.push(fit_joint(g, start, Some(&shape), opts)?);
     }
     Ok(Identified { conditions: out })
 }
