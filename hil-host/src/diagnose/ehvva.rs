@@ -94,13 +94,15 @@ impl Events {
         }
         let n = lift.len();
         let pre = ((PRE_MS / dt_ms).round() as usize).max(1);
-        let rising: Vec<usize> = (0..n).filter(|&k| u[k] > 0.5 && (k == 0 || u[k - 1] <= 0.5)).collect();
+        // A command already on at the first sample began before the log: not an edge.
+        let rising: Vec<usize> = (1..n).filter(|&k| u[k] > 0.5 && u[k - 1] <= 0.5).collect();
         if rising.is_empty() {
             return Err(format!("{}: no valve event (u_pilot never rises)", log.file));
         }
+        let skip = unsettled_prefix(u, lift, rising[0], pre);
         let mut starts: Vec<usize> = Vec::with_capacity(rising.len());
         for (i, &r) in rising.iter().enumerate() {
-            let s = if i == 0 { 0 } else { r.saturating_sub(pre).max(starts[i - 1] + 1) };
+            let s = if i == 0 { skip } else { r.saturating_sub(pre).max(starts[i - 1] + 1) };
             starts.push(s);
         }
         let mut events = Vec::with_capacity(rising.len());
@@ -130,6 +132,12 @@ impl Events {
             events.push(Event { start: s, u_pilot: u[s..e].iter().map(|&v| v > 0.5).collect(), lift_mm: lift[s..e].to_vec(), inputs, on_index: on, off_index });
         }
         Ok(Events { dt_ms, events, samples: n, file: log.file.clone() })
+    }
+
+    /// Samples before the first event: the log began while the valve was still moving (e.g. a
+    /// held-out tail cut from a longer record), a state the model cannot start from.
+    pub fn skipped(&self) -> usize {
+        self.events.first().map_or(0, |e| e.start)
     }
 
     /// The measured lift over the whole log (what `simulate_all` predicts).
@@ -175,6 +183,23 @@ impl Events {
     }
 }
 
+/// Lift band about the rest level inside which the valve counts as at rest, mm (a seated
+/// valve's lift is sensor noise, σ ≤ 6 µm).
+const REST_BAND_MM: f64 = 0.05;
+
+/// How many leading samples precede the valve's rest before the first command edge `first_on`:
+/// a log cut out of a longer record may begin with a command on or the valve still closing.
+/// Those samples are left out of every event (0 when the log begins at rest). The rest level is
+/// the mean lift over the `pre` samples before the edge.
+fn unsettled_prefix(u: &[f64], lift: &[f64], first_on: usize, pre: usize) -> usize {
+    let rest = first_on.saturating_sub(pre)..first_on;
+    if rest.is_empty() {
+        return 0;
+    }
+    let level = lift[rest.clone()].iter().sum::<f64>() / rest.len() as f64;
+    (0..first_on).rev().find(|&k| u[k] > 0.5 || (lift[k] - level).abs() > REST_BAND_MM).map_or(0, |k| k + 1)
+}
+
 /// Simulates one event from rest with model-core's reduced model, writing the lift into `out`
 /// (same length as the event).
 pub fn simulate_event(params: &EhvvaParams, ev: &Event, dt_ms: f64, out: &mut [f64]) -> Result<(), String> {
@@ -202,8 +227,10 @@ pub fn simulate_event(params: &EhvvaParams, ev: &Event, dt_ms: f64, out: &mut [f
     Ok(())
 }
 
-/// Simulates every event into `out` (the log's length).
+/// Simulates every event into `out` (the log's length); the samples before the first event
+/// ([`Events::skipped`]) are set to 0, as [`Events::measured`] has them.
 pub fn simulate_all(params: &EhvvaParams, set: &Events, out: &mut [f64]) -> Result<(), String> {
+    out[..set.skipped()].fill(0.0);
     for ev in &set.events {
         simulate_event(params, ev, set.dt_ms, &mut out[ev.start..ev.start + ev.lift_mm.len()])?;
     }
@@ -435,8 +462,15 @@ impl Family for EhvvaFamily {
         let p = apply_knobs(&EhvvaParams::baseline(), &knobs, &r.x);
         let mut predicted = vec![0.0; dv.samples];
         simulate_all(&p, &dv, &mut predicted)?;
+        // Samples before the validation log's first event are not predicted (the valve's state
+        // there is unknown): they are scored as measured, the same for every candidate.
+        let mut measured = dv.measured();
+        let lift = val.col("lift_mm").ok_or_else(|| format!("{}: no `lift_mm` column", val.file))?;
+        let skip = dv.skipped();
+        measured[..skip].copy_from_slice(&lift[..skip]);
+        predicted[..skip].copy_from_slice(&lift[..skip]);
         let params = knobs.iter().zip(&r.x).map(|(k, v)| (k.name.to_string(), *v)).collect();
-        Ok(Fit::new(effect.unwrap_or("baseline"), params, r.ci95.clone(), dv.measured(), predicted, r.iterations))
+        Ok(Fit::new(effect.unwrap_or("baseline"), params, r.ci95.clone(), measured, predicted, r.iterations))
     }
 
     fn regressors(&self, val: &Log) -> Vec<(String, Vec<f64>)> {
@@ -498,6 +532,42 @@ mod tests {
         simulate_all(&apply_knobs(&EhvvaParams::baseline(), &knobs, &wrong), &set, &mut sim).unwrap();
         let e: Vec<f64> = sim.iter().zip(set.measured()).map(|(s, y)| s - y).collect();
         assert!(crate::residuals::rmse(&e) > 5.0 * rms);
+    }
+
+    /// A log cut out of a longer record in the middle of a valve event (the held-out tail of
+    /// `diagnose` with one file): the samples until the valve rests before the next command are
+    /// left out, as the model cannot start from an unknown motion, and the events after them
+    /// reproduce the bench with the truth to the sensor noise.
+    #[test]
+    fn a_log_beginning_mid_event_is_simulated_from_its_first_rest() {
+        let (est, _, truth) = logs("snubber", 5);
+        let full = Events::from_log(&est).unwrap();
+        assert_eq!(full.skipped(), 0, "a generated log begins at rest");
+        // Cut where the third event's valve is fully open.
+        let ev = &full.events[2];
+        let lift = est.col("lift_mm").unwrap();
+        let cut = (ev.start..ev.start + ev.lift_mm.len()).max_by(|&a, &b| lift[a].total_cmp(&lift[b])).unwrap();
+        assert!(lift[cut] > 0.5, "lift {} mm at the cut", lift[cut]);
+        let mut tail = est.clone();
+        for c in tail.columns.values_mut() {
+            c.drain(..cut);
+        }
+        let set = Events::from_log(&tail).unwrap();
+        let seated = set.skipped();
+        assert!(seated > 0 && seated < full.events[3].start - cut, "skipped {seated}");
+        assert!(tail.col("lift_mm").unwrap()[seated..seated + 5].iter().all(|l| l.abs() < 0.05));
+        let mut knobs = BASELINE_KNOBS.to_vec();
+        knobs.push(effect_knob("snubber").unwrap());
+        let x: Vec<f64> = knobs.iter().map(|k| get(&truth, k.name)).collect();
+        let mut sim = vec![0.0; set.samples];
+        simulate_all(&apply_knobs(&EhvvaParams::baseline(), &knobs, &x), &set, &mut sim).unwrap();
+        let e: Vec<f64> = sim.iter().zip(set.measured()).map(|(s, y)| s - y).collect();
+        let rms = crate::residuals::rmse(&e);
+        assert!(rms < 0.008, "rms {rms} mm");
+        // The family scores the skipped samples as measured, for every candidate alike.
+        let fit = EhvvaFamily::default().fit(Some("snubber"), &est, &tail).unwrap();
+        assert_eq!(&fit.measured[..seated], &tail.col("lift_mm").unwrap()[..seated]);
+        assert!(fit.rmse < 0.008, "validation rmse {} mm", fit.rmse);
     }
 
     /// The baseline and an extension recover the generator's parameters from the estimation
