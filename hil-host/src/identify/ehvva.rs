@@ -20,8 +20,8 @@
 //! parameters are calibrated, as in the paper.
 //!
 //! A condition is every event within 0.25 MPa and 3 °C of the condition's first event; its
-//! value is the mean of its events', and its events are simulated at that one supply
-//! set-point. Events of one condition may differ in back pressure, lift
+//! value is the mean of its events'. Its events whose supply set-points agree within 0.02 MPa
+//! are simulated at their mean set-point. Events of one condition may differ in back pressure, lift
 //! and switch valve: the model takes those as inputs.
 
 use model_core::ehvva::{EhvvaParams, EhvvaTableData, EhvvaTables};
@@ -35,6 +35,8 @@ const REFERENCE_TD_MS: f64 = 1.0;
 /// Events closer than these belong to one test condition.
 const SAME_P_MPA: f64 = 0.25;
 const SAME_T_C: f64 = 3.0;
+/// Supply set-points of one condition closer than this are one set-point read with noise, MPa.
+const SAME_SETPOINT_MPA: f64 = 0.02;
 
 /// The calibrated knobs of one condition: uniform τp and Cd tables.
 pub const CONDITION_KNOBS: [Knob; 2] = [
@@ -335,13 +337,15 @@ pub fn conditions(sets: &[Events]) -> Vec<Events> {
     groups
         .into_iter()
         .map(|(_, _, mut g)| {
-            // One supply set-point per condition: the mean of its events' (each read from
-            // 1 ms at rest). The fit does not see set-point errors and slides along the td-τp
-            // ridge to absorb them; pooling the events shrinks them (τp 12 % → 5 % at a
-            // 0.01 MPa sensor noise, `tests/identify_ehvva.rs`).
-            let ph = g.events.iter().map(|e| e.inputs.p_supply_mpa).sum::<f64>() / g.events.len() as f64;
+            // Events of a condition whose supply set-points (each read from 1 ms at rest) agree
+            // within SAME_SETPOINT_MPA share one: the mean of theirs. The fit does not see
+            // set-point errors and slides along the td-τp ridge to absorb them; pooling shrinks
+            // them (τp 12 % → 5 % at a 0.01 MPa sensor noise, `tests/identify_ehvva.rs`).
+            let setpoints: Vec<f64> = g.events.iter().map(|e| e.inputs.p_supply_mpa).collect();
             for e in &mut g.events {
-                e.inputs.p_supply_mpa = ph;
+                let own = e.inputs.p_supply_mpa;
+                let near: Vec<f64> = setpoints.iter().copied().filter(|p| (p - own).abs() <= SAME_SETPOINT_MPA).collect();
+                e.inputs.p_supply_mpa = near.iter().sum::<f64>() / near.len() as f64;
             }
             g
         })
