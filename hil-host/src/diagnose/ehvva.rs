@@ -237,6 +237,50 @@ pub fn simulate_all(params: &EhvvaParams, set: &Events, out: &mut [f64]) -> Resu
     Ok(())
 }
 
+/// As [`simulate_all`], with the events shared among `threads` threads: they are independent
+/// (each from rest), so the result is the same as on one; the events go in contiguous runs
+/// of about equal sample counts.
+pub fn simulate_all_on(params: &EhvvaParams, set: &Events, out: &mut [f64], threads: usize) -> Result<(), String> {
+    let threads = threads.clamp(1, set.events.len().max(1));
+    if threads == 1 {
+        return simulate_all(params, set, out);
+    }
+    let skip = set.skipped();
+    out[..skip].fill(0.0);
+    let per_thread = set.covered().div_ceil(threads);
+    // Runs of events: (events, their output slice).
+    let mut runs: Vec<(&[Event], &mut [f64])> = Vec::with_capacity(threads);
+    let (mut rest_events, mut rest_out) = (&set.events[..], &mut out[skip..]);
+    while !rest_events.is_empty() {
+        let (mut count, mut len) = (0, 0);
+        while count < rest_events.len() && (len < per_thread || runs.len() + 1 == threads) {
+            len += rest_events[count].lift_mm.len();
+            count += 1;
+        }
+        let (ev, more_ev) = rest_events.split_at(count);
+        let (o, more_o) = std::mem::take(&mut rest_out).split_at_mut(len);
+        runs.push((ev, o));
+        (rest_events, rest_out) = (more_ev, more_o);
+    }
+    std::thread::scope(|s| {
+        let handles: Vec<_> = runs
+            .into_iter()
+            .map(|(events, o)| {
+                s.spawn(move || {
+                    let mut at = 0;
+                    for ev in events {
+                        let len = ev.lift_mm.len();
+                        simulate_event(params, ev, set.dt_ms, &mut o[at..at + len])?;
+                        at += len;
+                    }
+                    Ok::<(), String>(())
+                })
+            })
+            .collect();
+        handles.into_iter().try_for_each(|h| h.join().map_err(|_| "event simulation thread panicked".to_string())?)
+    })
+}
+
 /// A fitted parameter: its name, bounds and how it sets the model's parameters.
 #[derive(Clone, Copy, Debug)]
 pub struct Knob {
@@ -333,16 +377,20 @@ pub fn calibrate_with(
     let measured = set.measured();
     let lo: Vec<f64> = knobs.iter().map(|k| k.lo).collect();
     let hi: Vec<f64> = knobs.iter().map(|k| k.hi).collect();
+    // The threads go to the events of each simulation, not to the Jacobian's columns: the
+    // solver's serial evaluations (start, trial steps) run on all of them too, and 4-5
+    // columns on 2 threads leave one idle every other round.
     let residual = |x: &[f64], out: &mut [f64]| -> Result<(), String> {
         let mut p = apply_knobs(base, knobs, x);
         derive(&mut p)?;
-        simulate_all(&p, set, out)?;
+        simulate_all_on(&p, set, out, opts.threads)?;
         for (o, y) in out.iter_mut().zip(&measured) {
             *o -= y;
         }
         Ok(())
     };
-    solve(residual, x0, &lo, &hi, set.samples, opts).map_err(|e| format!("{}: {e}", set.file))
+    let serial = LsqOptions { threads: 1, ..opts.clone() };
+    solve(residual, x0, &lo, &hi, set.samples, &serial).map_err(|e| format!("{}: {e}", set.file))
 }
 
 /// Times at which the lift crosses 1 % of the stroke after the rising edge and 99 % after the
@@ -397,7 +445,7 @@ impl EhvvaFamily {
         let mut x = vec![td0, cd0, tau0, EhvvaParams::baseline().mass_kg];
         let p = apply_knobs(&EhvvaParams::baseline(), &BASELINE_KNOBS, &x);
         let mut sim = vec![0.0; set.samples];
-        simulate_all(&p, set, &mut sim)?;
+        simulate_all_on(&p, set, &mut sim, self.lsq.threads)?;
         let (mut shift, mut count) = (0.0, 0usize);
         for ev in &set.events {
             let stroke = ev.stroke_mm(&p);
@@ -461,7 +509,7 @@ impl Family for EhvvaFamily {
         };
         let p = apply_knobs(&EhvvaParams::baseline(), &knobs, &r.x);
         let mut predicted = vec![0.0; dv.samples];
-        simulate_all(&p, &dv, &mut predicted)?;
+        simulate_all_on(&p, &dv, &mut predicted, self.lsq.threads)?;
         // Samples before the validation log's first event are not predicted (the valve's state
         // there is unknown): they are scored as measured, the same for every candidate.
         let mut measured = dv.measured();
