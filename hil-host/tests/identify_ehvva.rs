@@ -1,19 +1,24 @@
 //! `identify ehvva` on bench logs over a Table 1-like matrix (4 supply pressures × 5
 //! temperatures; low lift at 1 MPa back pressure with the switch valve off and on (dwell 8 and
-//! 20 ms), low lift at 3 MPa back pressure, high lift from 6 MPa, 50 kHz, lift noise 3 µm):
-//! - from the reduced model (eq. (12)), whose parameters τp, Cd and td are exactly the tables:
-//!   with exact pressure and temperature channels td, τp and Cd within 5 %; with the bench's
-//!   noisy pressure channels td and Cd within 5 %, τp within 7 % (the supply set-point's error
-//!   moves the solution along the td-τp ridge, correlation about −0.99);
-//! - from the ninth-order model (EhvvaFull, eq. (9); matrix without the raised back pressure,
-//!   which the reduced model does not follow at 5 MPa and −20/0 °C), which has no τp of its
-//!   own: its explicit delays are the table's td less one constant lag of its
-//!   solenoid/pilot/main chain, calibrated (model-core `full_model_dynamic_lag_is_calibrated`)
-//!   so that its main-valve pressure is half-way td + ln2·τp after the command, as the reduced
-//!   model's delayed Pmo is. That half-way time is what these logs generate: the fitted
-//!   td + ln2·τp within 6 % of the tables' per condition (5.4 % measured, earlier: the reduced
-//!   model's pressure lag stands in for the main valve's metering ramp), Cd(T) within 5 %, τp
-//!   off its bounds.
+//! 20 ms), low lift at 3 MPa back pressure (dwell 8 and 20 ms), high lift from 6 MPa, 50 kHz,
+//! lift noise 3 µm). Two readings of td (identify's module doc): pass 1, td from the command
+//! to the lift onset with τp and Cd fitted under it (the method), and pass 2, td fitted
+//! jointly with τp and Cd.
+//! - From the reduced model (eq. (12)), whose parameters τp, Cd and td are exactly the tables:
+//!   with exact or with the bench's noisy pressure and temperature channels both td readings,
+//!   τp and Cd within 5 % per condition and on the tables' breakpoints (the supply set-point's
+//!   error moves the solution along the td-τp ridge, correlation about −0.99: two
+//!   raised-back-pressure events per condition instead of one hold τp to 3.2 % instead of 5.1 %).
+//! - From the ninth-order model (EhvvaFull, eq. (9); matrix without the raised back pressure,
+//!   which the reduced model does not follow at 5 MPa and −20/0 °C, with the 1 MPa low-lift
+//!   tests repeated at the other dwell), which has no τp of its own: its explicit delays are
+//!   the table's td less its solenoid/pilot/main chain's own lag (linear in Ph), calibrated
+//!   (model-core `full_model_dynamic_lag_is_calibrated`) so that its main-valve pressure is
+//!   half-way td + ln2·τp after the command, as the reduced model's delayed Pmo is. Its
+//!   generating tables are td(Ph, T) and Cd(T): the onset td and Cd within 5 % per condition;
+//!   the joint fit's td + ln2·τp within 6 % (its td alone slides along the ridge: τp is the
+//!   reduced model's equivalent of the main valve's metering ramp), τp in range, the paper's
+//!   trends.
 use std::f64::consts::LN_2;
 
 use hil_host::diagnose::ehvva::Events;
@@ -30,19 +35,25 @@ const BACK_HIGH_MPA: f64 = 3.0;
 const DT_MS: f64 = 0.02;
 
 /// The test matrix (module doc); high lift from 6 MPa only, as in Table 1 (at 5 MPa the
-/// valve would float short of its 7.5 mm stop).
-fn matrix(raised_back: bool) -> Vec<Test> {
+/// valve would float short of its 7.5 mm stop). `repeated`: the two low-lift tests at 1 MPa
+/// again with the other dwell (a bench repeats tests to average the noise).
+fn matrix(raised_back: bool, repeated: bool) -> Vec<Test> {
     let mut tests = Vec::new();
     for ph in [5.0, 6.0, 7.0, 8.0] {
         for t in [-20.0, 0.0, 22.0, 60.0, 100.0] {
             let at = |p_back_mpa: f64, lift_high: bool, snubber_on: bool, dwell_ms: f64| Test { inputs: EhvvaInputs { p_supply_mpa: ph, p_back_mpa, temp_c: t, lift_high, snubber_on }, dwell_ms };
             tests.push(at(1.0, false, false, 8.0));
             tests.push(at(1.0, false, true, 20.0));
+            if repeated {
+                tests.push(at(1.0, false, false, 20.0));
+                tests.push(at(1.0, false, true, 8.0));
+            }
             // A raised back pressure moves the fraction of the pressure rise at which the
             // piston starts: the onset moves by a different multiple of τp than at 1 MPa,
             // which separates τp from td.
             if raised_back {
                 tests.push(at(BACK_HIGH_MPA, false, false, 8.0));
+                tests.push(at(BACK_HIGH_MPA, false, false, 20.0));
             }
             if ph >= 6.0 {
                 tests.push(at(1.0, true, true, 8.0));
@@ -64,17 +75,37 @@ fn sensors(exact_setpoints: bool) -> Sensors {
     }
 }
 
-fn identify_bench<P: BenchPlant>(sensors: Sensors, raised_back: bool, make: impl FnMut(&EhvvaInputs<f64>) -> Result<P, String>) -> Identified {
-    let cols = run_bench(&matrix(raised_back), DT_MS, &sensors, &mut Rng::new(7), make).unwrap();
+fn identify_bench<P: BenchPlant>(sensors: Sensors, raised_back: bool, repeated: bool, make: impl FnMut(&EhvvaInputs<f64>) -> Result<P, String>) -> Identified {
+    let cols = run_bench(&matrix(raised_back, repeated), DT_MS, &sensors, &mut Rng::new(7), make).unwrap();
     let log = parse_log("bench.csv", &log_text("bench", DT_MS, &cols), None).unwrap();
     let set = Events::from_log(&log).unwrap();
-    let id = identify(&[set], &default_options(), &mut |_, _| {}).unwrap();
+    let id = identify(std::slice::from_ref(&set), &default_options(), &mut |_, _| {}).unwrap();
     print!("{}", id.text());
     assert_eq!(id.conditions.len(), 20, "one condition per (Ph, T) of the matrix");
     for c in &id.conditions {
         assert!(c.iterations > 0 && c.cost <= c.initial_cost && c.cd_ci95.is_some(), "solver evidence at {} MPa {} °C: {c:?}", c.p_supply_mpa, c.temp_c);
     }
     id
+}
+
+/// Largest relative deviation per condition of td from the lift onset (pass 1, the issue's
+/// td), of Cd (both passes) and of τp (joint fit) from the generating tables at the
+/// condition's (Ph, T), with its name.
+fn worst_onset_and_cd(id: &Identified, p: &EhvvaParams) -> [(f64, String); 3] {
+    let tables = EhvvaTables::<f64>::new(p).unwrap();
+    let mut w = [(0.0, String::new()), (0.0, String::new()), (0.0, String::new())];
+    for c in &id.conditions {
+        let (vo, vc) = tables.t_delay_pair_ms(c.p_supply_mpa, c.temp_c);
+        let at = format!("at {:.2} MPa, {:.1} °C", c.p_supply_mpa, c.temp_c);
+        for (k, name, got, want) in [(0, "onset td VO", c.td_open_onset_ms, vo), (0, "onset td VC", c.td_close_onset_ms, vc), (1, "Cd", c.cd, tables.cd(c.temp_c)), (1, "Cd pass 1", c.cd_onset, tables.cd(c.temp_c)), (2, "tau_p", c.tau_p_ms, tables.tau_p_ms(c.p_supply_mpa, c.temp_c))] {
+            let r = (got / want - 1.0).abs();
+            if r > w[k].0 {
+                w[k] = (r, format!("{name} {at}: {got:.4} vs {want:.4}"));
+            }
+        }
+    }
+    println!("worst per condition: onset td {:.1} % ({}), Cd {:.1} % ({}), tau_p {:.1} % ({})", 100.0 * w[0].0, w[0].1, 100.0 * w[1].0, w[1].1, 100.0 * w[2].0, w[2].1);
+    w
 }
 
 /// Largest relative deviation of the (td, τp, Cd) entries, with its name.
@@ -111,11 +142,15 @@ fn worst(got: &EhvvaTableData, want: &EhvvaTableData) -> [(f64, String); 3] {
 #[test]
 fn tables_from_reduced_model_logs_match_the_generating_ones() {
     let p = EhvvaParams::paper_default();
-    let id = identify_bench(sensors(true), true, |i| EhvvaReduced::<f64, 1024>::new(&p, i, DT_MS).map_err(|e| format!("{e:?}")));
+    let id = identify_bench(sensors(true), true, false, |i| EhvvaReduced::<f64, 1024>::new(&p, i, DT_MS).map_err(|e| format!("{e:?}")));
     let [td, tau, cd] = worst(&id.table_data(), &p.tables);
     assert!(td.0 < 0.05, "{}", td.1);
     assert!(tau.0 < 0.05, "{}", tau.1);
     assert!(cd.0 < 0.05, "{}", cd.1);
+    let [onset, cd_condition, tau_condition] = worst_onset_and_cd(&id, &p);
+    assert!(onset.0 < 0.05, "{}", onset.1);
+    assert!(cd_condition.0 < 0.05, "{}", cd_condition.1);
+    assert!(tau_condition.0 < 0.05, "{}", tau_condition.1);
     for c in &id.conditions {
         let r = c.corr_td_open_tau_p.expect("JᵀJ regular");
         assert!(r < -0.8, "td VO and tau_p trade off (later onset = slower rise): r {r}");
@@ -124,24 +159,35 @@ fn tables_from_reduced_model_logs_match_the_generating_ones() {
 
 /// With the bench's noisy pressure channels, the supply set-point read before each command
 /// carries an error the fit cannot see (errors in variables) and along the td-τp ridge it moves
-/// τp: 12 % off with a set-point per event, 5.1 % with one per condition (the events pooled).
+/// τp: 12 % off with a set-point per event, 5.1 % with one per condition (the events pooled)
+/// and one raised-back-pressure event, 3.2 % with two (dwell 8 and 20 ms).
 #[test]
 fn tables_from_noisy_reduced_model_logs() {
     let p = EhvvaParams::paper_default();
-    let id = identify_bench(sensors(false), true, |i| EhvvaReduced::<f64, 1024>::new(&p, i, DT_MS).map_err(|e| format!("{e:?}")));
+    let id = identify_bench(sensors(false), true, false, |i| EhvvaReduced::<f64, 1024>::new(&p, i, DT_MS).map_err(|e| format!("{e:?}")));
     let [td, tau, cd] = worst(&id.table_data(), &p.tables);
     assert!(td.0 < 0.05, "{}", td.1);
-    assert!(tau.0 < 0.07, "{}", tau.1);
+    assert!(tau.0 < 0.05, "{}", tau.1);
     assert!(cd.0 < 0.05, "{}", cd.1);
+    let [onset, cd_condition, tau_condition] = worst_onset_and_cd(&id, &p);
+    assert!(onset.0 < 0.05, "{}", onset.1);
+    assert!(cd_condition.0 < 0.05, "{}", cd_condition.1);
+    assert!(tau_condition.0 < 0.05, "{}", tau_condition.1);
 }
 
 #[test]
 fn tables_from_ninth_order_logs_match_the_generating_ones() {
     let p = EhvvaParams::paper_default();
-    let id = identify_bench(sensors(false), false, |i| EhvvaFull::<f64, 1024>::new(&p, i, DT_MS).map_err(|e| format!("{e:?}")));
+    let id = identify_bench(sensors(false), false, true, |i| EhvvaFull::<f64, 1024>::new(&p, i, DT_MS).map_err(|e| format!("{e:?}")));
     let got = id.table_data();
     let [td, _, cd] = worst(&got, &p.tables);
     assert!(cd.0 < 0.05, "{}", cd.1);
+    let [onset, cd_condition, _] = worst_onset_and_cd(&id, &p);
+    assert!(cd_condition.0 < 0.05, "{}", cd_condition.1);
+    // td from the command to the lift onset with τp and Cd fitted under it (pass 1, the
+    // issue's method): the generating td table within 5 % at every condition (4.0 % measured).
+    // The joint fit's td is not: it moves along the td-τp ridge (below).
+    assert!(onset.0 < 0.05, "{}", onset.1);
     // EhvvaFull has no τp: its explicit delays are set (less its chain's own lag) so that its
     // main-valve pressure is half-way where the reduced model's delayed Pmo is, td + ln2·τp
     // after the command (model-core `full_model_dynamic_lag_is_calibrated`). That half-way time
@@ -167,6 +213,9 @@ fn tables_from_ninth_order_logs_match_the_generating_ones() {
         for tau in row {
             assert!((0.02..0.3).contains(&tau), "tau_p {tau} ms");
         }
+    }
+    for c in &id.conditions {
+        assert!((0.02..0.3).contains(&c.tau_p_onset_ms), "pass 1 tau_p {} ms at {} MPa, {} °C", c.tau_p_onset_ms, c.p_supply_mpa, c.temp_c);
     }
     // The tables keep the paper's trends: td falls with supply pressure and with temperature
     // (VO), Cd rises with temperature.

@@ -74,10 +74,14 @@ pub struct ConditionFit {
     /// 95 % half-widths of td VO, VC (None on a bound or not identifiable).
     pub td_open_ci95: Option<f64>,
     pub td_close_ci95: Option<f64>,
-    /// td VO and VC from the command edges to the lift onset (the solver's start and a
-    /// cross-check), at the fitted τp and Cd, ms.
+    /// Pass 1, the paper's method: td VO and VC from the command edges to the lift onset
+    /// ([`td_from_onset`]) with τp and Cd fitted under it ([`fit_onset`]), ms; that τp and Cd.
+    /// They start pass 2. On a plant other than the reduced model (the ninth-order one) these
+    /// are the td to use: the joint fit moves td along the td-τp ridge (module doc).
     pub td_open_onset_ms: f64,
     pub td_close_onset_ms: f64,
+    pub tau_p_onset_ms: f64,
+    pub cd_onset: f64,
     pub tau_p_ms: f64,
     pub cd: f64,
     /// 95 % half-widths of τp and Cd (None on a bound or not identifiable).
@@ -249,6 +253,8 @@ pub fn fit_onset(set: &Events, opts: &LsqOptions) -> Result<ConditionFit, String
         td_close_ci95: None,
         td_open_onset_ms: td.0,
         td_close_onset_ms: td.1,
+        tau_p_onset_ms: r.x[0],
+        cd_onset: r.x[1],
         tau_p_ms: r.x[0],
         cd: r.x[1],
         tau_p_ci95: r.ci95[0],
@@ -285,9 +291,6 @@ pub fn fit_joint(set: &Events, start: &ConditionFit, shape: Option<&EhvvaTableDa
     let corr = correlation(&base, knobs, &r.x, set, &derive)?;
     let m = knobs.len();
     let (tau_i, cd_i, close_i) = (m - 2, m - 1, usize::from(has_close));
-    // Cross-check: td from the onset with the solution's τp and Cd.
-    let mut p = apply_knobs(&base, &CONDITION_KNOBS, &[r.x[tau_i], r.x[cd_i]]);
-    let onset = derive_td(&mut p, set)?;
     Ok(ConditionFit {
         p_supply_mpa: p_c,
         temp_c: t_c,
@@ -296,8 +299,10 @@ pub fn fit_joint(set: &Events, start: &ConditionFit, shape: Option<&EhvvaTableDa
         td_close_ms: r.x[close_i],
         td_open_ci95: r.ci95[0],
         td_close_ci95: r.ci95[close_i],
-        td_open_onset_ms: onset.0,
-        td_close_onset_ms: onset.1,
+        td_open_onset_ms: start.td_open_onset_ms,
+        td_close_onset_ms: start.td_close_onset_ms,
+        tau_p_onset_ms: start.tau_p_onset_ms,
+        cd_onset: start.cd_onset,
         tau_p_ms: r.x[tau_i],
         cd: r.x[cd_i],
         tau_p_ci95: r.ci95[tau_i],
@@ -441,11 +446,24 @@ impl Identified {
         pts[pts.len() - 1].1
     }
 
-    /// The tables on model-core's breakpoints (paper's grid), ready for `EhvvaParams::tables`.
+    /// The tables on model-core's breakpoints (paper's grid), ready for `EhvvaParams::tables`:
+    /// td from the joint fit (the reduced model's parameter set, consistent with its τp).
     pub fn table_data(&self) -> EhvvaTableData {
+        self.tables_with_td(|c| c.td_open_ms, |c| c.td_close_ms)
+    }
+
+    /// As [`Self::table_data`] with td from the command edges to the lift onset (pass 1, the
+    /// paper's method; τp and Cd stay the joint fit's). On a plant that is not the reduced
+    /// model (the ninth-order one) the two differ: the joint fit moves td along the td-τp
+    /// ridge to fit the rise with the reduced model's first-order lag.
+    pub fn table_data_onset_td(&self) -> EhvvaTableData {
+        self.tables_with_td(|c| c.td_open_onset_ms, |c| c.td_close_onset_ms)
+    }
+
+    fn tables_with_td(&self, open: impl Fn(&ConditionFit) -> f64, close: impl Fn(&ConditionFit) -> f64) -> EhvvaTableData {
         let mut d = EhvvaTableData::paper_default();
-        let vo = self.points(|c| c.td_open_ms);
-        let vc = self.points(|c| c.td_close_ms);
+        let vo = self.points(open);
+        let vc = self.points(close);
         let tau = self.points(|c| c.tau_p_ms);
         for (i, &p) in d.td_p_supply_mpa.iter().enumerate() {
             for (j, &t) in d.td_temp_c.iter().enumerate() {
@@ -466,22 +484,24 @@ impl Identified {
 
     /// The human-readable report: per condition (solver evidence), then the tables.
     pub fn text(&self) -> String {
-        let mut s = String::from("per test condition (td VO, td VC, tau_p and Cd together by trust-region least squares on the lift; onset = td read from the command edges to the lift onset; r = correlation of td with tau_p):\n");
-        s.push_str("  Ph MPa   T °C  ev  td VO ms (± 95 %)   onset   td VC ms (± 95 %)   onset   tau_p ms (± 95 %)    Cd (± 95 %)        r VO   r VC   it  cost (initial)\n");
+        let mut s = String::from("per test condition. Pass 1 (onset; Li 2018's method): td from the command edges to the lift onset, tau_p and Cd by trust-region least squares on the lift under it. Pass 2 (joint): td VO, td VC, tau_p and Cd together by the same solver from pass 1 (95 % CIs); r = correlation of td with tau_p:\n");
+        s.push_str("  Ph MPa   T °C  ev | onset: td VO   td VC   tau_p    Cd     | joint: td VO ms (± 95 %)   td VC ms (± 95 %)   tau_p ms (± 95 %)    Cd (± 95 %)        r VO   r VC   it  cost (initial)\n");
         let ci = |c: Option<f64>| c.map_or("   n/a".to_string(), |v| format!("{v:.4}"));
         let r = |c: Option<f64>| c.map_or("  n/a".to_string(), |v| format!("{v:+.2}"));
         for c in &self.conditions {
             s.push_str(&format!(
-                "  {:6.2} {:6.1} {:3}  {:.3} ± {:<8}  {:6.3}  {:.3} ± {:<8}  {:6.3}  {:.4} ± {:<8}  {:.4} ± {:<8}  {:>5}  {:>5}  {:3}  {:.3e} ({:.3e})\n",
+                "  {:6.2} {:6.1} {:3} |      {:6.3}  {:6.3}  {:.4}  {:.4} |        {:.3} ± {:<8}   {:.3} ± {:<8}   {:.4} ± {:<8}  {:.4} ± {:<8}  {:>5}  {:>5}  {:3}  {:.3e} ({:.3e})\n",
                 c.p_supply_mpa,
                 c.temp_c,
                 c.events,
+                c.td_open_onset_ms,
+                c.td_close_onset_ms,
+                c.tau_p_onset_ms,
+                c.cd_onset,
                 c.td_open_ms,
                 ci(c.td_open_ci95),
-                c.td_open_onset_ms,
                 c.td_close_ms,
                 ci(c.td_close_ci95),
-                c.td_close_onset_ms,
                 c.tau_p_ms,
                 ci(c.tau_p_ci95),
                 c.cd,
@@ -509,8 +529,12 @@ impl Identified {
             }
             g
         };
-        s.push_str(&grid("td VO (ms) on model-core's breakpoints", &d.td_p_supply_mpa, &d.td_temp_c, &|i, j| d.td_open_ms[i][j]));
-        s.push_str(&grid("td VC (ms)", &d.td_p_supply_mpa, &d.td_temp_c, &|i, j| d.td_close_ms[i][j]));
+        let o = self.table_data_onset_td();
+        s.push_str("\ntd has two readings: onset (pass 1) = command edge to the lift onset (1 % / 99 % of the stroke) less the reduced model's own response time at pass 1's tau_p and Cd (Li 2018's td); joint (pass 2) = td fitted with tau_p and Cd, the set that best reproduces the whole lift in the reduced model (td and tau_p trade off along a ridge, r above). On reduced-model logs they agree; on another plant (ninth-order model) the onset td is its td, the joint set one consistent reduced-model calibration. The tau_p and Cd tables below are the joint fit's.\n");
+        s.push_str(&grid("td VO (ms) from the lift onset, on model-core's breakpoints", &o.td_p_supply_mpa, &o.td_temp_c, &|i, j| o.td_open_ms[i][j]));
+        s.push_str(&grid("td VC (ms) from the lift onset", &o.td_p_supply_mpa, &o.td_temp_c, &|i, j| o.td_close_ms[i][j]));
+        s.push_str(&grid("td VO (ms) joint fit with tau_p and Cd", &d.td_p_supply_mpa, &d.td_temp_c, &|i, j| d.td_open_ms[i][j]));
+        s.push_str(&grid("td VC (ms) joint fit", &d.td_p_supply_mpa, &d.td_temp_c, &|i, j| d.td_close_ms[i][j]));
         s.push_str(&grid("tau_p (ms)", &d.tau_p_supply_mpa, &d.tau_temp_c, &|i, j| d.tau_ms[i][j]));
         s.push_str("\nCd(T)\n  T °C    ");
         for t in d.cd_temp_c {
@@ -527,7 +551,15 @@ impl Identified {
     /// The JSON report: per condition, the tables at the tested points, and `EhvvaTableData`.
     pub fn json(&self) -> Value {
         let d = self.table_data();
+        let o = self.table_data_onset_td();
         json!({
+            "td_definitions": "pass 1 (the paper's method), td_*_onset_ms and td_onset_tables: command edge to the lift onset (1 % rising, 99 % falling of the stroke) less the reduced model's own response time at pass 1's tau_p_onset_ms and cd_onset, which are fitted under that td; pass 2, td_*_ms and ehvva_table_data: td fitted jointly with tau_p and Cd from pass 1 (one consistent reduced-model calibration; td and tau_p correlate, corr_*). On reduced-model logs they agree; on another plant the onset td is its td",
+            "td_onset_tables": {
+                "td_p_supply_mpa": o.td_p_supply_mpa,
+                "td_temp_c": o.td_temp_c,
+                "td_open_ms": o.td_open_ms,
+                "td_close_ms": o.td_close_ms,
+            },
             "conditions": self.conditions.iter().map(|c| json!({
                 "p_supply_MPa": c.p_supply_mpa,
                 "temp_C": c.temp_c,
@@ -538,6 +570,8 @@ impl Identified {
                 "td_close_ci95_ms": c.td_close_ci95,
                 "td_open_onset_ms": c.td_open_onset_ms,
                 "td_close_onset_ms": c.td_close_onset_ms,
+                "tau_p_onset_ms": c.tau_p_onset_ms,
+                "cd_onset": c.cd_onset,
                 "corr_td_open_tau_p": c.corr_td_open_tau_p,
                 "corr_td_close_tau_p": c.corr_td_close_tau_p,
                 "tau_p_ms": c.tau_p_ms,
