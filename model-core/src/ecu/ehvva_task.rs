@@ -7,7 +7,11 @@
 //! explicit delay, eq. (14)), so the command must be issued td earlier than the requested
 //! crank angle: at engine speed ω the command angle is `θ_req − ω·td`. td depends on the
 //! supply pressure and the oil temperature (3.2..4.2 ms at 5 MPa), i.e. 20..150 crank degrees
-//! between 1000 and 6000 rpm: ignoring it would open the valve that much late.
+//! between 1000 and 6000 rpm: ignoring it would open the valve that much late. td ends where
+//! the main valve's outlet pressure reaches the piston (eq. (11)); the valve's timing is read
+//! where the lift passes 1 % (opening) and 99 % (closing) of the stroke (Sec. 2), 0.2..1.1 ms
+//! of motion later. The advance therefore is td plus that motion
+//! ([`ActuationDelay::event_advances_ms`], tabulated in [`EhvvaTables`]).
 //!
 //! The task is a synchronous state machine: the firmware feeds captured edges to
 //! [`EhvvaTask::on_edge`] and calls [`EhvvaTask::step`] on every edge and at the returned
@@ -349,11 +353,22 @@ impl CrankDecoder {
 /// model's delay table ([`EhvvaTables::t_delay_pair_ms`]) or any calibration the caller has.
 pub trait ActuationDelay {
     fn delays_ms(&self, p_supply_mpa: f32, temp_oil_c: f32) -> (f32, f32);
+    /// Pilot edge to the valve event the request means (1 % lift opening, 99 % closing),
+    /// `(VO, VC)` ms: what the task advances the edges by. Default: td alone.
+    fn event_advances_ms(&self, p_supply_mpa: f32, temp_oil_c: f32, lift_high: bool) -> (f32, f32) {
+        let _ = lift_high;
+        self.delays_ms(p_supply_mpa, temp_oil_c)
+    }
 }
 
 impl ActuationDelay for EhvvaTables<f32> {
     fn delays_ms(&self, p_supply_mpa: f32, temp_oil_c: f32) -> (f32, f32) {
         self.t_delay_pair_ms(p_supply_mpa, temp_oil_c)
+    }
+    /// td plus the valve's own motion to the thresholds
+    /// ([`EhvvaTables::t_event_advance_pair_ms`]).
+    fn event_advances_ms(&self, p_supply_mpa: f32, temp_oil_c: f32, lift_high: bool) -> (f32, f32) {
+        self.t_event_advance_pair_ms(p_supply_mpa, temp_oil_c, lift_high)
     }
 }
 
@@ -486,9 +501,10 @@ impl<D: ActuationDelay> EhvvaTask<D> {
     }
 
     /// The crank angles at which the pilot is switched on and off now: the requested angles
-    /// advanced by ω·td,VO and ω·td,VC.
+    /// advanced by ω times the pilot-edge-to-event times (td plus the valve's motion to the
+    /// 1 % / 99 % thresholds, [`ActuationDelay::event_advances_ms`]) at the lift the valve has.
     pub fn command_angles_deg(&self, req: &ValveRequest, p_supply_mpa: f32, temp_oil_c: f32) -> (f32, f32) {
-        let (td_vo_ms, td_vc_ms) = self.delay.delays_ms(p_supply_mpa, temp_oil_c);
+        let (td_vo_ms, td_vc_ms) = self.delay.event_advances_ms(p_supply_mpa, temp_oil_c, self.lift_on);
         let deg_per_ms = self.decoder.deg_per_us() * 1000.0;
         (wrap_cycle_deg(req.open_deg - deg_per_ms * td_vo_ms), wrap_cycle_deg(req.close_deg - deg_per_ms * td_vc_ms))
     }
@@ -717,11 +733,11 @@ mod tests {
         EhvvaTables::new(&EhvvaParams::paper_default()).unwrap()
     }
 
-    /// Largest |valve motion angle − requested angle| over the events after sync, where the
-    /// valve moves td after the pilot edge (the LPV model's delay at the same Ph, T).
+    /// Largest |valve event angle − requested angle| over the events after sync, where the
+    /// valve event comes td plus the tabulated motion after the pilot edge (high lift).
     fn worst_event_error_deg(rpm: f64, accel: f64, p_mpa: f32, temp_c: f32, open: f32, close: f32) -> (f64, usize) {
         let td = tables();
-        let (td_vo, td_vc) = td.delays_ms(p_mpa, temp_c);
+        let (td_vo, td_vc) = td.event_advances_ms(p_mpa, temp_c, true);
         let mut task = EhvvaTask::new(EhvvaTaskConfig::default(), td).unwrap();
         let mut eng = SimEngine::new(rpm, accel, 450.0);
         let mut inp = inputs(request(open, close), p_mpa, temp_c);

@@ -111,4 +111,4 @@ pub use params::{
     EhvvaError, EhvvaInputs, EhvvaParams, EhvvaTableData, EhvvaValveParams, PaperTest, PAPER_TESTS,
 };
 pub use reduced::EhvvaReduced;
-pub use tables::{t_delay_ms, EhvvaTables};
+pub use tables::{t_delay_ms, EhvvaTables, ValveMotionData, VALVE_MOTION_P_BACK_MPA};

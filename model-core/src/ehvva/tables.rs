@@ -3,7 +3,9 @@
 //! τp(Ph, T) (Fig. 5 top) and mean discharge coefficient Cd(T) (Fig. 5 bottom, Table 4), with
 //! the diagnosis effect knobs `viscosity`, `pressure-delay` and `direction-delay` applied.
 
-use super::params::{EhvvaError, EhvvaParams};
+use super::event::{run_event, ValveEvent};
+use super::params::{EhvvaError, EhvvaInputs, EhvvaParams};
+use super::reduced::EhvvaReduced;
 use crate::lut::{Lut1, Lut2};
 use crate::real::Real;
 
@@ -28,11 +30,37 @@ pub struct EhvvaTables<R: Real> {
     gain_viscosity: R,
     gain_pressure_delay: R,
     gain_direction_delay: R,
+    /// The valve's own motion after td to the timing thresholds, [high lift, low lift].
+    motion_open: [Lut2<R, 4, 5>; 2],
+    motion_close: [Lut2<R, 4, 5>; 2],
 }
 
 impl<R: Real> EhvvaTables<R> {
+    /// The tables of `params`, with the valve-motion calibration of the paper's default valve
+    /// ([`ValveMotionData::paper_default`]; cheap: no simulation).
     pub fn new(params: &EhvvaParams) -> Result<Self, EhvvaError> {
+        Self::with_valve_motion(params, &ValveMotionData::paper_default())
+    }
+
+    /// Like [`Self::new`] with a valve-motion calibration for another valve (e.g.
+    /// [`ValveMotionData::from_model`] of the same `params`).
+    pub fn with_valve_motion(
+        params: &EhvvaParams,
+        motion: &ValveMotionData,
+    ) -> Result<Self, EhvvaError> {
         params.validate()?;
+        motion.validate()?;
+        let lut = |z: [[f64; 5]; 4], what: &'static str| {
+            Lut2::new(motion.p_supply_mpa, motion.temp_c, z).map_err(|e| EhvvaError::Table(what, e))
+        };
+        let motion_open = [
+            lut(motion.open_ms[0], "valve_motion.open_ms")?,
+            lut(motion.open_ms[1], "valve_motion.open_ms")?,
+        ];
+        let motion_close = [
+            lut(motion.close_ms[0], "valve_motion.close_ms")?,
+            lut(motion.close_ms[1], "valve_motion.close_ms")?,
+        ];
         let t = &params.tables;
         let td_open = Lut2::new(t.td_p_supply_mpa, t.td_temp_c, t.td_open_ms)
             .map_err(|e| EhvvaError::Table("tables.td_open_ms", e))?;
@@ -52,7 +80,29 @@ impl<R: Real> EhvvaTables<R> {
             gain_viscosity: R::from_f64(params.effect_viscosity),
             gain_pressure_delay: R::from_f64(params.effect_pressure_delay),
             gain_direction_delay: R::from_f64(params.effect_direction_delay),
+            motion_open,
+            motion_close,
         })
+    }
+
+    /// The valve's own motion after the actuation delay, `(VO, VC)` in ms: from td,VO to the
+    /// lift passing 1 % of the stroke, and from td,VC to it passing 99 % on the way down (the
+    /// paper's timing thresholds, Sec. 2), at supply pressure, oil temperature and lift state.
+    pub fn t_motion_pair_ms(&self, p_supply_mpa: R, temp_c: R, lift_high: bool) -> (R, R) {
+        let k = usize::from(!lift_high);
+        (
+            self.motion_open[k].eval(p_supply_mpa, temp_c).max(R::ZERO),
+            self.motion_close[k].eval(p_supply_mpa, temp_c).max(R::ZERO),
+        )
+    }
+
+    /// Pilot edge to the valve event, `(VO, VC)` in ms: td (Fig. 4: command to the main valve
+    /// outlet pressure reaching the piston, eq. (11)) plus the valve's motion to the 1 % / 99 %
+    /// thresholds ([`Self::t_motion_pair_ms`]). The firmware advances each pilot edge by this.
+    pub fn t_event_advance_pair_ms(&self, p_supply_mpa: R, temp_c: R, lift_high: bool) -> (R, R) {
+        let (td_open, td_close) = self.t_delay_pair_ms(p_supply_mpa, temp_c);
+        let (m_open, m_close) = self.t_motion_pair_ms(p_supply_mpa, temp_c, lift_high);
+        (td_open + m_open, td_close + m_close)
     }
 
     /// Mean effective discharge coefficient Cd(T) (Table 4), with the `viscosity` effect gain.
@@ -63,8 +113,10 @@ impl<R: Real> EhvvaTables<R> {
     }
 
     /// Actuation delay td(Ph, T) in ms (Fig. 4, eq. (11)) for the opening (`true`, VO) or
-    /// closing (`false`, VC) edge, with the `pressure-delay` and `direction-delay` gains. The
-    /// firmware advances each valve event by this delay.
+    /// closing (`false`, VC) edge, with the `pressure-delay` and `direction-delay` gains: from
+    /// the pilot command to the delayed main valve outlet pressure at the piston, i.e. to the
+    /// onset of the valve's motion (the firmware adds that motion, see
+    /// [`Self::t_event_advance_pair_ms`]).
     pub fn t_delay_ms(&self, p_supply_mpa: R, temp_c: R, opening: bool) -> R {
         let (open, close) = self.t_delay_pair_ms(p_supply_mpa, temp_c);
         if opening {
@@ -96,6 +148,123 @@ impl<R: Real> EhvvaTables<R> {
     }
 }
 
+/// The valve's own motion after td to the paper's timing thresholds on the td grid (Ph × T),
+/// for high and low lift, at one back pressure: `open_ms` from td,VO to 1 % of the stroke,
+/// `close_ms` from td,VC to 99 % on the way down. Computed from the reduced model
+/// ([`Self::from_model`]); [`Self::paper_default`] is that result for the paper's valve,
+/// stored so the firmware needs no simulation at start-up.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ValveMotionData {
+    pub p_supply_mpa: [f64; 4],
+    pub temp_c: [f64; 5],
+    /// The back pressure Pl the motion was computed at (the ECU does not measure Pl).
+    pub p_back_mpa: f64,
+    /// `[high lift, low lift][Ph][T]`, ms.
+    pub open_ms: [[[f64; 5]; 4]; 2],
+    pub close_ms: [[[f64; 5]; 4]; 2],
+}
+
+/// Back pressure of the stored calibration (the run's and the paper's nominal 1 MPa).
+pub const VALVE_MOTION_P_BACK_MPA: f64 = 1.0;
+/// Pilot on long enough for the valve to settle at the stop before the closing edge.
+const MOTION_DWELL_MS: f64 = 15.0;
+/// Model step of the calibration (the HIL run's plant step).
+const MOTION_DT_MS: f64 = 0.01;
+
+impl ValveMotionData {
+    /// [`Self::from_model`] of [`EhvvaParams::paper_default`] at 1 MPa back pressure, rounded to
+    /// 0.1 µs (test `stored_valve_motion_matches_the_model` recomputes it).
+    pub fn paper_default() -> Self {
+        Self {
+            p_supply_mpa: [5.0, 6.0, 7.0, 8.0],
+            temp_c: [-20.0, 0.0, 22.0, 60.0, 100.0],
+            p_back_mpa: VALVE_MOTION_P_BACK_MPA,
+            open_ms: PAPER_MOTION_OPEN_MS,
+            close_ms: PAPER_MOTION_CLOSE_MS,
+        }
+    }
+
+    /// Runs one event of the reduced model (f64, 0.01 ms) per grid point and lift and measures
+    /// command-to-threshold minus td. No heap; ~40 events, host or start-up use.
+    pub fn from_model(params: &EhvvaParams, p_back_mpa: f64) -> Result<Self, EhvvaError> {
+        let tables = EhvvaTables::<f64>::with_valve_motion(params, &Self::zero_like(params))?;
+        let mut out = Self::zero_like(params);
+        out.p_back_mpa = p_back_mpa;
+        for (k, lift_high) in [true, false].into_iter().enumerate() {
+            let stroke_mm = if lift_high { params.lift_high_mm } else { params.lift_low_mm };
+            for (i, &p) in out.p_supply_mpa.clone().iter().enumerate() {
+                for (j, &temp) in out.temp_c.clone().iter().enumerate() {
+                    let inputs = EhvvaInputs::<f64> {
+                        p_supply_mpa: p,
+                        p_back_mpa,
+                        temp_c: temp,
+                        lift_high,
+                        snubber_on: true,
+                    };
+                    let (td_open, td_close) = tables.t_delay_pair_ms(p, temp);
+                    let event = ValveEvent {
+                        t_open_ms: 1.0,
+                        dwell_ms: MOTION_DWELL_MS,
+                        t_end_ms: 1.0 + MOTION_DWELL_MS + td_close + 5.0,
+                    };
+                    // The closing edge: the lift leaving 99 % of the stroke, or of the lift the
+                    // valve holds when the pressure falls at the piston (td,VC after the pilot
+                    // went off) if that is short of the stroke (high lift at 5 MPa or cold oil:
+                    // Ph·At barely beats the spring, the valve crawls or rebounds off the stop).
+                    let onset_ms = event.t_open_ms + event.dwell_ms + td_close;
+                    let mut level_mm: Option<f64> = None;
+                    let mut last = (0.0, 0.0);
+                    let mut t_close_ms: Option<f64> = None;
+                    let m = run_event(
+                        &mut EhvvaReduced::<f64>::new(params, &inputs, MOTION_DT_MS)?,
+                        &event,
+                        &inputs,
+                        stroke_mm,
+                        |t, y| {
+                            if t >= onset_ms && t_close_ms.is_none() {
+                                let level = *level_mm.get_or_insert(0.99 * stroke_mm.min(last.1));
+                                if last.1 >= level && y < level {
+                                    t_close_ms = Some(last.0 + (level - last.1) / (y - last.1) * (t - last.0));
+                                }
+                            }
+                            last = (t, y);
+                        },
+                    );
+                    let open = m.opening_delay_ms().ok_or(EhvvaError::InvalidParameter(
+                        "valve_motion: the valve does not reach 1 % lift",
+                    ))?;
+                    let close = t_close_ms.ok_or(EhvvaError::InvalidParameter(
+                        "valve_motion: the valve does not close",
+                    ))? - m.t_command_off_ms;
+                    out.open_ms[k][i][j] = open - td_open;
+                    out.close_ms[k][i][j] = close - td_close;
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    fn zero_like(params: &EhvvaParams) -> Self {
+        Self {
+            p_supply_mpa: params.tables.td_p_supply_mpa,
+            temp_c: params.tables.td_temp_c,
+            p_back_mpa: VALVE_MOTION_P_BACK_MPA,
+            open_ms: [[[0.0; 5]; 4]; 2],
+            close_ms: [[[0.0; 5]; 4]; 2],
+        }
+    }
+
+    fn validate(&self) -> Result<(), EhvvaError> {
+        let values = self.open_ms.iter().chain(self.close_ms.iter()).flatten().flatten();
+        for &v in values {
+            if !(v.is_finite() && (0.0..50.0).contains(&v)) {
+                return Err(EhvvaError::InvalidParameter("valve_motion: a time outside 0..50 ms"));
+            }
+        }
+        Ok(())
+    }
+}
+
 /// Host convenience: td(Ph, T) in f64 straight from a parameter set.
 pub fn t_delay_ms(
     params: &EhvvaParams,
@@ -105,6 +274,37 @@ pub fn t_delay_ms(
 ) -> Result<f64, EhvvaError> {
     Ok(EhvvaTables::<f64>::new(params)?.t_delay_ms(p_supply_mpa, temp_c, opening))
 }
+
+/// Generated by test `stored_valve_motion_matches_the_model` (run with `--nocapture`).
+/// `[high, low lift][Ph 5, 6, 7, 8 MPa][T −20, 0, 22, 60, 100 °C]`, ms.
+const PAPER_MOTION_OPEN_MS: [[[f64; 5]; 4]; 2] = [
+    [
+        [1.1248, 1.1177, 1.1108, 1.1068, 1.103],
+        [0.7381, 0.7335, 0.7291, 0.7265, 0.7239],
+        [0.5706, 0.5673, 0.564, 0.562, 0.5602],
+        [0.4675, 0.4649, 0.4625, 0.4609, 0.4595],
+    ],
+    [
+        [0.913, 0.9068, 0.9004, 0.8967, 0.893],
+        [0.596, 0.5921, 0.5881, 0.5857, 0.5833],
+        [0.4567, 0.4539, 0.451, 0.4492, 0.4475],
+        [0.3702, 0.3681, 0.366, 0.3645, 0.3632],
+    ],
+];
+const PAPER_MOTION_CLOSE_MS: [[[f64; 5]; 4]; 2] = [
+    [
+        [0.5761, 0.3105, 0.2506, 0.1919, 0.1815],
+        [0.5125, 0.4894, 0.4781, 0.4711, 0.469],
+        [0.5069, 0.4849, 0.4741, 0.4672, 0.4651],
+        [0.4912, 0.4704, 0.4602, 0.4533, 0.4513],
+    ],
+    [
+        [0.3838, 0.375, 0.3703, 0.367, 0.3658],
+        [0.4131, 0.4017, 0.3955, 0.3917, 0.39],
+        [0.4098, 0.3989, 0.3928, 0.389, 0.3872],
+        [0.3958, 0.3855, 0.3798, 0.376, 0.3742],
+    ],
+];
 
 #[cfg(test)]
 mod tests {
@@ -196,6 +396,21 @@ mod tests {
         p.effect_viscosity = 0.5;
         let half = EhvvaTables::<f64>::new(&p).unwrap();
         assert!((half.cd(-20.0) - 0.5 * (0.40 + 0.21)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn stored_valve_motion_matches_the_model() {
+        extern crate std;
+        let computed = ValveMotionData::from_model(&EhvvaParams::paper_default(), 1.0).unwrap();
+        let r = |a: [[[f64; 5]; 4]; 2]| a.map(|l| l.map(|row| row.map(|v| (v * 1e4).round() / 1e4)));
+        std::println!("const PAPER_MOTION_OPEN_MS: [[[f64; 5]; 4]; 2] = {:?};", r(computed.open_ms));
+        std::println!("const PAPER_MOTION_CLOSE_MS: [[[f64; 5]; 4]; 2] = {:?};", r(computed.close_ms));
+        let stored = ValveMotionData::paper_default();
+        let pairs = stored.open_ms.iter().chain(stored.close_ms.iter()).flatten().flatten()
+            .zip(computed.open_ms.iter().chain(computed.close_ms.iter()).flatten().flatten());
+        for (s, c) in pairs {
+            assert!((s - c).abs() < 1e-4, "stored {s} ms, model {c} ms");
+        }
     }
 
     #[test]
