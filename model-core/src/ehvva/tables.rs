@@ -191,7 +191,11 @@ impl ValveMotionData {
         let mut out = Self::zero_like(params);
         out.p_back_mpa = p_back_mpa;
         for (k, lift_high) in [true, false].into_iter().enumerate() {
-            let stroke_mm = if lift_high { params.lift_high_mm } else { params.lift_low_mm };
+            let stroke_mm = if lift_high {
+                params.lift_high_mm
+            } else {
+                params.lift_low_mm
+            };
             for (i, &p) in out.p_supply_mpa.clone().iter().enumerate() {
                 for (j, &temp) in out.temp_c.clone().iter().enumerate() {
                     let inputs = EhvvaInputs::<f64> {
@@ -224,7 +228,9 @@ impl ValveMotionData {
                             if t >= onset_ms && t_close_ms.is_none() {
                                 let level = *level_mm.get_or_insert(0.99 * stroke_mm.min(last.1));
                                 if last.1 >= level && y < level {
-                                    t_close_ms = Some(last.0 + (level - last.1) / (y - last.1) * (t - last.0));
+                                    t_close_ms = Some(
+                                        last.0 + (level - last.1) / (y - last.1) * (t - last.0),
+                                    );
                                 }
                             }
                             last = (t, y);
@@ -255,10 +261,17 @@ impl ValveMotionData {
     }
 
     fn validate(&self) -> Result<(), EhvvaError> {
-        let values = self.open_ms.iter().chain(self.close_ms.iter()).flatten().flatten();
+        let values = self
+            .open_ms
+            .iter()
+            .chain(self.close_ms.iter())
+            .flatten()
+            .flatten();
         for &v in values {
             if !(v.is_finite() && (0.0..50.0).contains(&v)) {
-                return Err(EhvvaError::InvalidParameter("valve_motion: a time outside 0..50 ms"));
+                return Err(EhvvaError::InvalidParameter(
+                    "valve_motion: a time outside 0..50 ms",
+                ));
             }
         }
         Ok(())
@@ -402,15 +415,74 @@ mod tests {
     fn stored_valve_motion_matches_the_model() {
         extern crate std;
         let computed = ValveMotionData::from_model(&EhvvaParams::paper_default(), 1.0).unwrap();
-        let r = |a: [[[f64; 5]; 4]; 2]| a.map(|l| l.map(|row| row.map(|v| (v * 1e4).round() / 1e4)));
-        std::println!("const PAPER_MOTION_OPEN_MS: [[[f64; 5]; 4]; 2] = {:?};", r(computed.open_ms));
-        std::println!("const PAPER_MOTION_CLOSE_MS: [[[f64; 5]; 4]; 2] = {:?};", r(computed.close_ms));
+        let r =
+            |a: [[[f64; 5]; 4]; 2]| a.map(|l| l.map(|row| row.map(|v| (v * 1e4).round() / 1e4)));
+        std::println!(
+            "const PAPER_MOTION_OPEN_MS: [[[f64; 5]; 4]; 2] = {:?};",
+            r(computed.open_ms)
+        );
+        std::println!(
+            "const PAPER_MOTION_CLOSE_MS: [[[f64; 5]; 4]; 2] = {:?};",
+            r(computed.close_ms)
+        );
         let stored = ValveMotionData::paper_default();
-        let pairs = stored.open_ms.iter().chain(stored.close_ms.iter()).flatten().flatten()
-            .zip(computed.open_ms.iter().chain(computed.close_ms.iter()).flatten().flatten());
+        let pairs = stored
+            .open_ms
+            .iter()
+            .chain(stored.close_ms.iter())
+            .flatten()
+            .flatten()
+            .zip(
+                computed
+                    .open_ms
+                    .iter()
+                    .chain(computed.close_ms.iter())
+                    .flatten()
+                    .flatten(),
+            );
         for (s, c) in pairs {
             assert!((s - c).abs() < 1e-4, "stored {s} ms, model {c} ms");
         }
+    }
+
+    #[test]
+    fn valve_motion_falls_with_pressure_and_adds_to_td() {
+        let m = ValveMotionData::paper_default();
+        for lift in 0..2 {
+            for j in 0..5 {
+                for i in 0..3 {
+                    // More Ph·At over the spring preload: the piston reaches 1 % sooner.
+                    assert!(
+                        m.open_ms[lift][i + 1][j] < m.open_ms[lift][i][j],
+                        "lift {lift}, T {j}, Ph {i}"
+                    );
+                }
+                for i in 0..4 {
+                    // 1 % of 7.5 mm is farther than 1 % of 4 mm.
+                    if lift == 0 {
+                        assert!(m.open_ms[0][i][j] > m.open_ms[1][i][j]);
+                    }
+                }
+            }
+        }
+        let t = EhvvaTables::<f32>::new(&EhvvaParams::paper_default()).unwrap();
+        for (p, temp, high) in [(6.3f32, 41.0f32, true), (7.7, -5.0, false)] {
+            let (td_o, td_c) = t.t_delay_pair_ms(p, temp);
+            let (m_o, m_c) = t.t_motion_pair_ms(p, temp, high);
+            let (a_o, a_c) = t.t_event_advance_pair_ms(p, temp, high);
+            assert!(
+                m_o > 0.3 && m_o < 1.2 && m_c > 0.15 && m_c < 0.6,
+                "{m_o} {m_c}"
+            );
+            assert!((a_o - td_o - m_o).abs() < 1e-6 && (a_c - td_c - m_c).abs() < 1e-6);
+        }
+        // A calibration that is not finite or negative is refused, by name.
+        let mut bad = ValveMotionData::paper_default();
+        bad.close_ms[1][2][3] = -0.1;
+        assert!(matches!(
+            EhvvaTables::<f32>::with_valve_motion(&EhvvaParams::paper_default(), &bad),
+            Err(EhvvaError::InvalidParameter(name)) if name.starts_with("valve_motion")
+        ));
     }
 
     #[test]
