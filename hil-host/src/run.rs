@@ -27,7 +27,8 @@
 
 use std::path::{Path, PathBuf};
 
-use model_core::ecu::board::{Edge, EdgeSource, SolenoidCmd};
+use model_core::ecu::board::SolenoidCmd;
+use model_core::ecu::crank_sim::CrankSignal;
 use model_core::ecu::ehvva_task::{TriggerWheel, ValveRequest, CYCLE_DEG};
 use model_core::ecu::evvt_task::EvvtTaskConfig;
 use model_core::ecu::frame::{ActuatorFrame, SensorFrame, MAX_EDGES};
@@ -592,53 +593,6 @@ const PILOT_DROPOUT_A: f64 = 0.7;
 /// (closing), the paper's thresholds.
 const LIFT_FRACTION: f64 = 0.01;
 
-/// The engine's crank and cam edges.
-struct Engine {
-    wheel: TriggerWheel,
-    /// Unwrapped crank angle; cycle angle = `theta_deg mod 720`.
-    theta_deg: f64,
-}
-
-impl Engine {
-    /// Advances from `t0_us` by one step at `rpm`; the edges crossed go to `edges` in time order.
-    fn advance(&mut self, rpm: f64, cam_cycle_deg: f64, crank_ok: bool, t0_us: u32, edges: &mut Vec<Edge>) {
-        let theta0 = self.theta_deg;
-        let theta1 = theta0 + rpm.max(0.0) * 6.0 * STEP_S;
-        self.theta_deg = theta1;
-        if theta1 <= theta0 || theta1.is_nan() {
-            return;
-        }
-        let tooth = f64::from(self.wheel.tooth_deg());
-        let total = i64::from(self.wheel.teeth_total);
-        let present = total - i64::from(self.wheel.teeth_missing);
-        let mut found: Vec<(f64, EdgeSource)> = Vec::new();
-        if crank_ok {
-            let first = (theta0 / tooth).floor() as i64 + 1;
-            let last = (theta1 / tooth).floor() as i64;
-            for j in first..=last {
-                if j.rem_euclid(total) < present {
-                    found.push((j as f64 * tooth, EdgeSource::CrankTooth));
-                }
-            }
-        }
-        // The cam edge: once per cycle at `cam_cycle_deg`.
-        let cycles_before = ((theta0 - cam_cycle_deg) / f64::from(CYCLE_DEG)).floor();
-        let cycles_after = ((theta1 - cam_cycle_deg) / f64::from(CYCLE_DEG)).floor();
-        if cycles_after > cycles_before {
-            found.push((cam_cycle_deg + cycles_after * f64::from(CYCLE_DEG), EdgeSource::CamSync));
-        }
-        found.sort_by(|a, b| a.0.total_cmp(&b.0));
-        for (a, source) in found {
-            let dt_us = (a - theta0) / (theta1 - theta0) * f64::from(STEP_US);
-            edges.push(Edge { source, t_us: t0_us.wrapping_add(dt_us as u32) });
-        }
-    }
-
-    fn cycle_deg(&self) -> f64 {
-        self.theta_deg.rem_euclid(f64::from(CYCLE_DEG))
-    }
-}
-
 /// Runs `scenario` against `link` and returns the logs and the summary (nothing is written).
 pub fn run_with(scenario: &Scenario, link: &mut dyn EcuLink, opts: &RunOptions) -> Result<RunOutput, String> {
     let sc = scenario;
@@ -670,13 +624,12 @@ pub fn run_with(scenario: &Scenario, link: &mut dyn EcuLink, opts: &RunOptions) 
     evvt.reset(sc.cam_phase_setpoint_deg.at(0.0) as f32);
     let mut vacuum = VacuumSystem::<f32>::paper(sc.p_tank_initial_kpa).map_err(|e| err("vacuum plant", &e))?;
     let mut stuck_x: [Option<f32>; 3] = [None; 3];
-    let mut engine = Engine { wheel: TriggerWheel::sixty_minus_two(), theta_deg: 5.0 };
+    let mut engine = CrankSignal::new(TriggerWheel::sixty_minus_two(), 5.0);
 
     let mut out = RunOutput {
         summary: Summary { faults_injected: sc.faults.iter().map(describe_fault).collect(), ..Default::default() },
         ..Default::default()
     };
-    let mut edges: Vec<Edge> = Vec::with_capacity(MAX_EDGES);
     let mut faults_before = FaultSet::default();
     let (mut open_err, mut close_err) = (Vec::new(), Vec::new());
     let (mut opened, mut prev_lift, mut worst_seat) = (false, 0.0f64, None::<f64>);
@@ -692,15 +645,16 @@ pub fn run_with(scenario: &Scenario, link: &mut dyn EcuLink, opts: &RunOptions) 
         let p_amb = sc.p_amb_kpa.at(t);
 
         // Sensor side: the edges of the step just ended, the ADC counts now.
-        edges.clear();
+        let mut edges = [SensorFrame::NO_EDGE; MAX_EDGES];
+        let mut n_edges = 0;
         if k > 0 {
             let t_prev = ((k - 1) * u64::from(STEP_US)) as f64 / 1e6;
             let cam_deg = f64::from(evvt_cfg.cam_edge_parked_deg) - f64::from(evvt.phase_deg());
             let crank_ok = !sc.fault_active(FaultKind::CrankLost, t_prev);
-            engine.advance(sc.engine_rpm.at(t_prev).max(0.0), cam_deg, crank_ok, t_us.wrapping_sub(STEP_US), &mut edges);
+            n_edges = engine.advance(sc.engine_rpm.at(t_prev).max(0.0), STEP_US, cam_deg, crank_ok, true, t_us.wrapping_sub(STEP_US), &mut edges);
         }
-        if edges.len() > MAX_EDGES {
-            return Err(format!("t = {t:.5} s: {} edges in one {STEP_US} µs step (engine speed {rpm:.0} rpm too high for the frame)", edges.len()));
+        if n_edges > MAX_EDGES {
+            return Err(format!("t = {t:.5} s: {n_edges} edges in one {STEP_US} µs step (engine speed {rpm:.0} rpm too high for the frame)"));
         }
         let x_meas = [0, 1, 2].map(|i| stuck_x[i].unwrap_or_else(|| actuator(&vacuum, i).x_pct()));
         let mut values = [0.0f32; N_CHANNELS];
@@ -726,11 +680,11 @@ pub fn run_with(scenario: &Scenario, link: &mut dyn EcuLink, opts: &RunOptions) 
             adc_counts[Channel::SupplyPressureMpa as usize] = 4095;
         }
         let x_set = [sc.wastegate_setpoint_pct.at(t), sc.hpt_bypass_setpoint_pct.at(t), sc.hpc_bypass_setpoint_pct.at(t)];
-        let mut frame = SensorFrame {
+        let frame = SensorFrame {
             seq: k as u32,
             t_us,
-            n_edges: edges.len() as u8,
-            edges: [SensorFrame::NO_EDGE; MAX_EDGES],
+            n_edges: n_edges as u8,
+            edges,
             adc_counts,
             valve: ValveRequest {
                 open_deg: sc.valve_open_deg.at(t) as f32,
@@ -743,7 +697,6 @@ pub fn run_with(scenario: &Scenario, link: &mut dyn EcuLink, opts: &RunOptions) 
             vacuum_x_set_pct: x_set.map(|x| x as f32),
             motor_driver_fault: sc.fault_active(FaultKind::MotorDriverFault, t),
         };
-        frame.edges[..edges.len()].copy_from_slice(&edges);
 
         // The ECU.
         let act = link.exchange(&frame).map_err(|e| format!("step {k} (t = {t:.5} s): {e}"))?;
@@ -1114,31 +1067,5 @@ mod tests {
         assert!(e.contains("lift_high") && e.contains("neither"), "{e}");
         let e = parse("snubber_on = \"yes\"\n").unwrap_err();
         assert!(e.starts_with("w.toml:") && e.contains("snubber_on"), "{e}");
-    }
-
-    #[test]
-    fn engine_gives_58_teeth_per_revolution_and_one_cam_edge_per_cycle() {
-        let mut e = Engine { wheel: TriggerWheel::sixty_minus_two(), theta_deg: 1.0 };
-        let mut edges = Vec::new();
-        let (mut teeth, mut cams, mut t_us) = (0, Vec::new(), 0u32);
-        // Two cycles at 3000 rpm (40 ms each).
-        for _ in 0..1600 {
-            edges.clear();
-            e.advance(3000.0, 430.0, true, t_us, &mut edges);
-            assert!(edges.len() <= MAX_EDGES);
-            assert!(edges.windows(2).all(|w| w[0].t_us <= w[1].t_us));
-            for ed in &edges {
-                match ed.source {
-                    EdgeSource::CrankTooth => teeth += 1,
-                    EdgeSource::CamSync => cams.push(ed.t_us),
-                }
-            }
-            t_us += STEP_US;
-        }
-        assert_eq!(teeth, 4 * 58);
-        assert_eq!(cams.len(), 2);
-        // 720 deg at 18 deg/ms: 40 ms apart; the first at (430 - 1) deg / 18 deg/ms.
-        assert!((cams[1] - cams[0]) as i64 - 40_000 <= 1);
-        assert!((cams[0] as f64 - 429.0 / 0.018).abs() <= 1.0, "{}", cams[0]);
     }
 }

@@ -255,8 +255,8 @@ impl EcuCore {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::ecu::board::{Edge, EdgeSource};
-    use crate::ecu::ehvva_task::ValveRequest;
+    use crate::ecu::crank_sim::CrankSignal;
+    use crate::ecu::ehvva_task::{TriggerWheel, ValveRequest};
     use crate::ecu::frame::MAX_EDGES;
     use crate::ecu::supervisor::{Channel, Fault, N_CHANNELS};
 
@@ -264,7 +264,7 @@ mod tests {
 
     /// A 60-2 wheel at constant speed, the cam edge at cycle angle 438 deg, healthy sensors.
     struct Feed {
-        next_tooth: u32,
+        engine: CrankSignal,
         counts: [u16; N_CHANNELS],
         crank: bool,
     }
@@ -273,28 +273,14 @@ mod tests {
         fn new() -> Self {
             let cfg = SupervisorConfig::default();
             let values = [13.8, 6.0, 2.0, 80.0, 40.0, 100.0, 20.0, 40.0, 60.0, 50.0];
-            Self { next_tooth: 1, counts: core::array::from_fn(|k| cfg.scales[k].counts_for(values[k])), crank: true }
+            let engine = CrankSignal::new(TriggerWheel::sixty_minus_two(), 0.0);
+            Self { engine, counts: core::array::from_fn(|k| cfg.scales[k].counts_for(values[k])), crank: true }
         }
+        /// The frame of step `seq` (called for seq = 1, 2, 3, ...).
         fn frame(&mut self, seq: u32) -> SensorFrame {
             let t_us = seq * STEP_US;
             let mut edges = [SensorFrame::NO_EDGE; MAX_EDGES];
-            let mut n = 0;
-            let us_per_deg = 1e6 / (RPM * 6.0);
-            loop {
-                let t = (self.next_tooth as f64 * 6.0 * us_per_deg) as u32;
-                if t > t_us {
-                    break;
-                }
-                if self.crank && self.next_tooth % 60 < 58 && n < MAX_EDGES {
-                    edges[n] = Edge { source: EdgeSource::CrankTooth, t_us: t };
-                    n += 1;
-                }
-                if self.crank && self.next_tooth % 120 == 73 && n < MAX_EDGES {
-                    edges[n] = Edge { source: EdgeSource::CamSync, t_us: t + 1 };
-                    n += 1;
-                }
-                self.next_tooth += 1;
-            }
+            let n = self.engine.advance(RPM, STEP_US, 438.0, self.crank, self.crank, t_us - STEP_US, &mut edges).min(MAX_EDGES);
             SensorFrame {
                 seq,
                 t_us,
