@@ -4,7 +4,7 @@
 //! Each case prints its seed; replay one with `hil-host generate <plant> <effect> --seed N`.
 use hil_host::diagnose::{self, Rules};
 use hil_host::generate::{self, effects};
-use hil_host::log::{parse_log, Plant};
+use hil_host::log::Plant;
 
 struct Outcome {
     cause: String,
@@ -14,8 +14,7 @@ struct Outcome {
 
 fn run(plant: Plant, effect: &str, seed: u64) -> Outcome {
     let case = generate::generate(plant, effect, seed).unwrap_or_else(|e| panic!("seed {seed}: {e}"));
-    let est = parse_log("estimation.csv", &case.estimation_csv, None).expect("generated estimation log reads back");
-    let val = parse_log("validation.csv", &case.validation_csv, None).expect("generated validation log reads back");
+    let (est, val) = case.logs().expect("generated logs read back");
     let family = diagnose::family_for(plant).unwrap();
     let d = diagnose::diagnose(family.as_ref(), &est, &val, false, &Rules::default(), &mut |_| {}).unwrap();
     Outcome { cause: d.cause.clone(), gain_pct: d.gain_pct, summary: diagnose::report::summary(&d) }

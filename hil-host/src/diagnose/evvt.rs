@@ -701,12 +701,10 @@ impl Family for EvvtFamily {
 mod tests {
     use super::*;
     use crate::generate::{evvt as gen, Rng};
-    use crate::log::parse_log;
 
     fn logs(effect: &str, seed: u64) -> (Log, Log, Vec<(String, f64)>) {
         let case = gen::generate(effect, seed).unwrap();
-        let est = parse_log("e.csv", &case.estimation_csv, None).unwrap();
-        let val = parse_log("v.csv", &case.validation_csv, None).unwrap();
+        let (est, val) = case.logs().expect("generated logs read back");
         (est, val, case.truth)
     }
 

@@ -1001,8 +1001,7 @@ mod tests {
 
     fn case_logs(effect: &str, seed: u64) -> (crate::generate::Case, Log, Log) {
         let case = crate::generate::vacuum::generate(effect, seed).unwrap();
-        let est = crate::log::parse_log("e.csv", &case.estimation_csv, None).unwrap();
-        let val = crate::log::parse_log("v.csv", &case.validation_csv, None).unwrap();
+        let (est, val) = case.logs().expect("generated logs read back");
         (case, est, val)
     }
 

@@ -249,13 +249,11 @@ pub fn generate(effect: &str, seed: u64) -> Result<Case, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::log::parse_log;
 
     #[test]
     fn logs_read_back_and_cover_the_matrix() {
         let case = generate("none", 5).unwrap();
-        let est = parse_log("e.csv", &case.estimation_csv, None).unwrap();
-        let val = parse_log("v.csv", &case.validation_csv, None).unwrap();
+        let (est, val) = case.logs().expect("generated logs read back");
         assert_eq!(est.plant, Plant::Ehvva);
         assert!((est.dt_s - DT_MS * 1e-3).abs() < 1e-12);
         let ev = crate::diagnose::ehvva::Events::from_log(&est).unwrap();

@@ -449,13 +449,11 @@ pub fn identification_grid(seed: u64) -> Result<Vec<(String, String)>, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::log::parse_log;
 
     #[test]
     fn logs_read_back_with_the_stated_loop_and_cover_the_grid() {
         let case = generate("none", 5).unwrap();
-        let est = parse_log("e.csv", &case.estimation_csv, None).unwrap();
-        let val = parse_log("v.csv", &case.validation_csv, None).unwrap();
+        let (est, val) = case.logs().expect("generated logs read back");
         assert_eq!(est.plant, Plant::Evvt);
         assert_eq!((est.len(), val.len()), (22_500, 10_200));
         assert!((est.dt_s - DT_S).abs() < 1e-12);

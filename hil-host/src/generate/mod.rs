@@ -11,7 +11,7 @@ pub mod evvt;
 pub mod positioner;
 pub mod vacuum;
 
-use crate::log::Plant;
+use crate::log::{parse_log, Log, Plant};
 
 /// SplitMix64: small, fast, and good enough for test-data generation (not cryptography).
 #[derive(Clone, Debug)]
@@ -62,6 +62,16 @@ pub struct Case {
     pub truth: Vec<(String, f64)>,
     pub estimation_csv: String,
     pub validation_csv: String,
+}
+
+impl Case {
+    /// The estimation and validation logs read back through the strict reader (as
+    /// `diagnose` would read the files).
+    pub fn logs(&self) -> Result<(Log, Log), String> {
+        let est = parse_log("estimation.csv", &self.estimation_csv, None).map_err(|e| e.to_string())?;
+        let val = parse_log("validation.csv", &self.validation_csv, None).map_err(|e| e.to_string())?;
+        Ok((est, val))
+    }
 }
 
 /// The effects a plant's generator can hide (its catalogue plus `none`).

@@ -301,14 +301,12 @@ pub fn generate(effect: &str, seed: u64) -> Result<Case, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::log::parse_log;
 
     #[test]
     fn logs_read_back_and_hide_the_truth() {
         for (i, effect) in ["none", "supply-voltage", "pressure-direction", "coulomb-friction", "backlash"].iter().enumerate() {
             let c = generate(effect, 100 + i as u64).unwrap();
-            let est = parse_log("e.csv", &c.estimation_csv, None).unwrap();
-            let val = parse_log("v.csv", &c.validation_csv, None).unwrap();
+            let (est, val) = c.logs().expect("generated logs read back");
             assert_eq!(est.plant, Plant::Vacuum);
             assert!(est.len() > 7000 && val.len() > 4000, "{} {}", est.len(), val.len());
             for l in [&est, &val] {
