@@ -93,14 +93,7 @@ fn times(n: usize) -> Vec<f64> {
 fn mre(t: &PaperTest, a: &[f64], b: &[f64]) -> f64 {
     let ev = ValveEvent::with_dwell(t.dwell_ms);
     let ts = times(a.len());
-    mean_relative_error_pct(
-        &ts,
-        a,
-        b,
-        ev.t_open_ms,
-        ev.t_open_ms + ev.dwell_ms + 12.0,
-        stroke(t),
-    )
+    mean_relative_error_pct(&ts, a, b, ev.t_open_ms, ev.t_open_ms + ev.dwell_ms + 12.0, stroke(t))
 }
 
 #[test]
@@ -116,10 +109,7 @@ fn table3_opening_times_within_15_percent() {
             "test {n}: opening {model_ms:.2} ms, paper {paper_ms} ms ({:+.1} %)",
             100.0 * err
         );
-        assert!(
-            err.abs() <= 0.15,
-            "test {n}: {model_ms:.2} ms vs {paper_ms} ms"
-        );
+        assert!(err.abs() <= 0.15, "test {n}: {model_ms:.2} ms vs {paper_ms} ms");
     }
     // Supply pressure is the key factor (Sec. 5.3): strictly faster with Ph in both lifts.
     for ns in [[1u8, 2, 3], [4, 5, 6]] {
@@ -136,16 +126,11 @@ fn table4_temperature_trends_at_5_mpa() {
     let p = EhvvaParams::paper_default();
     let tables = EhvvaTables::<f64>::new(&p).unwrap();
     // Tests 8-11: -20, 22, 60, 100 °C.
-    let ms: Vec<EventMetrics> = [8u8, 9, 10, 11]
-        .iter()
-        .map(|&n| metrics(&p, &test_no(n)))
-        .collect();
+    let ms: Vec<EventMetrics> = [8u8, 9, 10, 11].iter().map(|&n| metrics(&p, &test_no(n))).collect();
     let temps = [-20.0, 22.0, 60.0, 100.0];
     for i in 0..3 {
         // VO delay (table, and as measured from command to 1 % lift) and VO time grow as T falls.
-        assert!(
-            tables.t_delay_ms(5.0, temps[i], true) > tables.t_delay_ms(5.0, temps[i + 1], true)
-        );
+        assert!(tables.t_delay_ms(5.0, temps[i], true) > tables.t_delay_ms(5.0, temps[i + 1], true));
         let d = |m: &EventMetrics| m.opening_delay_ms().unwrap();
         let o = |m: &EventMetrics| m.opening_time_ms().unwrap();
         assert!(
@@ -166,10 +151,7 @@ fn table4_temperature_trends_at_5_mpa() {
     println!("VO time {vo:.2?} (paper 8.2 6.2 4.8 4.4), VC time {vc:.2?} (paper 4.0 3.5 3.0 2.8)");
     // VC time nearly flat above 22 °C (paper: 3.5 -> 2.8 ms, -20 %) while opening moves more at
     // the cold end; cold (-20 °C) closing is clearly slower.
-    assert!(
-        (vc[1] - vc[3]).abs() / vc[1] < 0.25,
-        "VC 22 -> 100 °C: {vc:?}"
-    );
+    assert!((vc[1] - vc[3]).abs() / vc[1] < 0.25, "VC 22 -> 100 °C: {vc:?}");
     assert!(vc[0] > 1.2 * vc[1], "VC at -20 °C not slower: {vc:?}");
     // The cold end slows the opening clearly (paper: +32 % from 22 to -20 °C). Weaker than the
     // paper: above 22 °C the model's opening moves by only ~5 % (paper 29 %), see the report.
@@ -195,10 +177,7 @@ fn snubber_switch_lowers_seating_velocity_and_adds_a_tail() {
     bare.effect_snubber = 0.0;
     let v_bare = metrics(&bare, &test_no(6)).seating_velocity_m_s.unwrap();
     println!("no snubbing zone, switch on: seating {v_bare:.3} m/s");
-    assert!(
-        v_bare > 3.0 * v_on && v_bare > 1.4 * v_off,
-        "no snubber: {v_bare}"
-    );
+    assert!(v_bare > 3.0 * v_on && v_bare > 1.4 * v_off, "no snubber: {v_bare}");
 }
 
 #[test]
@@ -215,10 +194,7 @@ fn back_pressure_delays_full_closing() {
     }
     let delay = full[3] - full[0];
     // Fig. 10: about 7 ms later at 4 MPa.
-    assert!(
-        (5.0..=9.0).contains(&delay),
-        "closing delayed by {delay:.2} ms"
-    );
+    assert!((5.0..=9.0).contains(&delay), "closing delayed by {delay:.2} ms");
 }
 
 #[test]
@@ -257,16 +233,11 @@ fn run_full_in<R: Real>(p: &EhvvaParams, t: &PaperTest) -> Vec<f64> {
     let mut m = EhvvaFull::<R>::new(p, &inputs, DT_MS).unwrap();
     let ev = ValveEvent::with_dwell(t.dwell_ms);
     let n = (ev.t_end_ms / DT_MS) as usize;
-    (0..n)
-        .map(|k| m.step(command(k, &ev), &inputs).to_f64())
-        .collect()
+    (0..n).map(|k| m.step(command(k, &ev), &inputs).to_f64()).collect()
 }
 
 fn max_dev(a: &[f64], b: &[f64]) -> f64 {
-    a.iter()
-        .zip(b)
-        .map(|(x, y)| (x - y).abs())
-        .fold(0.0, f64::max)
+    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max)
 }
 
 #[test]
@@ -352,9 +323,7 @@ fn ninth_order_actuation_chain_behaves() {
         "{max_current}"
     );
     assert!(main_open_k.unwrap() < first_lift_k.unwrap());
-    assert!(
-        m.current_a() < 0.01 && m.pilot_mm() == 0.0 && m.main_mm() == 0.0 && m.lift_mm() == 0.0
-    );
+    assert!(m.current_a() < 0.01 && m.pilot_mm() == 0.0 && m.main_mm() == 0.0 && m.lift_mm() == 0.0);
 }
 
 #[test]
@@ -384,10 +353,7 @@ fn effect_knobs_switch_their_effect_off() {
     let mut off = on;
     off.effect_direction_delay = 0.0;
     let tb = EhvvaTables::<f64>::new(&off).unwrap();
-    assert_eq!(
-        tb.t_delay_ms(7.0, 22.0, true),
-        tb.t_delay_ms(7.0, 22.0, false)
-    );
+    assert_eq!(tb.t_delay_ms(7.0, 22.0, true), tb.t_delay_ms(7.0, 22.0, false));
     let gap = |p: &EhvvaParams| {
         let m = metrics(p, &test_no(2));
         m.opening_delay_ms().unwrap() - m.closing_delay_ms().unwrap()
@@ -403,8 +369,7 @@ fn effect_knobs_switch_their_effect_off() {
     let mut off = on;
     off.effect_snubber = 0.0;
     let ratio = |p: &EhvvaParams| {
-        metrics(p, &test_no(7)).seating_velocity_m_s.unwrap()
-            / metrics(p, &test_no(6)).seating_velocity_m_s.unwrap()
+        metrics(p, &test_no(7)).seating_velocity_m_s.unwrap() / metrics(p, &test_no(6)).seating_velocity_m_s.unwrap()
     };
     println!(
         "snubber: seating velocity switch off/on {:.2} with the zone, {:.2} without",
@@ -445,8 +410,7 @@ fn lpv_affine_data_matches_the_simulated_model() {
     let b = aff.b_matrix(&th);
     let u = [1.0, 0.0];
     for row in 0..3 {
-        let rate: f64 =
-            (0..3).map(|c| a[row][c] * x1[c]).sum::<f64>() + b[row][0] * u[0] + b[row][1] * u[1];
+        let rate: f64 = (0..3).map(|c| a[row][c] * x1[c]).sum::<f64>() + b[row][0] * u[0] + b[row][1] * u[1];
         let fd = (x1[row] - x0[row]) / dt;
         assert!(
             (rate - fd).abs() <= 0.02 * fd.abs().max(1.0),

@@ -13,9 +13,7 @@
 use model_core::control::evvt_phase::{
     EvvtFault, EvvtGains, EvvtPhaseConfig, EvvtPhaseController, EvvtPhaseInputs, EvvtPhaseMode,
 };
-use model_core::evvt::{
-    quantize_phase_deg, zoh, EvvtParams, EvvtPlant, PlanetaryGear, PAPER_DESIGN_KP_RPM_PER_DEG,
-};
+use model_core::evvt::{quantize_phase_deg, zoh, EvvtParams, EvvtPlant, PlanetaryGear, PAPER_DESIGN_KP_RPM_PER_DEG};
 use model_core::prbs::{Hold, InversePrbs, MSequence};
 use model_core::{Real, Q32};
 
@@ -104,7 +102,11 @@ fn fig3_settling_time_ratios() {
 fn direction_effect_makes_advancing_slower() {
     let cfg = EvvtPhaseConfig::paper_fixed_p(PAPER_DESIGN_KP_RPM_PER_DEG);
     let run = |factor: f64, from: f64, to: f64| {
-        let p = EvvtParams { advance_alpha_factor: factor, initial_phase_deg: from, ..EvvtParams::default() };
+        let p = EvvtParams {
+            advance_alpha_factor: factor,
+            initial_phase_deg: from,
+            ..EvvtParams::default()
+        };
         let trace = closed_loop::<f64>(&p, &cfg, DT_S, 1000, |_| to, |_| (800.0, 14.0));
         settling_time_s(&trace, to, 1.5, DT_S)
     };
@@ -120,7 +122,10 @@ fn direction_effect_makes_advancing_slower() {
 /// (recomputed ZOH). Maximum difference below 1e-8 deg.
 #[test]
 fn zoh_plant_matches_fine_integration_of_the_continuous_model() {
-    let p = EvvtParams { initial_phase_deg: 20.0, ..EvvtParams::default() };
+    let p = EvvtParams {
+        initial_phase_deg: 20.0,
+        ..EvvtParams::default()
+    };
     let mut plant = EvvtPlant::<f64>::new(&p).unwrap();
     let prbs = Hold::new(InversePrbs::<f64>::new(7, 40.0).unwrap(), 5).unwrap();
     let (mut x1, mut x2) = (20.0f64, 0.0f64);
@@ -205,9 +210,14 @@ fn table2_prbs_identification_experiment() {
     for n in [800.0, 1100.0, 1400.0] {
         for v in [9.5, 11.5, 14.0] {
             let mut reference = Hold::new(InversePrbs::<f64>::new(9, a).unwrap(), 20).unwrap();
-            let p = EvvtParams { initial_phase_deg: 25.0, ..EvvtParams::default() };
+            let p = EvvtParams {
+                initial_phase_deg: 25.0,
+                ..EvvtParams::default()
+            };
             let trace = closed_loop::<f64>(&p, &cfg, DT_S, 3000, |_| 25.0 + reference.next().unwrap(), |_| (n, v));
-            let (lo, hi) = trace.iter().fold((f64::MAX, f64::MIN), |(lo, hi), s| (lo.min(s.0), hi.max(s.0)));
+            let (lo, hi) = trace
+                .iter()
+                .fold((f64::MAX, f64::MIN), |(lo, hi), s| (lo.min(s.0), hi.max(s.0)));
             let peak_cmd = trace.iter().fold(0.0f64, |m, s| m.max(s.2.abs()));
             assert!(lo > 0.0 && hi < 40.0, "{n} rpm {v} V: phase {lo}..{hi}");
             assert!(peak_cmd < 1000.0, "{n} rpm {v} V: command {peak_cmd}");
@@ -221,10 +231,18 @@ fn table2_prbs_identification_experiment() {
 /// degrees, which shows the test can tell the two apart.
 #[test]
 fn anti_windup_after_long_saturation() {
-    let cfg = EvvtPhaseConfig { motor_cmd_max_rpm: 300.0, motor_cmd_rate_max_rpm_per_s: None, ..Default::default() };
+    let cfg = EvvtPhaseConfig {
+        motor_cmd_max_rpm: 300.0,
+        motor_cmd_rate_max_rpm_per_s: None,
+        ..Default::default()
+    };
     let (n, v) = (800.0, 14.0);
     let run = |jam_steps: usize, naive: bool| -> f64 {
-        let mut plant = EvvtPlant::<f64>::new(&EvvtParams { initial_phase_deg: 5.0, ..Default::default() }).unwrap();
+        let mut plant = EvvtPlant::<f64>::new(&EvvtParams {
+            initial_phase_deg: 5.0,
+            ..Default::default()
+        })
+        .unwrap();
         let mut ctrl = EvvtPhaseController::<f64>::new(&cfg).unwrap();
         let (kp, ki_rate) = ctrl.gains_at(n, v);
         let mut naive_integral = 0.0;
@@ -261,7 +279,10 @@ fn anti_windup_after_long_saturation() {
     let naive_jammed = run(500, true);
     println!("overshoot: plain step {plain:.2}, after 5 s jam {jammed:.2}, naive PI after jam {naive_jammed:.2} deg");
     assert!(jammed <= plain + 0.5, "jammed {jammed} vs plain {plain}");
-    assert!(naive_jammed > plain + 5.0, "naive PI overshoot {naive_jammed}: the jam did not saturate");
+    assert!(
+        naive_jammed > plain + 5.0,
+        "naive PI overshoot {naive_jammed}: the jam did not saturate"
+    );
 }
 
 /// The integral part removes a constant load (a speed offset the motor loses, e.g. cam torque
@@ -271,7 +292,11 @@ fn integral_action_removes_a_constant_load() {
     let (n, v) = (1100.0, 12.0);
     let offset = -60.0; // rpm lost to the load
     let run = |cfg: &EvvtPhaseConfig| {
-        let mut plant = EvvtPlant::<f64>::new(&EvvtParams { initial_phase_deg: 10.0, ..Default::default() }).unwrap();
+        let mut plant = EvvtPlant::<f64>::new(&EvvtParams {
+            initial_phase_deg: 10.0,
+            ..Default::default()
+        })
+        .unwrap();
         let mut ctrl = EvvtPhaseController::<f64>::new(cfg).unwrap();
         for _ in 0..3000 {
             let inp = EvvtPhaseInputs {
@@ -309,7 +334,10 @@ fn scheduled_controller_over_the_operating_map() {
     let mut rises = Vec::new(); // (crossover held, scheduled, fixed)
     for n in [800.0, 1100.0, 1400.0] {
         for v in [9.5, 11.5, 14.0] {
-            let p = EvvtParams { initial_phase_deg: 5.0, ..EvvtParams::default() };
+            let p = EvvtParams {
+                initial_phase_deg: 5.0,
+                ..EvvtParams::default()
+            };
             let measure = |cfg: &EvvtPhaseConfig| {
                 let trace = closed_loop::<f64>(&p, cfg, DT_S, 1500, |_| 25.0, |_| (n, v));
                 let settle = settling_time_s(&trace, 25.0, 1.0, DT_S);
@@ -335,10 +363,15 @@ fn scheduled_controller_over_the_operating_map() {
     let held_fixed = spread(&|r| r.0.then_some(r.2));
     let all_sched = spread(&|r| Some(r.1));
     let all_fixed = spread(&|r| Some(r.2));
-    println!("rise time max/min where the crossover is held: scheduled {held_sched:.2}, fixed {held_fixed:.2}; \
-              whole map: scheduled {all_sched:.2}, fixed {all_fixed:.2}");
+    println!(
+        "rise time max/min where the crossover is held: scheduled {held_sched:.2}, fixed {held_fixed:.2}; \
+              whole map: scheduled {all_sched:.2}, fixed {all_fixed:.2}"
+    );
     assert_eq!(rises.iter().filter(|r| r.0).count(), 7);
-    assert!(worst_overshoot < 0.15 * 20.0 + 0.5, "scheduled overshoot {worst_overshoot}");
+    assert!(
+        worst_overshoot < 0.15 * 20.0 + 0.5,
+        "scheduled overshoot {worst_overshoot}"
+    );
     assert!(held_sched < 1.2 && held_sched < held_fixed);
     assert!(all_sched < all_fixed);
 }
@@ -347,7 +380,11 @@ fn scheduled_controller_over_the_operating_map() {
 /// motion at all), a sensor fault parks the phaser at the retard stop.
 #[test]
 fn enable_conditions_in_closed_loop() {
-    let mut plant = EvvtPlant::<f64>::new(&EvvtParams { initial_phase_deg: 12.0, ..Default::default() }).unwrap();
+    let mut plant = EvvtPlant::<f64>::new(&EvvtParams {
+        initial_phase_deg: 12.0,
+        ..Default::default()
+    })
+    .unwrap();
     let mut ctrl = EvvtPhaseController::<f64>::new(&EvvtPhaseConfig::default()).unwrap();
     let mut step = |cranking: bool, n: f64, fault: EvvtFault| {
         let inp = EvvtPhaseInputs {
@@ -435,13 +472,26 @@ fn fixed_point_and_f32_match_f64_in_closed_loop() {
 fn scheduled_gain_uses_the_plant_table() {
     let ctrl = EvvtPhaseController::<f64>::new(&EvvtPhaseConfig::default()).unwrap();
     let plant = EvvtPlant::<f64>::new(&EvvtParams::default()).unwrap();
-    let EvvtGains::Scheduled { crossover_rad_s: wc, .. } = EvvtPhaseConfig::default().gains else {
+    let EvvtGains::Scheduled {
+        crossover_rad_s: wc, ..
+    } = EvvtPhaseConfig::default().gains
+    else {
         panic!("default is scheduled")
     };
-    for (n, v) in [(800.0, 14.0), (1100.0, 14.0), (1400.0, 14.0), (1250.0, 13.0), (1400.0, 11.5), (800.0, 9.5)] {
+    for (n, v) in [
+        (800.0, 14.0),
+        (1100.0, 14.0),
+        (1400.0, 14.0),
+        (1250.0, 13.0),
+        (1400.0, 11.5),
+        (800.0, 9.5),
+    ] {
         let (a, b) = plant.alpha_beta(n, v);
         let (kp, _) = ctrl.gains_at(n, v);
         let loop_magnitude = kp * a / (wc * (wc * wc + b * b).sqrt());
-        assert!((loop_magnitude - 1.0).abs() < 1e-9, "{n} rpm {v} V: |L(j wc)| = {loop_magnitude}");
+        assert!(
+            (loop_magnitude - 1.0).abs() < 1e-9,
+            "{n} rpm {v} V: |L(j wc)| = {loop_magnitude}"
+        );
     }
 }

@@ -5,9 +5,7 @@
 //! (Sec. 5.3), and the agreement of f64, f32 and Q32.32.
 
 use model_core::pwm_comp::PwmCompensator;
-use model_core::vacuum::{
-    VacuumInputs, VacuumParams, VacuumSystem, VacuumTank, VacuumTankParams, VacuumValveActuator,
-};
+use model_core::vacuum::{VacuumInputs, VacuumParams, VacuumSystem, VacuumTank, VacuumTankParams, VacuumValveActuator};
 use model_core::{Real, Q32};
 
 const DT_S: f64 = 0.001;
@@ -51,7 +49,13 @@ fn voltage_sag_response(compensate: bool) -> (f64, f64, f64, f64) {
     let comp = PwmCompensator::<f64>::new(12.0, 6.0, 0.0, 100.0).expect("valid compensator");
     let params = VacuumParams::hpt();
     let mut a = actuator::<f64>(&params);
-    let duty = |u_v: f64| if compensate { comp.apply(fig16_duty_pct(), u_v).duty_pct } else { fig16_duty_pct() };
+    let duty = |u_v: f64| {
+        if compensate {
+            comp.apply(fig16_duty_pct(), u_v).duty_pct
+        } else {
+            fig16_duty_pct()
+        }
+    };
     a.settle(&inputs(duty(U_HIGH_V), U_HIGH_V, P_TANK_OP_KPA));
     let (p0, x0) = hold(&mut a, &inputs(duty(U_HIGH_V), U_HIGH_V, P_TANK_OP_KPA), 1.0);
     let (p1, x1) = hold(&mut a, &inputs(duty(U_SAG_V), U_SAG_V, P_TANK_OP_KPA), 2.0);
@@ -69,7 +73,10 @@ fn supply_sag_of_1_5_v_moves_hpt_pressure_by_about_5_kpa_and_the_compensator_rem
     // pressure increases".
     assert!((3.5..6.5).contains(&dp), "sag changed the pressure by {dp} kPa");
     // The valve closes a little: the wastegate moves toward its spring position.
-    assert!(x1 < x0 - 1.0, "position {x0} -> {x1}: the sag should close the bypass visibly");
+    assert!(
+        x1 < x0 - 1.0,
+        "position {x0} -> {x1}: the sag should close the bypass visibly"
+    );
 
     let (q0, q1, y0, y1) = voltage_sag_response(true);
     println!("compensated:   p {q0:.2} -> {q1:.2} kPa, x {y0:.2} -> {y1:.2} %");
@@ -89,7 +96,11 @@ fn ramp_up_down(params: &VacuumParams, ramp_s: f64) -> (Vec<(f64, f64)>, Vec<(f6
     let mut up = Vec::with_capacity(n);
     let mut down = Vec::with_capacity(n);
     for i in 0..2 * n {
-        let frac = if i < n { i as f64 / n as f64 } else { 2.0 - i as f64 / n as f64 };
+        let frac = if i < n {
+            i as f64 / n as f64
+        } else {
+            2.0 - i as f64 / n as f64
+        };
         let o = a.step(&inputs(20.0 + 80.0 * frac, 12.0, 20.0), DT_S);
         let sample = (o.p_act_kpa, o.x_pct);
         if i < n {
@@ -121,7 +132,11 @@ fn slow_ramps_show_friction_hysteresis_of_two_fc_that_vanishes_without_friction(
             // Extending needs more vacuum (lower pressure) than retracting: p_down − p_up = 2 Fc.
             let width = pressure_at_position(&down, x) - pressure_at_position(&up, x);
             println!("{name} x = {x} %: hysteresis {width:.3} kPa, 2 Fc = {:.3}", 2.0 * fc);
-            assert!((width - 2.0 * fc).abs() < 0.1 * 2.0 * fc, "{name}: width {width} vs 2 Fc {}", 2.0 * fc);
+            assert!(
+                (width - 2.0 * fc).abs() < 0.1 * 2.0 * fc,
+                "{name}: width {width} vs 2 Fc {}",
+                2.0 * fc
+            );
         }
         let mut no_fric = params;
         no_fric.effects.coulomb_friction = false;
@@ -129,7 +144,10 @@ fn slow_ramps_show_friction_hysteresis_of_two_fc_that_vanishes_without_friction(
         for x in [30.0, 50.0, 70.0] {
             let width = pressure_at_position(&down, x) - pressure_at_position(&up, x);
             println!("{name} without friction x = {x} %: {width:.4} kPa");
-            assert!(width.abs() < 0.1, "{name}: curves do not collapse without friction ({width} kPa)");
+            assert!(
+                width.abs() < 0.1,
+                "{name}: curves do not collapse without friction ({width} kPa)"
+            );
         }
     }
 }
@@ -154,10 +172,20 @@ fn linkage_clearance_gives_position_hysteresis_of_the_clearance_width() {
     let (up, down) = ramp_up_down(&p, 100.0);
     for (i, &p_kpa) in pressures.iter().enumerate() {
         let gap_without = x_at(&down, p_kpa) - x_at(&up, p_kpa);
-        println!("HPC at {p_kpa} kPa: x_down − x_up = {:.3} % with a {} % clearance, {gap_without:.3} % without", gaps_with[i], VacuumParams::hpc().backlash_pct);
-        assert!(gap_without.abs() < 0.3, "without clearance the branches nearly coincide, got {gap_without}");
+        println!(
+            "HPC at {p_kpa} kPa: x_down − x_up = {:.3} % with a {} % clearance, {gap_without:.3} % without",
+            gaps_with[i],
+            VacuumParams::hpc().backlash_pct
+        );
+        assert!(
+            gap_without.abs() < 0.3,
+            "without clearance the branches nearly coincide, got {gap_without}"
+        );
         let from_clearance = gaps_with[i] - gap_without;
-        assert!((from_clearance - VacuumParams::hpc().backlash_pct).abs() < 0.1 * VacuumParams::hpc().backlash_pct, "clearance gap {from_clearance}");
+        assert!(
+            (from_clearance - VacuumParams::hpc().backlash_pct).abs() < 0.1 * VacuumParams::hpc().backlash_pct,
+            "clearance gap {from_clearance}"
+        );
     }
 }
 
@@ -185,7 +213,11 @@ fn step_time_constant(params: &VacuumParams, from_pct: f64, to_pct: f64) -> (f64
 
 #[test]
 fn steps_rise_and_fall_with_their_own_time_constants() {
-    for (name, params) in [("LPT", VacuumParams::lpt()), ("HPT", VacuumParams::hpt()), ("HPC", VacuumParams::hpc())] {
+    for (name, params) in [
+        ("LPT", VacuumParams::lpt()),
+        ("HPT", VacuumParams::hpt()),
+        ("HPC", VacuumParams::hpc()),
+    ] {
         // Falling pressure: duty up. Rising: duty down.
         let (fall63, fall98) = step_time_constant(&params, 30.0, 85.0);
         let (rise63, rise98) = step_time_constant(&params, 85.0, 30.0);
@@ -201,13 +233,20 @@ fn steps_rise_and_fall_with_their_own_time_constants() {
         one_tau.effects.pressure_direction = false;
         let (fall63, _) = step_time_constant(&one_tau, 30.0, 85.0);
         let (rise63, _) = step_time_constant(&one_tau, 85.0, 30.0);
-        assert!((fall63 - rise63).abs() <= 1.5 * DT_S, "{name}: one time constant expected, {fall63} vs {rise63}");
+        assert!(
+            (fall63 - rise63).abs() <= 1.5 * DT_S,
+            "{name}: one time constant expected, {fall63} vs {rise63}"
+        );
     }
 }
 
 #[test]
 fn static_maps_saturate_at_ambient_and_tank_pressure() {
-    for (name, params) in [("LPT", VacuumParams::lpt()), ("HPT", VacuumParams::hpt()), ("HPC", VacuumParams::hpc())] {
+    for (name, params) in [
+        ("LPT", VacuumParams::lpt()),
+        ("HPT", VacuumParams::hpt()),
+        ("HPC", VacuumParams::hpc()),
+    ] {
         let a = actuator::<f64>(&params);
         let p = |duty: f64, tank: f64| a.static_pressure_kpa(&inputs(duty, 12.0, tank));
         assert_eq!(p(0.0, 30.0), P_AMB_KPA, "{name}: duty 0 must vent to ambient");
@@ -258,7 +297,10 @@ fn tank_rises_with_leakage_more_with_duty_and_falls_with_the_pump() {
         println!("LPT duty {duty} %: tank {p_start:.1} -> {p_end:.2} kPa in 60 s");
         rises.push((p_end - p_start) / 60.0);
     }
-    assert!(rises[0] > 0.0 && rises[1] > rises[0] && rises[2] > rises[1], "rates {rises:?}");
+    assert!(
+        rises[0] > 0.0 && rises[1] > rises[0] && rises[2] > rises[1],
+        "rates {rises:?}"
+    );
     // Fig. 14's slopes are 0.1..0.5 kPa/s.
     assert!(rises.iter().all(|r| (0.03..0.8).contains(r)), "rates {rises:?}");
 
@@ -279,7 +321,10 @@ fn tank_rises_with_leakage_more_with_duty_and_falls_with_the_pump() {
     // for Fig. 15, and compare with eq. (14) directly.
     let v_over_rt_mg_per_kpa = tank_p.volume_l * 1e6 / (287.0 * tank_p.temp_amb_k);
     for target_ratio in [1.5, 3.0, 5.0] {
-        let i = trace.iter().position(|&p| P_AMB_KPA / p >= target_ratio).expect("ratio reached");
+        let i = trace
+            .iter()
+            .position(|&p| P_AMB_KPA / p >= target_ratio)
+            .expect("ratio reached");
         let p = trace[i];
         let dp_dt = (trace[i + 1] - trace[i - 1]) / (2.0 * dt);
         let reconstructed = -v_over_rt_mg_per_kpa * dp_dt + tank.base_leak_mg_s(P_AMB_KPA, p);
@@ -315,7 +360,13 @@ fn system_scenario<R: Real>() -> Vec<[f64; 7]> {
             pump_on = false;
         }
         let duties = [R::from_f64(ramp), R::from_f64(step), R::from_f64(110.0 - ramp)];
-        let o = sys.step(duties, R::from_f64(u), R::from_f64(P_AMB_KPA), pump_on, R::from_f64(DT_S));
+        let o = sys.step(
+            duties,
+            R::from_f64(u),
+            R::from_f64(P_AMB_KPA),
+            pump_on,
+            R::from_f64(DT_S),
+        );
         let a = o.actuators;
         rows.push([
             a[0].p_act_kpa.to_f64(),
@@ -333,17 +384,28 @@ fn system_scenario<R: Real>() -> Vec<[f64; 7]> {
 #[test]
 fn fixed_point_and_f32_track_f64() {
     let reference = system_scenario::<f64>();
-    let names = ["p_lpt kPa", "x_lpt %", "p_hpt kPa", "x_hpt %", "p_hpc kPa", "x_hpc %", "p_tank kPa"];
+    let names = [
+        "p_lpt kPa",
+        "x_lpt %",
+        "p_hpt kPa",
+        "x_hpt %",
+        "p_hpc kPa",
+        "x_hpc %",
+        "p_tank kPa",
+    ];
     // Measured (this scenario, 30 s at 1 ms): f32 worst 8.8e-4 kPa actuator pressure, 4.3e-4 %
     // position, 6.2e-3 kPa tank (f32 sums 1e-3 kPa increments into ~40 kPa); Q32.32 worst
     // 1.1e-5 kPa, 1.8e-3 % (HPT, steep arctan map), 1.6e-5 kPa tank. Bounds with margin:
     let bounds = [0.005, 0.01, 0.005, 0.01, 0.005, 0.01, 0.02];
     for (label, run) in [("f32", system_scenario::<f32>()), (Q32::NAME, system_scenario::<Q32>())] {
         for k in 0..7 {
-            let max_dev = reference.iter().zip(&run).map(|(a, b)| (a[k] - b[k]).abs()).fold(0.0, f64::max);
+            let max_dev = reference
+                .iter()
+                .zip(&run)
+                .map(|(a, b)| (a[k] - b[k]).abs())
+                .fold(0.0, f64::max);
             println!("{label}: max |{} − f64| = {max_dev:.3e}", names[k]);
             assert!(max_dev < bounds[k], "{label} {}: {max_dev}", names[k]);
         }
     }
 }
-

@@ -70,7 +70,11 @@ fn counted<T>(begin: extern "C" fn(), work: impl FnOnce() -> T) -> T {
 }
 
 /// The plant steps of one number type, counted; their final states.
-fn plants<R: Real>(ehvva: extern "C" fn(), evvt: extern "C" fn(), vacuum: extern "C" fn()) -> Result<[R; N_STATE], &'static str> {
+fn plants<R: Real>(
+    ehvva: extern "C" fn(),
+    evvt: extern "C" fn(),
+    vacuum: extern "C" fn(),
+) -> Result<[R; N_STATE], &'static str> {
     let mut b = PlantBench::<R>::new()?;
     // The order the host repeats natively (hil-host pil.rs, `plant_bench_native`).
     for _ in 0..COUNTED_STEPS {
@@ -89,8 +93,16 @@ pub fn run_plants(link: &mut Link) -> Result<(), &'static str> {
     for _ in 0..4 {
         counted(pil_begin_empty, || ());
     }
-    let f = plants::<f32>(pil_begin_ehvva_plant_f32, pil_begin_evvt_plant_f32, pil_begin_vacuum_plant_f32)?;
-    let q = plants::<Q32>(pil_begin_ehvva_plant_q32, pil_begin_evvt_plant_q32, pil_begin_vacuum_plant_q32)?;
+    let f = plants::<f32>(
+        pil_begin_ehvva_plant_f32,
+        pil_begin_evvt_plant_f32,
+        pil_begin_vacuum_plant_f32,
+    )?;
+    let q = plants::<Q32>(
+        pil_begin_ehvva_plant_q32,
+        pil_begin_evvt_plant_q32,
+        pil_begin_vacuum_plant_q32,
+    )?;
     let mut words = [0u64; 2 * N_STATE];
     for k in 0..N_STATE {
         words[k] = u64::from(f[k].to_bits());

@@ -8,7 +8,9 @@
 //!   is sent once, unasked, as an actuator frame whose `t_us` is the ECU's own estimate of the
 //!   time (never the `t_us` of a sensor frame, so the host cannot take it for an answer).
 use embassy_time::{with_deadline, Duration, Instant};
-use model_core::ecu::frame::{encode, ActuatorFrame, Frame, FrameDecoder, FrameError, Nack, SensorFrame, MAX_FRAME_BYTES};
+use model_core::ecu::frame::{
+    encode, ActuatorFrame, Frame, FrameDecoder, FrameError, Nack, SensorFrame, MAX_FRAME_BYTES,
+};
 use model_core::ecu::lockstep::EcuCore;
 
 use crate::board::Link;
@@ -32,18 +34,30 @@ pub struct Server {
 
 impl Server {
     pub fn new(core: EcuCore) -> Self {
-        Self { core, bad_frames: 0, last_answer: None, outputs: EcuCore::safe_outputs(0, 0) }
+        Self {
+            core,
+            bad_frames: 0,
+            last_answer: None,
+            outputs: EcuCore::safe_outputs(0, 0),
+        }
     }
 
     /// The answer to one decoder result.
-    pub fn on_frame(&mut self, decoded: Result<Frame, FrameError>, step: &mut impl FnMut(&mut EcuCore, &SensorFrame) -> ActuatorFrame) -> Frame {
+    pub fn on_frame(
+        &mut self,
+        decoded: Result<Frame, FrameError>,
+        step: &mut impl FnMut(&mut EcuCore, &SensorFrame) -> ActuatorFrame,
+    ) -> Frame {
         match decoded {
             Ok(Frame::Sensor(s)) => {
                 let answer = match self.last_answer {
                     Some(last) if last.seq == s.seq => last,
                     _ => step(&mut self.core, &s),
                 };
-                let answer = ActuatorFrame { bad_frames: self.bad_frames, ..answer };
+                let answer = ActuatorFrame {
+                    bad_frames: self.bad_frames,
+                    ..answer
+                };
                 self.last_answer = Some(answer);
                 self.outputs = answer;
                 Frame::Actuator(answer)
@@ -57,14 +71,21 @@ impl Server {
     fn reject(&mut self, why: FrameError) -> Frame {
         self.bad_frames = self.bad_frames.wrapping_add(1);
         let seq_expected = self.last_answer.map_or(0, |a| a.seq.wrapping_add(1));
-        Frame::Nack(Nack { seq_expected, bad_frames: self.bad_frames, reason: why as u8 })
+        Frame::Nack(Nack {
+            seq_expected,
+            bad_frames: self.bad_frames,
+            reason: why as u8,
+        })
     }
 
     /// The link fell silent `silent_us` after the last valid frame: outputs safe, and the
     /// report of it.
     pub fn on_silence(&mut self, silent_us: u32) -> Frame {
         let (seq, t_us) = self.last_answer.map_or((0, 0), |a| (a.seq, a.t_us));
-        let safe = ActuatorFrame { bad_frames: self.bad_frames, ..EcuCore::safe_outputs(seq, t_us.wrapping_add(silent_us)) };
+        let safe = ActuatorFrame {
+            bad_frames: self.bad_frames,
+            ..EcuCore::safe_outputs(seq, t_us.wrapping_add(silent_us))
+        };
         self.outputs = safe;
         Frame::Actuator(safe)
     }
@@ -72,7 +93,11 @@ impl Server {
 
 /// Serves the link forever. `step` runs the core on one sensor frame (plain [`EcuCore::step`],
 /// or with instruction-count markers around it in the bench mode).
-pub async fn serve(link: &mut Link, server: &mut Server, mut step: impl FnMut(&mut EcuCore, &SensorFrame) -> ActuatorFrame) -> ! {
+pub async fn serve(
+    link: &mut Link,
+    server: &mut Server,
+    mut step: impl FnMut(&mut EcuCore, &SensorFrame) -> ActuatorFrame,
+) -> ! {
     let mut decoder = FrameDecoder::new();
     let mut out = [0u8; MAX_FRAME_BYTES];
     let mut last_valid = Instant::now();
@@ -95,7 +120,11 @@ pub async fn serve(link: &mut Link, server: &mut Server, mut step: impl FnMut(&m
                     let silent_us = u32::try_from(last_valid.elapsed().as_micros()).unwrap_or(u32::MAX);
                     let report = server.on_silence(silent_us);
                     send(link, &report, &mut out);
-                    defmt::warn!("link silent for {=u32} us: outputs safe ({=u32} bytes lost to a full buffer so far)", silent_us, crate::board::usart1::rx_dropped());
+                    defmt::warn!(
+                        "link silent for {=u32} us: outputs safe ({=u32} bytes lost to a full buffer so far)",
+                        silent_us,
+                        crate::board::usart1::rx_dropped()
+                    );
                     continue;
                 }
             }

@@ -60,7 +60,9 @@ async fn lockstep_task(mut link: Link, mut server: Server, mode: Mode) -> ! {
 
 #[entry]
 fn main() -> ! {
-    let Some(core) = cortex_m::Peripherals::take() else { halt("core peripherals taken twice") };
+    let Some(core) = cortex_m::Peripherals::take() else {
+        halt("core peripherals taken twice")
+    };
     let board = board::init(core);
     let mode = mode_from_command_line();
     let ecu = match EcuCore::new(EcuCoreConfig::default()) {

@@ -93,7 +93,11 @@ async fn main(spawner: Spawner) {
         Ok(t) => high.spawn(t),
         Err(_) => halt("EHVVA task spawn"),
     }
-    match (evvt_task(board.evvt, evvt), vacuum_task(board.vacuum, vacuum), supervisor_task(board.adc, board.watchdog, sup)) {
+    match (
+        evvt_task(board.evvt, evvt),
+        vacuum_task(board.vacuum, vacuum),
+        supervisor_task(board.adc, board.watchdog, sup),
+    ) {
         (Ok(a), Ok(b), Ok(c)) => {
             spawner.spawn(a);
             spawner.spawn(b);

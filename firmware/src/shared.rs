@@ -21,7 +21,13 @@ pub struct Setpoints {
 }
 
 pub const DEFAULT_SETPOINTS: Setpoints = Setpoints {
-    valve: ValveRequest { open_deg: 340.0, close_deg: 580.0, high_lift: true, soft_seat: true, enabled: true },
+    valve: ValveRequest {
+        open_deg: 340.0,
+        close_deg: 580.0,
+        high_lift: true,
+        soft_seat: true,
+        enabled: true,
+    },
     cam_phase_deg: 20.0,
     vacuum_x_pct: [0.0; 3],
 };
@@ -37,7 +43,10 @@ static SETPOINTS: Shared<Setpoints> = Mutex::new(Cell::new(DEFAULT_SETPOINTS));
 static MEASUREMENTS: Shared<Option<Measurements>> = Mutex::new(Cell::new(None));
 static FAULTS: Shared<FaultSet> = Mutex::new(Cell::new(FaultSet(0)));
 static ENGINE: Shared<Option<EngineSnapshot>> = Mutex::new(Cell::new(None));
-static VACUUM: Shared<VacuumReport> = Mutex::new(Cell::new(VacuumReport { stuck: false, abnormal_leak: false }));
+static VACUUM: Shared<VacuumReport> = Mutex::new(Cell::new(VacuumReport {
+    stuck: false,
+    abnormal_leak: false,
+}));
 
 /// Heartbeats: EHVVA, EVVT, vacuum. The supervisor pets the watchdog only while all move.
 pub static HEARTBEATS: [AtomicU32; 3] = [AtomicU32::new(0), AtomicU32::new(0), AtomicU32::new(0)];

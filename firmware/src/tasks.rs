@@ -46,7 +46,12 @@ pub async fn ehvva<B: EhvvaIo, D: ActuationDelay>(io: &mut B, mut task: EhvvaTas
 }
 
 /// EVVT: 100 Hz.
-pub async fn evvt(motor: &mut impl PwmOut, driver_fault: impl Fn() -> bool, clock: impl Clock, mut task: EvvtTask) -> ! {
+pub async fn evvt(
+    motor: &mut impl PwmOut,
+    driver_fault: impl Fn() -> bool,
+    clock: impl Clock,
+    mut task: EvvtTask,
+) -> ! {
     let mut ticker = Ticker::every(Duration::from_millis(10));
     loop {
         ticker.next().await;
@@ -69,7 +74,12 @@ pub async fn evvt(motor: &mut impl PwmOut, driver_fault: impl Fn() -> bool, cloc
 }
 
 /// Vacuum valves: duty update at 80 Hz (the PWM itself runs at 300 Hz in hardware).
-pub async fn vacuum(valves: &mut [impl PwmOut; 3], pump: &mut impl SwitchOut, clock: impl Clock, mut task: VacuumTask) -> ! {
+pub async fn vacuum(
+    valves: &mut [impl PwmOut; 3],
+    pump: &mut impl SwitchOut,
+    clock: impl Clock,
+    mut task: VacuumTask,
+) -> ! {
     let mut ticker = Ticker::every(Duration::from_micros(12_500));
     loop {
         ticker.next().await;
@@ -87,14 +97,22 @@ pub async fn vacuum(valves: &mut [impl PwmOut; 3], pump: &mut impl SwitchOut, cl
             valve.set_duty(duty);
         }
         pump.set(out.pump_on);
-        shared::set_vacuum_report(shared::VacuumReport { stuck: out.stuck.iter().any(|s| *s), abnormal_leak: out.abnormal_leak });
+        shared::set_vacuum_report(shared::VacuumReport {
+            stuck: out.stuck.iter().any(|s| *s),
+            abnormal_leak: out.abnormal_leak,
+        });
         shared::beat(shared::HB_VACUUM);
     }
 }
 
 /// Supervisor: 100 Hz ADC scan (one channel per yield), range checks and faults, a defmt
 /// message per fault change, and the watchdog: petted only while every task is alive.
-pub async fn supervisor(adc: &mut impl AnalogBank, mut pet_watchdog: impl FnMut(), clock: impl Clock, mut sup: Supervisor) -> ! {
+pub async fn supervisor(
+    adc: &mut impl AnalogBank,
+    mut pet_watchdog: impl FnMut(),
+    clock: impl Clock,
+    mut sup: Supervisor,
+) -> ! {
     let mut ticker = Ticker::every(Duration::from_millis(10));
     let mut last_beats = [0u32; 3];
     let mut scans = 0u32;

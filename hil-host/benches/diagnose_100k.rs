@@ -26,7 +26,11 @@ fn long_case(plant: Plant, effect: &str) -> Option<Result<Case, String>> {
         Plant::Positioner => Some(generate::positioner::generate_sized(effect, SEED, 101.0, 15.0)),
         // 100 Hz: 40 stitched operating points of 25 s.
         Plant::Evvt => {
-            let sizes = generate::evvt::Sizes { estimation_points: 40, estimation_point_s: 25.0, ..generate::evvt::Sizes::default() };
+            let sizes = generate::evvt::Sizes {
+                estimation_points: 40,
+                estimation_point_s: 25.0,
+                ..generate::evvt::Sizes::default()
+            };
             Some(generate::evvt::generate_sized(effect, SEED, &sizes))
         }
         // 80 or 100 Hz: twelve repeats of the four-voltage estimation programme.
@@ -42,7 +46,14 @@ fn ehvva_long_case(effect: &str) -> Result<Case, String> {
     use model_core::ehvva::{EhvvaInputs, EhvvaReduced};
     let mut rng = generate::Rng::new(SEED);
     let (params, truth) = draw_params(effect, &mut rng)?;
-    let sensors = Sensors { lift_sigma_mm: 0.004, lift_lsb_mm: 0.002, p_sigma_mpa: 0.01, p_lsb_mpa: 0.005, temp_sigma_c: 0.3, temp_lsb_c: 0.1 };
+    let sensors = Sensors {
+        lift_sigma_mm: 0.004,
+        lift_lsb_mm: 0.002,
+        p_sigma_mpa: 0.01,
+        p_lsb_mpa: 0.005,
+        temp_sigma_c: 0.3,
+        temp_lsb_c: 0.1,
+    };
     let make = |i: &EhvvaInputs<f64>| EhvvaReduced::<f64, 1024>::new(&params, i, DT_MS).map_err(|e| format!("{e:?}"));
     let mut tests = Vec::new();
     // About 30 ms per event: 170 events fill 100 000 samples; the matrix has 20.
@@ -76,14 +87,21 @@ fn benches(c: &mut Criterion) {
     // Criterion's name filter (`cargo bench ... -- vacuum`): cases it would skip are not
     // generated and pre-run either.
     let filter: Option<String> = std::env::args().skip(1).find(|a| !a.starts_with('-'));
-    let wanted = |plant: Plant, effect: &str| filter.as_ref().is_none_or(|f| format!("diagnose_100k/{plant}/{effect}").contains(f.as_str()));
+    let wanted = |plant: Plant, effect: &str| {
+        filter
+            .as_ref()
+            .is_none_or(|f| format!("diagnose_100k/{plant}/{effect}").contains(f.as_str()))
+    };
     for plant in Plant::ALL {
         if family_for(plant).is_err() {
             eprintln!("{plant}: no diagnosis family yet, not benchmarked");
             continue;
         }
         let mut group = c.benchmark_group(format!("diagnose_100k/{plant}"));
-        group.sample_size(10).warm_up_time(Duration::from_millis(500)).measurement_time(Duration::from_secs(8));
+        group
+            .sample_size(10)
+            .warm_up_time(Duration::from_millis(500))
+            .measurement_time(Duration::from_secs(8));
         for effect in effects(plant).iter().filter(|e| wanted(plant, e)) {
             let Some(case) = long_case(plant, effect) else {
                 eprintln!("{plant}: no long-log generator yet, not benchmarked");
@@ -93,7 +111,8 @@ fn benches(c: &mut Criterion) {
             let (est, val) = split_log(&case);
             // What the timed runs find (the same every run: the fit is deterministic).
             let family = family_for(plant).expect("checked above");
-            let d = diagnose(family.as_ref(), &est, &val, true, &rules, &mut |_| {}).unwrap_or_else(|e| panic!("{plant} {effect}: {e}"));
+            let d = diagnose(family.as_ref(), &est, &val, true, &rules, &mut |_| {})
+                .unwrap_or_else(|e| panic!("{plant} {effect}: {e}"));
             eprintln!(
                 "{plant} hidden {effect} (seed {SEED}, {} + {} samples): named {}, gain {:.1} %",
                 est.len(),

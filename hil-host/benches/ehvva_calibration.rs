@@ -23,7 +23,16 @@ fn matrix_events() -> Events {
     let mut tests = Vec::new();
     for ph in [5.0, 6.0, 7.0, 8.0] {
         for t in [-20.0, 0.0, 22.0, 60.0, 100.0] {
-            let at = |p_back_mpa: f64, lift_high: bool, snubber_on: bool| Test { inputs: EhvvaInputs { p_supply_mpa: ph, p_back_mpa, temp_c: t, lift_high, snubber_on }, dwell_ms: 8.0 };
+            let at = |p_back_mpa: f64, lift_high: bool, snubber_on: bool| Test {
+                inputs: EhvvaInputs {
+                    p_supply_mpa: ph,
+                    p_back_mpa,
+                    temp_c: t,
+                    lift_high,
+                    snubber_on,
+                },
+                dwell_ms: 8.0,
+            };
             tests.push(at(1.0, false, false));
             tests.push(at(3.0, false, false));
             if ph >= 6.0 {
@@ -32,8 +41,18 @@ fn matrix_events() -> Events {
         }
     }
     let p = EhvvaParams::paper_default();
-    let sensors = Sensors { lift_sigma_mm: 0.003, lift_lsb_mm: 0.002, p_sigma_mpa: 0.01, p_lsb_mpa: 0.005, temp_sigma_c: 0.3, temp_lsb_c: 0.1 };
-    let cols = run_bench(&tests, DT_MS, &sensors, &mut Rng::new(1), |i| EhvvaReduced::<f64, 1024>::new(&p, i, DT_MS).map_err(|e| format!("{e:?}"))).expect("bench runs");
+    let sensors = Sensors {
+        lift_sigma_mm: 0.003,
+        lift_lsb_mm: 0.002,
+        p_sigma_mpa: 0.01,
+        p_lsb_mpa: 0.005,
+        temp_sigma_c: 0.3,
+        temp_lsb_c: 0.1,
+    };
+    let cols = run_bench(&tests, DT_MS, &sensors, &mut Rng::new(1), |i| {
+        EhvvaReduced::<f64, 1024>::new(&p, i, DT_MS).map_err(|e| format!("{e:?}"))
+    })
+    .expect("bench runs");
     let log = parse_log("bench.csv", &log_text("benchmark", DT_MS, &cols), None).expect("log reads back");
     Events::from_log(&log).expect("events")
 }
@@ -42,12 +61,20 @@ fn bench(c: &mut Criterion) {
     let set = matrix_events();
     let groups = conditions(std::slice::from_ref(&set));
     // One condition: 7 MPa, 22 °C (two low-lift events and a high-lift one).
-    let one = groups.iter().find(|g| (g.events[0].inputs.p_supply_mpa - 7.0).abs() < 0.3 && (g.events[0].inputs.temp_c - 22.0).abs() < 3.0).expect("7 MPa, 22 °C tested").clone();
+    let one = groups
+        .iter()
+        .find(|g| (g.events[0].inputs.p_supply_mpa - 7.0).abs() < 0.3 && (g.events[0].inputs.temp_c - 22.0).abs() < 3.0)
+        .expect("7 MPa, 22 °C tested")
+        .clone();
     let opts = default_options();
     let mut g = c.benchmark_group("ehvva_calibration");
     g.sample_size(10).measurement_time(Duration::from_secs(20));
-    g.bench_function("one condition (onset stage, then td VO, td VC, tau_p, Cd)", |b| b.iter(|| fit_condition(&one, &opts).expect("fit")));
-    g.bench_function("Table 1-like matrix, 20 conditions", |b| b.iter(|| identify(std::slice::from_ref(&set), &opts, &mut |_, _| {}).expect("identify")));
+    g.bench_function("one condition (onset stage, then td VO, td VC, tau_p, Cd)", |b| {
+        b.iter(|| fit_condition(&one, &opts).expect("fit"))
+    });
+    g.bench_function("Table 1-like matrix, 20 conditions", |b| {
+        b.iter(|| identify(std::slice::from_ref(&set), &opts, &mut |_, _| {}).expect("identify"))
+    });
     g.finish();
 }
 

@@ -16,7 +16,15 @@ fn native_run(c: &mut Criterion) {
     g.bench_function("default_scenario_first_1s", |b| {
         b.iter(|| {
             let mut link = NativeLink::new().unwrap();
-            let o = run_with(&sc, &mut link, &RunOptions { until_s: Some(1.0), keep_frames: false }).unwrap();
+            let o = run_with(
+                &sc,
+                &mut link,
+                &RunOptions {
+                    until_s: Some(1.0),
+                    keep_frames: false,
+                },
+            )
+            .unwrap();
             std::hint::black_box(o.summary.ehvva_events)
         })
     });

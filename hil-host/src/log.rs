@@ -77,7 +77,11 @@ impl Plant {
     }
 
     pub fn primary_output(self) -> &'static str {
-        self.columns().iter().find(|(_, r)| *r == Role::PrimaryOutput).map(|(n, _)| *n).unwrap_or("")
+        self.columns()
+            .iter()
+            .find(|(_, r)| *r == Role::PrimaryOutput)
+            .map(|(n, _)| *n)
+            .unwrap_or("")
     }
 }
 
@@ -218,13 +222,23 @@ const KNOWN_KEYS: [&str; 16] = [
 /// Reads and checks a log. `plant` overrides the file's `# plant:` metadata.
 pub fn read_log(path: &Path, plant: Option<Plant>) -> Result<Log, LogError> {
     let file = path.display().to_string();
-    let text = fs::read_to_string(path).map_err(|e| LogError { file: file.clone(), line: None, column: None, message: format!("cannot read: {e}") })?;
+    let text = fs::read_to_string(path).map_err(|e| LogError {
+        file: file.clone(),
+        line: None,
+        column: None,
+        message: format!("cannot read: {e}"),
+    })?;
     parse_log(&file, &text, plant)
 }
 
 /// Parses log text; `file` names it in errors.
 pub fn parse_log(file: &str, text: &str, plant_override: Option<Plant>) -> Result<Log, LogError> {
-    let err = |line: Option<usize>, column: Option<String>, message: String| LogError { file: file.to_string(), line, column, message };
+    let err = |line: Option<usize>, column: Option<String>, message: String| LogError {
+        file: file.to_string(),
+        line,
+        column,
+        message,
+    };
     let mut meta = Vec::new();
     let mut notices = Vec::new();
     let mut lines = text.lines().enumerate().map(|(i, l)| (i + 1, l.trim_end_matches('\r')));
@@ -263,7 +277,11 @@ pub fn parse_log(file: &str, text: &str, plant_override: Option<Plant>) -> Resul
                 .map(|(_, v)| v.clone())
                 .ok_or_else(|| err(None, None, "no `# plant:` metadata and no plant given (--plant)".into()))?;
             Plant::from_name(&name).ok_or_else(|| {
-                err(None, None, format!("unknown plant `{name}` in metadata (known: vacuum, ehvva, evvt, positioner)"))
+                err(
+                    None,
+                    None,
+                    format!("unknown plant `{name}` in metadata (known: vacuum, ehvva, evvt, positioner)"),
+                )
             })?
         }
     };
@@ -274,10 +292,18 @@ pub fn parse_log(file: &str, text: &str, plant_override: Option<Plant>) -> Resul
     let known: Vec<&str> = plant.columns().iter().map(|(n, _)| *n).collect();
     for (i, name) in names.iter().enumerate() {
         if name.is_empty() {
-            return Err(err(Some(header_line), Some(format!("#{}", i + 1)), "empty column name in header".into()));
+            return Err(err(
+                Some(header_line),
+                Some(format!("#{}", i + 1)),
+                "empty column name in header".into(),
+            ));
         }
         if names[..i].contains(name) {
-            return Err(err(Some(header_line), Some(name.clone()), "column appears twice in header".into()));
+            return Err(err(
+                Some(header_line),
+                Some(name.clone()),
+                "column appears twice in header".into(),
+            ));
         }
         if name == "t_s" || known.contains(&name.as_str()) {
             keep.push(Some(name.clone()));
@@ -287,11 +313,19 @@ pub fn parse_log(file: &str, text: &str, plant_override: Option<Plant>) -> Resul
         }
     }
     if !names.iter().any(|n| n == "t_s") {
-        return Err(err(Some(header_line), Some("t_s".into()), "required column `t_s` is missing".into()));
+        return Err(err(
+            Some(header_line),
+            Some("t_s".into()),
+            "required column `t_s` is missing".into(),
+        ));
     }
     for (name, role) in plant.columns() {
         if matches!(role, Role::Input | Role::PrimaryOutput) && !names.iter().any(|n| n == name) {
-            return Err(err(Some(header_line), Some((*name).into()), format!("required `{plant}` column `{name}` is missing")));
+            return Err(err(
+                Some(header_line),
+                Some((*name).into()),
+                format!("required `{plant}` column `{name}` is missing"),
+            ));
         }
     }
 
@@ -309,20 +343,35 @@ pub fn parse_log(file: &str, text: &str, plant_override: Option<Plant>) -> Resul
         }
         let cells: Vec<&str> = l.split(',').collect();
         if cells.len() != names.len() {
-            return Err(err(Some(n), None, format!("{} cells, header has {}", cells.len(), names.len())));
+            return Err(err(
+                Some(n),
+                None,
+                format!("{} cells, header has {}", cells.len(), names.len()),
+            ));
         }
         for (cell, name) in cells.iter().zip(&keep) {
             let Some(name) = name else { continue };
-            let v: f64 = cell
-                .trim()
-                .parse()
-                .map_err(|_| err(Some(n), Some(name.clone()), format!("`{}` is not a number", cell.trim())))?;
+            let v: f64 = cell.trim().parse().map_err(|_| {
+                err(
+                    Some(n),
+                    Some(name.clone()),
+                    format!("`{}` is not a number", cell.trim()),
+                )
+            })?;
             if !v.is_finite() {
-                return Err(err(Some(n), Some(name.clone()), format!("`{}` is not finite", cell.trim())));
+                return Err(err(
+                    Some(n),
+                    Some(name.clone()),
+                    format!("`{}` is not finite", cell.trim()),
+                ));
             }
             if let Some((lo, hi)) = column_range(name) {
                 if v < lo || v > hi {
-                    return Err(err(Some(n), Some(name.clone()), format!("{v} is outside the column's range {lo}..{hi}")));
+                    return Err(err(
+                        Some(n),
+                        Some(name.clone()),
+                        format!("{v} is outside the column's range {lo}..{hi}"),
+                    ));
                 }
                 if FLAGS.contains(&name.as_str()) && v != 0.0 && v != 1.0 {
                     return Err(err(Some(n), Some(name.clone()), format!("{v} is not a flag (0 or 1)")));
@@ -335,7 +384,15 @@ pub fn parse_log(file: &str, text: &str, plant_override: Option<Plant>) -> Resul
         // Strictly increasing time, checked as rows arrive so the line is known.
         let t = &columns["t_s"];
         if t.len() >= 2 && t[t.len() - 1] <= t[t.len() - 2] {
-            return Err(err(Some(n), Some("t_s".into()), format!("time {} does not increase (previous {})", t[t.len() - 1], t[t.len() - 2])));
+            return Err(err(
+                Some(n),
+                Some("t_s".into()),
+                format!(
+                    "time {} does not increase (previous {})",
+                    t[t.len() - 1],
+                    t[t.len() - 2]
+                ),
+            ));
         }
     }
     let t = &columns["t_s"];
@@ -360,18 +417,36 @@ pub fn parse_log(file: &str, text: &str, plant_override: Option<Plant>) -> Resul
         jitter_pct = jitter_pct.max(dev);
     }
     if jitter_pct > 0.01 {
-        notices.push(format!("time jitter up to {jitter_pct:.2} % of the {dt_s} s period (accepted up to 1 %)"));
+        notices.push(format!(
+            "time jitter up to {jitter_pct:.2} % of the {dt_s} s period (accepted up to 1 %)"
+        ));
     }
     if let Some(rate) = meta.iter().find(|(k, _)| k == "sample_rate_hz").map(|(_, v)| v.clone()) {
         match rate.trim().parse::<f64>() {
-            Ok(hz) if hz > 0.0 && ((1.0 / hz) - dt_s).abs() / dt_s > 0.01 => {
-                notices.push(format!("metadata sample_rate_hz {hz} disagrees with the time column's {:.6} Hz; the time column is used", 1.0 / dt_s))
-            }
+            Ok(hz) if hz > 0.0 && ((1.0 / hz) - dt_s).abs() / dt_s > 0.01 => notices.push(format!(
+                "metadata sample_rate_hz {hz} disagrees with the time column's {:.6} Hz; the time column is used",
+                1.0 / dt_s
+            )),
             Ok(_) => {}
-            Err(_) => return Err(err(None, None, format!("metadata `sample_rate_hz` is `{rate}`, not a number"))),
+            Err(_) => {
+                return Err(err(
+                    None,
+                    None,
+                    format!("metadata `sample_rate_hz` is `{rate}`, not a number"),
+                ))
+            }
         }
     }
-    Ok(Log { file: file.to_string(), plant, meta, columns, order, dt_s, jitter_pct, notices })
+    Ok(Log {
+        file: file.to_string(),
+        plant,
+        meta,
+        columns,
+        order,
+        dt_s,
+        jitter_pct,
+        notices,
+    })
 }
 
 /// Writes a log in the same format. `columns` are (name, samples), all the same length.
@@ -440,7 +515,13 @@ mod tests {
         let e = error_of(&GOOD.replace("0.002,3.5", "0.001,3.5"));
         assert_eq!((e.line, e.column.as_deref()), (Some(8), Some("t_s")));
 
-        let e = error_of(&GOOD.replace("t_s,force_N,pos_m,extra", "t_s,pos_m,extra").replace(",1.5,", ",").replace(",2.5,", ",").replace(",3.5,", ","));
+        let e = error_of(
+            &GOOD
+                .replace("t_s,force_N,pos_m,extra", "t_s,pos_m,extra")
+                .replace(",1.5,", ",")
+                .replace(",2.5,", ",")
+                .replace(",3.5,", ","),
+        );
         assert_eq!((e.line, e.column.as_deref()), (Some(5), Some("force_N")));
 
         let e = error_of(&GOOD.replace("0.001,2.5,0.001,9", "0.001,2.5,0.001"));
@@ -472,7 +553,10 @@ mod tests {
         let t = [0.0, 0.01, 0.02];
         let x = [0.1 + 0.2, 1.0 / 3.0, -0.0];
         let f = [1e-300, 123456.789, -5.0];
-        let text = format_log(&[("plant".into(), "positioner".into())], &[("t_s", &t), ("pos_m", &x), ("force_N", &f)]);
+        let text = format_log(
+            &[("plant".into(), "positioner".into())],
+            &[("t_s", &t), ("pos_m", &x), ("force_N", &f)],
+        );
         let log = parse_log("w.csv", &text, None).unwrap();
         assert_eq!(log.col("pos_m").unwrap(), &x);
         assert_eq!(log.col("force_N").unwrap(), &f);
@@ -482,7 +566,10 @@ mod tests {
     fn reads_the_emps_benchmark_when_shared_data_is_present() {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/emps/emps-estimation.csv");
         if !path.exists() {
-            eprintln!("SKIP: {} not found (../shared is absent in a fresh clone)", path.display());
+            eprintln!(
+                "SKIP: {} not found (../shared is absent in a fresh clone)",
+                path.display()
+            );
             return;
         }
         let log = read_log(&path, None).unwrap();

@@ -64,7 +64,13 @@ pub struct LsqOptions {
 
 impl Default for LsqOptions {
     fn default() -> Self {
-        Self { max_iterations: 60, cost_tolerance: 1e-10, step_tolerance: 1e-9, fd_step: 1e-6, threads: 2 }
+        Self {
+            max_iterations: 60,
+            cost_tolerance: 1e-10,
+            step_tolerance: 1e-9,
+            fd_step: 1e-6,
+            threads: 2,
+        }
     }
 }
 
@@ -96,7 +102,10 @@ pub enum StopReason {
 #[derive(Clone, Debug, PartialEq)]
 pub enum LsqError {
     /// Bounds or start are inconsistent; the index names the parameter.
-    BadBounds { index: usize, message: String },
+    BadBounds {
+        index: usize,
+        message: String,
+    },
     /// The residual function failed at the starting point.
     StartFailed(String),
     NoResiduals,
@@ -116,17 +125,30 @@ impl std::error::Error for LsqError {}
 
 /// Solves min ½‖r(x)‖², lo ≤ x ≤ hi, from `x0` (clamped into the bounds).
 /// `residual(x, out)` fills `out` (its length fixed by the first call's `n_residuals`).
-pub fn solve<F>(residual: F, x0: &[f64], lo: &[f64], hi: &[f64], n_residuals: usize, opts: &LsqOptions) -> Result<LsqResult, LsqError>
+pub fn solve<F>(
+    residual: F,
+    x0: &[f64],
+    lo: &[f64],
+    hi: &[f64],
+    n_residuals: usize,
+    opts: &LsqOptions,
+) -> Result<LsqResult, LsqError>
 where
     F: Fn(&[f64], &mut [f64]) -> Result<(), String> + Sync,
 {
     let p = x0.len();
     if lo.len() != p || hi.len() != p {
-        return Err(LsqError::BadBounds { index: p.min(lo.len()).min(hi.len()), message: "bounds and start differ in length".into() });
+        return Err(LsqError::BadBounds {
+            index: p.min(lo.len()).min(hi.len()),
+            message: "bounds and start differ in length".into(),
+        });
     }
     for i in 0..p {
         if !(lo[i] <= hi[i]) || !x0[i].is_finite() {
-            return Err(LsqError::BadBounds { index: i, message: format!("lower {} / upper {} / start {}", lo[i], hi[i], x0[i]) });
+            return Err(LsqError::BadBounds {
+                index: i,
+                message: format!("lower {} / upper {} / start {}", lo[i], hi[i], x0[i]),
+            });
         }
     }
     if n_residuals == 0 {
@@ -193,7 +215,11 @@ where
                 Ok(()) => half_norm2(&r_try),
                 Err(_) => f64::INFINITY,
             };
-            let rho = if predicted > 0.0 { (cost - actual_cost) / predicted } else { -1.0 };
+            let rho = if predicted > 0.0 {
+                (cost - actual_cost) / predicted
+            } else {
+                -1.0
+            };
             // Eq. (20).
             if rho > 0.75 {
                 delta = delta.max(2.0 * step_norm);
@@ -233,7 +259,16 @@ where
             }
         })
         .collect();
-    Ok(LsqResult { x, cost, initial_cost, iterations, evaluations, ci95, residuals: n_residuals, stop })
+    Ok(LsqResult {
+        x,
+        cost,
+        initial_cost,
+        iterations,
+        evaluations,
+        ci95,
+        residuals: n_residuals,
+        stop,
+    })
 }
 
 fn half_norm2(r: &[f64]) -> f64 {
@@ -295,7 +330,11 @@ fn jtj(jac: &[f64], n: usize, p: usize) -> Vec<f64> {
     let mut h = vec![0.0; p * p];
     for a in 0..p {
         for b in a..p {
-            let v: f64 = jac[a * n..(a + 1) * n].iter().zip(&jac[b * n..(b + 1) * n]).map(|(x, y)| x * y).sum();
+            let v: f64 = jac[a * n..(a + 1) * n]
+                .iter()
+                .zip(&jac[b * n..(b + 1) * n])
+                .map(|(x, y)| x * y)
+                .sum();
             h[a * p + b] = v;
             h[b * p + a] = v;
         }
@@ -304,7 +343,9 @@ fn jtj(jac: &[f64], n: usize, p: usize) -> Vec<f64> {
 }
 
 fn jtr(jac: &[f64], r: &[f64], n: usize, p: usize) -> Vec<f64> {
-    (0..p).map(|j| jac[j * n..(j + 1) * n].iter().zip(r).map(|(a, b)| a * b).sum()).collect()
+    (0..p)
+        .map(|j| jac[j * n..(j + 1) * n].iter().zip(r).map(|(a, b)| a * b).sum())
+        .collect()
 }
 
 /// The step minimising the model on the free parameters with ‖D h‖ ≤ Δ: the Gauss-Newton step
@@ -427,7 +468,10 @@ mod tests {
     use super::*;
 
     fn opts() -> LsqOptions {
-        LsqOptions { max_iterations: 200, ..Default::default() }
+        LsqOptions {
+            max_iterations: 200,
+            ..Default::default()
+        }
     }
 
     #[test]
@@ -438,7 +482,11 @@ mod tests {
             Ok(())
         };
         let res = solve(r, &[-1.2, 1.0], &[-5.0, -5.0], &[5.0, 5.0], 2, &opts()).unwrap();
-        assert!((res.x[0] - 1.0).abs() < 1e-6 && (res.x[1] - 1.0).abs() < 1e-6, "{:?}", res);
+        assert!(
+            (res.x[0] - 1.0).abs() < 1e-6 && (res.x[1] - 1.0).abs() < 1e-6,
+            "{:?}",
+            res
+        );
         assert!(res.cost < 1e-12);
     }
 
@@ -458,7 +506,9 @@ mod tests {
         let (a, b) = with_iteration_observer(observer, || {
             let a = solve(r, &[-1.2, 1.0], &[-5.0, -5.0], &[5.0, 5.0], 2, &opts()).unwrap();
             // A fit on another thread is not this scope's.
-            std::thread::spawn(move || solve(r, &[-1.2, 1.0], &[-5.0, -5.0], &[5.0, 5.0], 2, &opts()).unwrap()).join().unwrap();
+            std::thread::spawn(move || solve(r, &[-1.2, 1.0], &[-5.0, -5.0], &[5.0, 5.0], 2, &opts()).unwrap())
+                .join()
+                .unwrap();
             let b = solve(r, &[0.5, 0.5], &[-5.0, -5.0], &[5.0, 5.0], 2, &opts()).unwrap();
             (a, b)
         });
@@ -487,7 +537,11 @@ mod tests {
         // y = a e^{-b t} + noise (deterministic pseudo-noise), a = 2, b = 0.7.
         let t: Vec<f64> = (0..200).map(|k| k as f64 * 0.05).collect();
         let noise = |k: usize| ((k as f64 * 12.9898).sin() * 43758.5453).rem_euclid(1.0) * 0.02 - 0.01;
-        let y: Vec<f64> = t.iter().enumerate().map(|(k, &t)| 2.0 * (-0.7 * t).exp() + noise(k)).collect();
+        let y: Vec<f64> = t
+            .iter()
+            .enumerate()
+            .map(|(k, &t)| 2.0 * (-0.7 * t).exp() + noise(k))
+            .collect();
         let r = |x: &[f64], out: &mut [f64]| {
             for k in 0..t.len() {
                 out[k] = x[0] * (-x[1] * t[k]).exp() - y[k];
@@ -496,8 +550,18 @@ mod tests {
         };
         let res = solve(r, &[1.0, 0.1], &[0.0, 0.0], &[10.0, 10.0], t.len(), &opts()).unwrap();
         let (ca, cb) = (res.ci95[0].unwrap(), res.ci95[1].unwrap());
-        assert!((res.x[0] - 2.0).abs() < 3.0 * ca && ca < 0.02, "a {} ± {}", res.x[0], ca);
-        assert!((res.x[1] - 0.7).abs() < 3.0 * cb && cb < 0.02, "b {} ± {}", res.x[1], cb);
+        assert!(
+            (res.x[0] - 2.0).abs() < 3.0 * ca && ca < 0.02,
+            "a {} ± {}",
+            res.x[0],
+            ca
+        );
+        assert!(
+            (res.x[1] - 0.7).abs() < 3.0 * cb && cb < 0.02,
+            "b {} ± {}",
+            res.x[1],
+            cb
+        );
         assert!(res.cost < res.initial_cost * 1e-3);
     }
 
@@ -526,7 +590,13 @@ mod tests {
             Ok(())
         };
         let e = solve(r, &[0.0, 0.0], &[0.0, 1.0], &[1.0, 0.0], 1, &opts()).unwrap_err();
-        assert_eq!(e, LsqError::BadBounds { index: 1, message: "lower 1 / upper 0 / start 0".into() });
+        assert_eq!(
+            e,
+            LsqError::BadBounds {
+                index: 1,
+                message: "lower 1 / upper 0 / start 0".into()
+            }
+        );
     }
 
     #[test]

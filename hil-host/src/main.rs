@@ -91,7 +91,9 @@ fn parse_args(args: &[String], known: &[&str]) -> Result<Args, CliError> {
             if !known.contains(&name) {
                 return Err(CliError::Usage(format!("unknown option --{name}")));
             }
-            let v = it.next().ok_or_else(|| CliError::Usage(format!("--{name} needs a value")))?;
+            let v = it
+                .next()
+                .ok_or_else(|| CliError::Usage(format!("--{name} needs a value")))?;
             options.push((name.to_string(), v.clone()));
         } else {
             positional.push(a.clone());
@@ -102,12 +104,18 @@ fn parse_args(args: &[String], known: &[&str]) -> Result<Args, CliError> {
 
 impl Args {
     fn get(&self, name: &str) -> Option<&str> {
-        self.options.iter().rev().find(|(k, _)| k == name).map(|(_, v)| v.as_str())
+        self.options
+            .iter()
+            .rev()
+            .find(|(k, _)| k == name)
+            .map(|(_, v)| v.as_str())
     }
     fn plant(&self) -> Result<Option<Plant>, CliError> {
         match self.get("plant") {
             None => Ok(None),
-            Some(n) => Plant::from_name(n).map(Some).ok_or_else(|| CliError::Usage(format!("--plant {n}: unknown plant"))),
+            Some(n) => Plant::from_name(n)
+                .map(Some)
+                .ok_or_else(|| CliError::Usage(format!("--plant {n}: unknown plant"))),
         }
     }
 }
@@ -118,7 +126,14 @@ fn check(args: &[String]) -> Result<(), CliError> {
         return Err(CliError::Usage("check takes one log file".into()));
     };
     let log = read_log(Path::new(path), a.plant()?).map_err(|e| CliError::Failed(e.to_string()))?;
-    println!("{}: plant {}, {} samples at {} s, columns {}", log.file, log.plant, log.len(), log.dt_s, log.order.join(", "));
+    println!(
+        "{}: plant {}, {} samples at {} s, columns {}",
+        log.file,
+        log.plant,
+        log.len(),
+        log.dt_s,
+        log.order.join(", ")
+    );
     for n in &log.notices {
         println!("notice: {n}");
     }
@@ -128,7 +143,9 @@ fn check(args: &[String]) -> Result<(), CliError> {
 fn run_diagnose(args: &[String]) -> Result<(), CliError> {
     let a = parse_args(args, &["validation", "plant", "json", "plots"])?;
     let [est_path] = a.positional.as_slice() else {
-        return Err(CliError::Usage("diagnose takes one estimation log (and --validation for a second)".into()));
+        return Err(CliError::Usage(
+            "diagnose takes one estimation log (and --validation for a second)".into(),
+        ));
     };
     let plant = a.plant()?;
     let failed = |e: hil_host::log::LogError| CliError::Failed(e.to_string());
@@ -168,7 +185,8 @@ fn run_diagnose(args: &[String]) -> Result<(), CliError> {
     }
     if let Some(dir) = a.get("plots") {
         let dir = PathBuf::from(dir);
-        let written = hil_host::plot::diagnosis_plots(&d, &dir).map_err(|e| CliError::Failed(format!("{}: {e}", dir.display())))?;
+        let written = hil_host::plot::diagnosis_plots(&d, &dir)
+            .map_err(|e| CliError::Failed(format!("{}: {e}", dir.display())))?;
         for w in written {
             eprintln!("plot written to {}", w.display());
         }
@@ -183,8 +201,12 @@ fn run_generate(args: &[String]) -> Result<(), CliError> {
     };
     let plant = Plant::from_name(plant).ok_or_else(|| CliError::Usage(format!("unknown plant `{plant}`")))?;
     let seed = match a.get("seed") {
-        Some(s) => s.parse::<u64>().map_err(|_| CliError::Usage(format!("--seed {s}: not a whole number")))?,
-        None => std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(1, |d| d.as_nanos() as u64),
+        Some(s) => s
+            .parse::<u64>()
+            .map_err(|_| CliError::Usage(format!("--seed {s}: not a whole number")))?,
+        None => std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(1, |d| d.as_nanos() as u64),
     };
     if plant == Plant::Evvt && effect == "prbs-grid" {
         return generate_evvt_prbs_grid(seed, &PathBuf::from(a.get("out").unwrap_or(".")));
@@ -192,13 +214,25 @@ fn run_generate(args: &[String]) -> Result<(), CliError> {
     let case = hil_host::generate::generate(plant, effect, seed).map_err(CliError::Failed)?;
     let dir = PathBuf::from(a.get("out").unwrap_or("."));
     std::fs::create_dir_all(&dir).map_err(|e| CliError::Failed(format!("{}: {e}", dir.display())))?;
-    let write = |name: &str, text: &str| std::fs::write(dir.join(name), text).map_err(|e| CliError::Failed(format!("{}: {e}", dir.join(name).display())));
+    let write = |name: &str, text: &str| {
+        std::fs::write(dir.join(name), text).map_err(|e| CliError::Failed(format!("{}: {e}", dir.join(name).display())))
+    };
     write("estimation.csv", &case.estimation_csv)?;
     write("validation.csv", &case.validation_csv)?;
-    let truth: serde_json::Map<String, serde_json::Value> = case.truth.iter().map(|(k, v)| (k.clone(), serde_json::json!(v))).collect();
+    let truth: serde_json::Map<String, serde_json::Value> = case
+        .truth
+        .iter()
+        .map(|(k, v)| (k.clone(), serde_json::json!(v)))
+        .collect();
     let truth = serde_json::json!({"plant": plant.name(), "effect": case.effect, "seed": seed, "params": truth});
-    write("truth.json", &(serde_json::to_string_pretty(&truth).unwrap_or_default() + "\n"))?;
-    println!("seed {seed}: wrote {}/estimation.csv, validation.csv and truth.json", dir.display());
+    write(
+        "truth.json",
+        &(serde_json::to_string_pretty(&truth).unwrap_or_default() + "\n"),
+    )?;
+    println!(
+        "seed {seed}: wrote {}/estimation.csv, validation.csv and truth.json",
+        dir.display()
+    );
     Ok(())
 }
 
@@ -213,7 +247,11 @@ fn run_scenario(args: &[String]) -> Result<(), CliError> {
         }
         _ => return Err(CliError::Usage("run takes at most one scenario file".into())),
     };
-    let out = PathBuf::from(a.get("out").map(String::from).unwrap_or_else(|| format!("out/{}", scenario.name)));
+    let out = PathBuf::from(
+        a.get("out")
+            .map(String::from)
+            .unwrap_or_else(|| format!("out/{}", scenario.name)),
+    );
     let summary = run(&scenario, Some(&out)).map_err(CliError::Failed)?;
     print!("{}", summary.text(&scenario.name));
     println!("logs (DATA-FORMAT) and plots in {}", out.display());
@@ -237,11 +275,29 @@ fn run_pil(args: &[String]) -> Result<(), CliError> {
         _ => return Err(CliError::Usage("pil takes at most one scenario file".into())),
     };
     let number = |name: &str| -> Result<Option<u32>, CliError> {
-        a.get(name).map(|v| v.parse::<u32>().map_err(|_| CliError::Usage(format!("--{name} {v}: not a whole number")))).transpose()
+        a.get(name)
+            .map(|v| {
+                v.parse::<u32>()
+                    .map_err(|_| CliError::Usage(format!("--{name} {v}: not a whole number")))
+            })
+            .transpose()
     };
-    let faults = LinkFaults { corrupt_every: number("corrupt-every")?, drop_every: number("drop-every")? };
-    let until_s = a.get("until").map(|v| v.parse::<f64>().map_err(|_| CliError::Usage(format!("--until {v}: not a number")))).transpose()?;
-    let out = PathBuf::from(a.get("out").map(String::from).unwrap_or_else(|| format!("out/{}-pil", scenario.name)));
+    let faults = LinkFaults {
+        corrupt_every: number("corrupt-every")?,
+        drop_every: number("drop-every")?,
+    };
+    let until_s = a
+        .get("until")
+        .map(|v| {
+            v.parse::<f64>()
+                .map_err(|_| CliError::Usage(format!("--until {v}: not a number")))
+        })
+        .transpose()?;
+    let out = PathBuf::from(
+        a.get("out")
+            .map(String::from)
+            .unwrap_or_else(|| format!("out/{}-pil", scenario.name)),
+    );
     let elf = match a.get("elf") {
         Some(e) => PathBuf::from(e),
         None => pil::build_firmware().map_err(CliError::Failed)?,
@@ -249,7 +305,8 @@ fn run_pil(args: &[String]) -> Result<(), CliError> {
     let r = pil::run_scenario(&scenario, &elf, faults, until_s, compare_native, &out).map_err(CliError::Failed)?;
     print!("{}", r.output.summary.text(&scenario.name));
     print!("{}", r.text());
-    let written = hil_host::run::write_outputs(&scenario, &r.output, &out).map_err(|e| CliError::Failed(format!("{}: {e}", out.display())))?;
+    let written = hil_host::run::write_outputs(&scenario, &r.output, &out)
+        .map_err(|e| CliError::Failed(format!("{}: {e}", out.display())))?;
     println!("logs (DATA-FORMAT), plots and the firmware's defmt stream (defmt.bin: defmt-print -e {} < defmt.bin) in {} ({} files)", elf.display(), out.display(), written.len());
     if r.first_difference.is_some() {
         return Err(CliError::Failed("the PIL run differs from the native run".into()));
@@ -271,7 +328,9 @@ fn run_target_bench(args: &[String]) -> Result<(), CliError> {
         _ => return Err(CliError::Usage("target-bench takes at most one scenario file".into())),
     };
     let steps = match a.get("steps") {
-        Some(v) => v.parse::<u32>().map_err(|_| CliError::Usage(format!("--steps {v}: not a whole number")))?,
+        Some(v) => v
+            .parse::<u32>()
+            .map_err(|_| CliError::Usage(format!("--steps {v}: not a whole number")))?,
         None => 2000,
     };
     let out = PathBuf::from(a.get("out").unwrap_or("out/target-bench"));
@@ -282,8 +341,15 @@ fn run_target_bench(args: &[String]) -> Result<(), CliError> {
     // The sensor frames of the scenario's first `steps` lockstep steps, closed loop natively;
     // the target then steps its core on the same frames with every task counted.
     let until_s = f64::from(steps) * f64::from(model_core::ecu::lockstep::STEP_US) * 1e-6;
-    let native = run_with(&scenario, &mut NativeLink::new().map_err(CliError::Failed)?, &RunOptions { until_s: Some(until_s), keep_frames: true })
-        .map_err(CliError::Failed)?;
+    let native = run_with(
+        &scenario,
+        &mut NativeLink::new().map_err(CliError::Failed)?,
+        &RunOptions {
+            until_s: Some(until_s),
+            keep_frames: true,
+        },
+    )
+    .map_err(CliError::Failed)?;
     let frames: Vec<_> = native.frames.iter().map(|(s, _)| *s).collect();
     let b = pil::target_bench(&elf, &frames, &out).map_err(CliError::Failed)?;
     print!("{}", b.text());
@@ -300,9 +366,13 @@ fn run_target_bench(args: &[String]) -> Result<(), CliError> {
 fn generate_evvt_prbs_grid(seed: u64, dir: &Path) -> Result<(), CliError> {
     std::fs::create_dir_all(dir).map_err(|e| CliError::Failed(format!("{}: {e}", dir.display())))?;
     for (name, text) in hil_host::generate::evvt::identification_grid(seed).map_err(CliError::Failed)? {
-        std::fs::write(dir.join(&name), text).map_err(|e| CliError::Failed(format!("{}: {e}", dir.join(&name).display())))?;
+        std::fs::write(dir.join(&name), text)
+            .map_err(|e| CliError::Failed(format!("{}: {e}", dir.join(&name).display())))?;
     }
-    println!("seed {seed}: wrote the nine EVVT PRBS identification logs (design table) to {}", dir.display());
+    println!(
+        "seed {seed}: wrote the nine EVVT PRBS identification logs (design table) to {}",
+        dir.display()
+    );
     Ok(())
 }
 
@@ -318,7 +388,9 @@ fn identify_evvt(args: &[String]) -> Result<(), CliError> {
     use hil_host::identify::evvt;
     let a = parse_args(args, &["json"])?;
     if a.positional.is_empty() {
-        return Err(CliError::Usage("identify evvt takes one or more closed-loop PRBS logs".into()));
+        return Err(CliError::Usage(
+            "identify evvt takes one or more closed-loop PRBS logs".into(),
+        ));
     }
     let opts = evvt::EvvtIdentifyOptions::default();
     let mut points = Vec::new();
@@ -333,7 +405,8 @@ fn identify_evvt(args: &[String]) -> Result<(), CliError> {
     }
     print!("{}", evvt::tables_text(&points));
     if let Some(out) = a.get("json") {
-        let text = serde_json::to_string_pretty(&evvt::to_json(&points)).map_err(|e| CliError::Failed(e.to_string()))?;
+        let text =
+            serde_json::to_string_pretty(&evvt::to_json(&points)).map_err(|e| CliError::Failed(e.to_string()))?;
         std::fs::write(out, text + "\n").map_err(|e| CliError::Failed(format!("{out}: {e}")))?;
         eprintln!("tables written to {out}");
     }
@@ -345,7 +418,9 @@ fn identify_ehvva(args: &[String]) -> Result<(), CliError> {
     use hil_host::identify::ehvva;
     let a = parse_args(args, &["json"])?;
     if a.positional.is_empty() {
-        return Err(CliError::Usage("identify ehvva takes one or more bench logs of valve events".into()));
+        return Err(CliError::Usage(
+            "identify ehvva takes one or more bench logs of valve events".into(),
+        ));
     }
     let mut sets = Vec::new();
     for path in &a.positional {
@@ -355,7 +430,10 @@ fn identify_ehvva(args: &[String]) -> Result<(), CliError> {
         }
         sets.push(Events::from_log(&log).map_err(CliError::Failed)?);
     }
-    let id = ehvva::identify(&sets, &ehvva::default_options(), &mut |k, n| eprintln!("condition {k}/{n} ...")).map_err(CliError::Failed)?;
+    let id = ehvva::identify(&sets, &ehvva::default_options(), &mut |k, n| {
+        eprintln!("condition {k}/{n} ...")
+    })
+    .map_err(CliError::Failed)?;
     print!("{}", id.text());
     if let Some(out) = a.get("json") {
         let text = serde_json::to_string_pretty(&id.json()).map_err(|e| CliError::Failed(e.to_string()))?;

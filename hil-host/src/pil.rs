@@ -32,7 +32,10 @@ pub const MACHINE: &str = "netduinoplus2";
 
 /// The workspace root (the directory of the top Cargo.toml), fixed at compile time.
 pub fn workspace_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).parent().map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from("."))
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| PathBuf::from("."))
 }
 
 /// Cargo's target directory: `CARGO_TARGET_DIR` when set (relative to the workspace root),
@@ -56,7 +59,15 @@ pub fn build_firmware() -> Result<PathBuf, String> {
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
     let status = Command::new(cargo)
         .current_dir(workspace_root())
-        .args(["build", "--release", "--locked", "-p", FIRMWARE_PACKAGE, "--target", TARGET])
+        .args([
+            "build",
+            "--release",
+            "--locked",
+            "-p",
+            FIRMWARE_PACKAGE,
+            "--target",
+            TARGET,
+        ])
         .status()
         .map_err(|e| format!("cannot run cargo to build {FIRMWARE_PACKAGE}: {e}"))?;
     if !status.success() {
@@ -66,13 +77,19 @@ pub fn build_firmware() -> Result<PathBuf, String> {
     if elf.is_file() {
         Ok(elf)
     } else {
-        Err(format!("cargo built {FIRMWARE_PACKAGE} but {} is missing", elf.display()))
+        Err(format!(
+            "cargo built {FIRMWARE_PACKAGE} but {} is missing",
+            elf.display()
+        ))
     }
 }
 
 /// `qemu-system-arm --version`'s first line, or why it cannot be run.
 pub fn qemu_version() -> Result<String, String> {
-    let out = Command::new(QEMU).arg("--version").output().map_err(|e| format!("{QEMU} not found ({e}); run tools/setup-qemu.sh"))?;
+    let out = Command::new(QEMU)
+        .arg("--version")
+        .output()
+        .map_err(|e| format!("{QEMU} not found ({e}); run tools/setup-qemu.sh"))?;
     let text = String::from_utf8_lossy(&out.stdout);
     Ok(text.lines().next().unwrap_or("").to_string())
 }
@@ -155,7 +172,12 @@ impl QemuBoard {
             match connect(&mut board, port, &stderr_log) {
                 Ok(stream) => {
                     let child = board.child.take().ok_or("QEMU process lost")?;
-                    return Ok(QemuBoard { child, stream, defmt_log, stderr_log });
+                    return Ok(QemuBoard {
+                        child,
+                        stream,
+                        defmt_log,
+                        stderr_log,
+                    });
                 }
                 Err(e) => last_err = e,
             }
@@ -204,7 +226,10 @@ fn connect(board: &mut Pending, port: u16, stderr_log: &Path) -> Result<TcpStrea
         if let Some(c) = board.child.as_mut() {
             if let Ok(Some(status)) = c.try_wait() {
                 let text = std::fs::read_to_string(stderr_log).unwrap_or_default();
-                return Err(format!("{QEMU} exited ({status}) before accepting the serial connection: {}", text.trim()));
+                return Err(format!(
+                    "{QEMU} exited ({status}) before accepting the serial connection: {}",
+                    text.trim()
+                ));
             }
         }
         match TcpStream::connect_timeout(&addr, Duration::from_millis(200)) {
@@ -268,7 +293,12 @@ pub struct PilOptions {
 
 impl Default for PilOptions {
     fn default() -> Self {
-        Self { qemu: QemuOptions::default(), faults: LinkFaults::default(), answer_timeout: Duration::from_millis(25), max_attempts: 12 }
+        Self {
+            qemu: QemuOptions::default(),
+            faults: LinkFaults::default(),
+            answer_timeout: Duration::from_millis(25),
+            max_attempts: 12,
+        }
     }
 }
 
@@ -296,7 +326,16 @@ impl PilLink {
     /// Starts QEMU with the firmware image `elf` and connects.
     pub fn start(elf: &Path, opts: PilOptions) -> Result<Self, String> {
         let board = QemuBoard::start(elf, &opts.qemu)?;
-        Ok(Self { board, decoder: FrameDecoder::new(), opts, stats: LinkStats::default(), rx: [0; 512], rx_len: 0, rx_at: 0, safe_reports: Vec::new() })
+        Ok(Self {
+            board,
+            decoder: FrameDecoder::new(),
+            opts,
+            stats: LinkStats::default(),
+            rx: [0; 512],
+            rx_len: 0,
+            rx_at: 0,
+            safe_reports: Vec::new(),
+        })
     }
 
     pub fn stats(&self) -> LinkStats {
@@ -310,7 +349,8 @@ impl PilLink {
     /// One lockstep step: sends `sensors` until the firmware answers it.
     pub fn exchange(&mut self, sensors: &SensorFrame) -> Result<ActuatorFrame, String> {
         let mut wire = [0u8; MAX_FRAME_BYTES];
-        let n = encode(&Frame::Sensor(*sensors), &mut wire).map_err(|e| format!("encoding sensor frame {}: {e:?}", sensors.seq))?;
+        let n = encode(&Frame::Sensor(*sensors), &mut wire)
+            .map_err(|e| format!("encoding sensor frame {}: {e:?}", sensors.seq))?;
         let mut wait = self.opts.answer_timeout;
         for _ in 0..self.opts.max_attempts {
             self.transmit(&wire[..n])?;
@@ -383,7 +423,10 @@ impl PilLink {
     }
 
     fn unasked(&mut self, a: ActuatorFrame) {
-        if a == (ActuatorFrame { bad_frames: a.bad_frames, ..EcuCore::safe_outputs(a.seq, a.t_us) }) {
+        if a == (ActuatorFrame {
+            bad_frames: a.bad_frames,
+            ..EcuCore::safe_outputs(a.seq, a.t_us)
+        }) {
             self.stats.safe_state_reports += 1;
             self.safe_reports.push(a);
         } else {
@@ -409,9 +452,14 @@ impl PilLink {
     /// Receives what is there within `wait`; false when nothing came.
     fn fill(&mut self, wait: Duration) -> Result<bool, String> {
         let stream = &mut self.board.stream;
-        stream.set_read_timeout(Some(wait.max(Duration::from_micros(100)))).map_err(|e| e.to_string())?;
+        stream
+            .set_read_timeout(Some(wait.max(Duration::from_micros(100))))
+            .map_err(|e| e.to_string())?;
         match stream.read(&mut self.rx) {
-            Ok(0) => Err(format!("{QEMU} closed the serial connection; stderr: {}", self.board.stderr_text().trim())),
+            Ok(0) => Err(format!(
+                "{QEMU} closed the serial connection; stderr: {}",
+                self.board.stderr_text().trim()
+            )),
             Ok(n) => {
                 self.rx_len = n;
                 self.rx_at = 0;
@@ -425,7 +473,10 @@ impl PilLink {
 
     /// Sends raw bytes as they are (a hand-made bad frame, say).
     pub fn send_raw(&mut self, bytes: &[u8]) -> Result<(), String> {
-        self.board.stream().write_all(bytes).map_err(|e| format!("writing to {QEMU}'s serial port: {e}"))
+        self.board
+            .stream()
+            .write_all(bytes)
+            .map_err(|e| format!("writing to {QEMU}'s serial port: {e}"))
     }
 
     /// The next frame (or decode error) from the firmware within `wait`.
@@ -485,12 +536,17 @@ pub fn run_frames(link: &mut PilLink, frames: &[SensorFrame]) -> Result<FramesRu
     for f in frames {
         answers.push(link.exchange(f)?);
     }
-    Ok(FramesRun { answers, wall_s: start.elapsed().as_secs_f64(), stats: link.stats() })
+    Ok(FramesRun {
+        answers,
+        wall_s: start.elapsed().as_secs_f64(),
+        stats: link.stats(),
+    })
 }
 
 /// The same frames through [`EcuCore`] natively.
 pub fn run_frames_native(frames: &[SensorFrame]) -> Result<Vec<ActuatorFrame>, String> {
-    let mut core = EcuCore::new(model_core::ecu::lockstep::EcuCoreConfig::default()).map_err(|e| format!("ECU core calibration: {e}"))?;
+    let mut core = EcuCore::new(model_core::ecu::lockstep::EcuCoreConfig::default())
+        .map_err(|e| format!("ECU core calibration: {e}"))?;
     Ok(frames.iter().map(|f| core.step(f)).collect())
 }
 
@@ -507,7 +563,10 @@ pub fn elf_symbols(path: &Path) -> Result<Vec<ElfSymbol>, String> {
     let data = std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?;
     let bad = |what: &str| format!("{}: not a 32-bit little-endian ELF file ({what})", path.display());
     let u16_at = |at: usize| data.get(at..at + 2).map(|b| u16::from_le_bytes([b[0], b[1]]));
-    let u32_at = |at: usize| data.get(at..at + 4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
+    let u32_at = |at: usize| {
+        data.get(at..at + 4)
+            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    };
     if data.get(..6) != Some(&[0x7F, b'E', b'L', b'F', 1, 1]) {
         return Err(bad("header"));
     }
@@ -516,7 +575,12 @@ pub fn elf_symbols(path: &Path) -> Result<Vec<ElfSymbol>, String> {
     let shnum = u16_at(0x30).ok_or_else(|| bad("e_shnum"))? as usize;
     let section = |k: usize| -> Option<(u32, usize, usize, usize)> {
         let h = shoff + k * shentsize;
-        Some((u32_at(h + 4)?, u32_at(h + 16)? as usize, u32_at(h + 20)? as usize, u32_at(h + 24)? as usize))
+        Some((
+            u32_at(h + 4)?,
+            u32_at(h + 16)? as usize,
+            u32_at(h + 20)? as usize,
+            u32_at(h + 24)? as usize,
+        ))
     };
     const SHT_SYMTAB: u32 = 2;
     let (_, sym_off, sym_size, strtab) = (0..shnum)
@@ -524,7 +588,9 @@ pub fn elf_symbols(path: &Path) -> Result<Vec<ElfSymbol>, String> {
         .find(|s| s.0 == SHT_SYMTAB)
         .ok_or_else(|| format!("{}: no symbol table (stripped?)", path.display()))?;
     let (_, str_off, str_size, _) = section(strtab).ok_or_else(|| bad("string table"))?;
-    let strings = data.get(str_off..str_off + str_size).ok_or_else(|| bad("string table bounds"))?;
+    let strings = data
+        .get(str_off..str_off + str_size)
+        .ok_or_else(|| bad("string table bounds"))?;
     let mut out = Vec::new();
     for at in (sym_off..sym_off + sym_size).step_by(16) {
         let (Some(name), Some(addr), Some(size)) = (u32_at(at), u32_at(at + 4), u32_at(at + 8)) else {
@@ -533,7 +599,11 @@ pub fn elf_symbols(path: &Path) -> Result<Vec<ElfSymbol>, String> {
         let name = strings.get(name as usize..).unwrap_or(&[]);
         let name = &name[..name.iter().position(|&b| b == 0).unwrap_or(name.len())];
         if !name.is_empty() {
-            out.push(ElfSymbol { name: String::from_utf8_lossy(name).into_owned(), addr, size });
+            out.push(ElfSymbol {
+                name: String::from_utf8_lossy(name).into_owned(),
+                addr,
+                size,
+            });
         }
     }
     Ok(out)
@@ -581,7 +651,10 @@ pub fn plant_bench_native() -> Result<Vec<u64>, String> {
     }
     let f = run::<f32>()?;
     let q = run::<model_core::Q32>()?;
-    Ok(f.iter().map(|x| u64::from(x.to_bits())).chain(q.iter().map(|x| x.to_bits() as u64)).collect())
+    Ok(f.iter()
+        .map(|x| u64::from(x.to_bits()))
+        .chain(q.iter().map(|x| x.to_bits() as u64))
+        .collect())
 }
 
 /// Runs the firmware's bench mode under the instruction-counting plugin: the plant steps,
@@ -589,26 +662,56 @@ pub fn plant_bench_native() -> Result<Vec<u64>, String> {
 pub fn target_bench(elf: &Path, frames: &[SensorFrame], log_dir: &Path) -> Result<TargetBench, String> {
     let plugin = plugin_path();
     if !plugin.is_file() {
-        return Err(format!("{}: missing; run tools/setup-qemu.sh (it builds the plugin with gcc)", plugin.display()));
+        return Err(format!(
+            "{}: missing; run tools/setup-qemu.sh (it builds the plugin with gcc)",
+            plugin.display()
+        ));
     }
     let symbols = elf_symbols(elf)?;
     let mut spec = plugin.display().to_string();
     for s in symbols.iter().filter(|s| s.name.starts_with("pil_begin_")) {
-        spec.push_str(&format!(",begin={}:{:#x}:{}", &s.name["pil_begin_".len()..], s.addr, s.size));
+        spec.push_str(&format!(
+            ",begin={}:{:#x}:{}",
+            &s.name["pil_begin_".len()..],
+            s.addr,
+            s.size
+        ));
     }
-    let end = symbols.iter().find(|s| s.name == "pil_end").ok_or_else(|| format!("{}: no pil_end marker", elf.display()))?;
+    let end = symbols
+        .iter()
+        .find(|s| s.name == "pil_end")
+        .ok_or_else(|| format!("{}: no pil_end marker", elf.display()))?;
     std::fs::create_dir_all(log_dir).map_err(|e| format!("{}: {e}", log_dir.display()))?;
     let counts_file = log_dir.join("insn-counts.txt");
-    spec.push_str(&format!(",end={:#x}:{},out={}", end.addr, end.size, counts_file.display()));
-    let qemu = QemuOptions { args: vec!["bench".into()], plugin: Some(spec), log_dir: Some(log_dir.to_path_buf()) };
+    spec.push_str(&format!(
+        ",end={:#x}:{},out={}",
+        end.addr,
+        end.size,
+        counts_file.display()
+    ));
+    let qemu = QemuOptions {
+        args: vec!["bench".into()],
+        plugin: Some(spec),
+        log_dir: Some(log_dir.to_path_buf()),
+    };
     // Counting every instruction slows the emulation: generous answer timeout.
-    let mut link = PilLink::start(elf, PilOptions { qemu, answer_timeout: Duration::from_millis(500), ..PilOptions::default() })?;
+    let mut link = PilLink::start(
+        elf,
+        PilOptions {
+            qemu,
+            answer_timeout: Duration::from_millis(500),
+            ..PilOptions::default()
+        },
+    )?;
     let plant_bits_target = read_plant_record(&mut link)?;
     let lockstep = run_frames(&mut link, frames)?;
     drop(link);
     let native = run_frames_native(frames)?;
-    let answers_equal_native =
-        native.iter().zip(&lockstep.answers).all(|(n, p)| *n == ActuatorFrame { bad_frames: 0, ..*p }) && native.len() == lockstep.answers.len();
+    let answers_equal_native = native
+        .iter()
+        .zip(&lockstep.answers)
+        .all(|(n, p)| *n == ActuatorFrame { bad_frames: 0, ..*p })
+        && native.len() == lockstep.answers.len();
 
     let text = std::fs::read_to_string(&counts_file).map_err(|e| format!("{}: {e}", counts_file.display()))?;
     let mut by_label: Vec<(String, Vec<u64>)> = Vec::new();
@@ -617,7 +720,9 @@ pub fn target_bench(elf: &Path, frames: &[SensorFrame], log_dir: &Path) -> Resul
         let (Some(label), Some(count), None) = (it.next(), it.next(), it.next()) else {
             return Err(format!("{}:{}: expected `label count`", counts_file.display(), k + 1));
         };
-        let count: u64 = count.parse().map_err(|_| format!("{}:{}: bad count {count}", counts_file.display(), k + 1))?;
+        let count: u64 = count
+            .parse()
+            .map_err(|_| format!("{}:{}: bad count {count}", counts_file.display(), k + 1))?;
         match by_label.iter_mut().find(|(l, _)| l == label) {
             Some((_, v)) => v.push(count),
             None => by_label.push((label.to_string(), vec![count])),
@@ -642,7 +747,14 @@ pub fn target_bench(elf: &Path, frames: &[SensorFrame], log_dir: &Path) -> Resul
             }
         })
         .collect();
-    Ok(TargetBench { counts, empty_overhead, plant_bits_target, plant_bits_host: plant_bench_native()?, lockstep, answers_equal_native })
+    Ok(TargetBench {
+        counts,
+        empty_overhead,
+        plant_bits_target,
+        plant_bits_host: plant_bench_native()?,
+        lockstep,
+        answers_equal_native,
+    })
 }
 
 /// The bench's plant-state record (`firmware-qemu/src/bench.rs`): magic 0x50 0xB7, a word
@@ -654,7 +766,9 @@ fn read_plant_record(link: &mut PilLink) -> Result<Vec<u64>, String> {
     let mut buf: Vec<u8> = Vec::new();
     let stream = link.board().stream();
     // The plant steps run under the plugin first: seconds, not minutes.
-    stream.set_read_timeout(Some(Duration::from_secs(60))).map_err(|e| e.to_string())?;
+    stream
+        .set_read_timeout(Some(Duration::from_secs(60)))
+        .map_err(|e| e.to_string())?;
     let mut chunk = [0u8; 256];
     loop {
         if let Some(at) = buf.windows(2).position(|w| w == MAGIC) {
@@ -664,10 +778,14 @@ fn read_plant_record(link: &mut PilLink) -> Result<Vec<u64>, String> {
                 if rec[2] as usize != words || model_core::ecu::frame::crc16(&rec[2..total - 2]) != crc {
                     return Err("the plant-state record from the target is corrupt".into());
                 }
-                return Ok((0..words).map(|k| u64::from_le_bytes(rec[3 + 8 * k..11 + 8 * k].try_into().unwrap_or([0; 8]))).collect());
+                return Ok((0..words)
+                    .map(|k| u64::from_le_bytes(rec[3 + 8 * k..11 + 8 * k].try_into().unwrap_or([0; 8])))
+                    .collect());
             }
         }
-        let n = stream.read(&mut chunk).map_err(|e| format!("waiting for the plant bench's record: {e}"))?;
+        let n = stream
+            .read(&mut chunk)
+            .map_err(|e| format!("waiting for the plant bench's record: {e}"))?;
         if n == 0 {
             return Err("QEMU closed the link before the plant bench's record".into());
         }
@@ -720,7 +838,9 @@ impl PilRun {
         );
         match (self.compared_steps, &self.first_difference) {
             (Some(n), None) => t.push_str(&format!("native run: all {n} actuator frames bit-identical\n")),
-            (Some(n), Some((k, a, b))) => t.push_str(&format!("native run: {n} steps compared, first difference at step {k}:\n  native {a:?}\n  PIL    {b:?}\n")),
+            (Some(n), Some((k, a, b))) => t.push_str(&format!(
+                "native run: {n} steps compared, first difference at step {k}:\n  native {a:?}\n  PIL    {b:?}\n"
+            )),
             _ => {}
         }
         t
@@ -738,9 +858,22 @@ pub fn run_scenario(
     log_dir: &Path,
 ) -> Result<PilRun, String> {
     use crate::run::{run_with, NativeLink, RunOptions};
-    let opts = RunOptions { until_s, keep_frames: compare_native };
-    let qemu = QemuOptions { log_dir: Some(log_dir.to_path_buf()), ..QemuOptions::default() };
-    let mut link = PilLink::start(elf, PilOptions { qemu, faults, ..PilOptions::default() })?;
+    let opts = RunOptions {
+        until_s,
+        keep_frames: compare_native,
+    };
+    let qemu = QemuOptions {
+        log_dir: Some(log_dir.to_path_buf()),
+        ..QemuOptions::default()
+    };
+    let mut link = PilLink::start(
+        elf,
+        PilOptions {
+            qemu,
+            faults,
+            ..PilOptions::default()
+        },
+    )?;
     let start = Instant::now();
     let output = run_with(scenario, &mut link, &opts)?;
     let wall_s = start.elapsed().as_secs_f64();
@@ -758,19 +891,37 @@ pub fn run_scenario(
             .find(|(_, ((_, n), (_, p)))| *n != ActuatorFrame { bad_frames: 0, ..*p })
             .map(|(k, ((_, n), (_, p)))| (k, *n, *p));
         if native.frames.len() != output.frames.len() && first_difference.is_none() {
-            return Err(format!("native run has {} steps, PIL run {}", native.frames.len(), output.frames.len()));
+            return Err(format!(
+                "native run has {} steps, PIL run {}",
+                native.frames.len(),
+                output.frames.len()
+            ));
         }
     }
-    Ok(PilRun { output, stats, wall_s, compared_steps, first_difference })
+    Ok(PilRun {
+        output,
+        stats,
+        wall_s,
+        compared_steps,
+        first_difference,
+    })
 }
 
 impl TargetBench {
     /// The instruction-count table.
     pub fn text(&self) -> String {
-        let mut t = String::from("instructions per step on the emulated Cortex-M4 (QEMU TCG plugin; marker calls subtracted)\n");
-        t.push_str(&format!("{:<22} {:>6} {:>10} {:>9} {:>9}\n", "what", "steps", "mean", "min", "max"));
+        let mut t = String::from(
+            "instructions per step on the emulated Cortex-M4 (QEMU TCG plugin; marker calls subtracted)\n",
+        );
+        t.push_str(&format!(
+            "{:<22} {:>6} {:>10} {:>9} {:>9}\n",
+            "what", "steps", "mean", "min", "max"
+        ));
         for c in &self.counts {
-            t.push_str(&format!("{:<22} {:>6} {:>10.0} {:>9} {:>9}\n", c.label, c.n, c.mean, c.min, c.max));
+            t.push_str(&format!(
+                "{:<22} {:>6} {:>10.0} {:>9} {:>9}\n",
+                c.label, c.n, c.mean, c.min, c.max
+            ));
         }
         let n = model_core::plant_bench::N_STATE;
         let f32_exact = self.plant_bits_target[..n] == self.plant_bits_host[..n];
@@ -783,7 +934,11 @@ impl TargetBench {
         t.push_str(&format!(
             "lockstep part: {} steps, actuator frames {} the native core's\n",
             self.lockstep.answers.len(),
-            if self.answers_equal_native { "equal to" } else { "DIFFERENT from" }
+            if self.answers_equal_native {
+                "equal to"
+            } else {
+                "DIFFERENT from"
+            }
         ));
         t
     }

@@ -74,30 +74,89 @@ pub fn line_plot(title: &str, x_label: &str, y_label: &str, series: &[Series], h
     let sx = |x: f64| ml + (x - x0) / (x1 - x0) * (w - ml - mr);
     let sy = |y: f64| mt + (1.0 - (y - y0) / (y1 - y0)) * (h - mt - mb);
     let mut s = String::new();
-    let _ = writeln!(s, r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" font-family="sans-serif" font-size="12">"#);
+    let _ = writeln!(
+        s,
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" font-family="sans-serif" font-size="12">"#
+    );
     let _ = writeln!(s, r#"<rect width="100%" height="100%" fill="white"/>"#);
-    let _ = writeln!(s, r#"<text x="{}" y="22" font-size="15" text-anchor="middle">{}</text>"#, w / 2.0, escape(title));
-    let _ = writeln!(s, r#"<rect x="{ml}" y="{mt}" width="{}" height="{}" fill="none" stroke="black"/>"#, w - ml - mr, h - mt - mb);
+    let _ = writeln!(
+        s,
+        r#"<text x="{}" y="22" font-size="15" text-anchor="middle">{}</text>"#,
+        w / 2.0,
+        escape(title)
+    );
+    let _ = writeln!(
+        s,
+        r#"<rect x="{ml}" y="{mt}" width="{}" height="{}" fill="none" stroke="black"/>"#,
+        w - ml - mr,
+        h - mt - mb
+    );
     for k in 0..=4 {
         let fx = x0 + (x1 - x0) * k as f64 / 4.0;
         let fy = y0 + (y1 - y0) * k as f64 / 4.0;
-        let _ = writeln!(s, r#"<text x="{:.1}" y="{}" text-anchor="middle">{}</text>"#, sx(fx), h - mb + 16.0, tick(fx));
-        let _ = writeln!(s, r#"<text x="{}" y="{:.1}" text-anchor="end">{}</text>"#, ml - 4.0, sy(fy) + 4.0, tick(fy));
+        let _ = writeln!(
+            s,
+            r#"<text x="{:.1}" y="{}" text-anchor="middle">{}</text>"#,
+            sx(fx),
+            h - mb + 16.0,
+            tick(fx)
+        );
+        let _ = writeln!(
+            s,
+            r#"<text x="{}" y="{:.1}" text-anchor="end">{}</text>"#,
+            ml - 4.0,
+            sy(fy) + 4.0,
+            tick(fy)
+        );
     }
-    let _ = writeln!(s, r#"<text x="{}" y="{}" text-anchor="middle">{}</text>"#, w / 2.0, h - 10.0, escape(x_label));
-    let _ = writeln!(s, r#"<text x="16" y="{}" text-anchor="middle" transform="rotate(-90 16 {})">{}</text>"#, h / 2.0, h / 2.0, escape(y_label));
+    let _ = writeln!(
+        s,
+        r#"<text x="{}" y="{}" text-anchor="middle">{}</text>"#,
+        w / 2.0,
+        h - 10.0,
+        escape(x_label)
+    );
+    let _ = writeln!(
+        s,
+        r#"<text x="16" y="{}" text-anchor="middle" transform="rotate(-90 16 {})">{}</text>"#,
+        h / 2.0,
+        h / 2.0,
+        escape(y_label)
+    );
     for &v in hlines {
-        let _ = writeln!(s, r##"<line x1="{ml}" x2="{}" y1="{:.1}" y2="{:.1}" stroke="#888" stroke-dasharray="5,4"/>"##, w - mr, sy(v), sy(v));
+        let _ = writeln!(
+            s,
+            r##"<line x1="{ml}" x2="{}" y1="{:.1}" y2="{:.1}" stroke="#888" stroke-dasharray="5,4"/>"##,
+            w - mr,
+            sy(v),
+            sy(v)
+        );
     }
     for (i, (ser, p)) in series.iter().zip(&pts).enumerate() {
         let mut d = String::new();
         for (k, &(x, y)) in p.iter().filter(|(x, y)| x.is_finite() && y.is_finite()).enumerate() {
             let _ = write!(d, "{}{:.1},{:.1} ", if k == 0 { "M" } else { "L" }, sx(x), sy(y));
         }
-        let _ = writeln!(s, r#"<path d="{d}" fill="none" stroke="{}" stroke-width="1.2"/>"#, ser.colour);
+        let _ = writeln!(
+            s,
+            r#"<path d="{d}" fill="none" stroke="{}" stroke-width="1.2"/>"#,
+            ser.colour
+        );
         let ly = mt + 14.0 + 16.0 * i as f64;
-        let _ = writeln!(s, r#"<line x1="{}" x2="{}" y1="{ly}" y2="{ly}" stroke="{}" stroke-width="2"/>"#, w - mr - 170.0, w - mr - 150.0, ser.colour);
-        let _ = writeln!(s, r#"<text x="{}" y="{}">{}</text>"#, w - mr - 145.0, ly + 4.0, escape(ser.label));
+        let _ = writeln!(
+            s,
+            r#"<line x1="{}" x2="{}" y1="{ly}" y2="{ly}" stroke="{}" stroke-width="2"/>"#,
+            w - mr - 170.0,
+            w - mr - 150.0,
+            ser.colour
+        );
+        let _ = writeln!(
+            s,
+            r#"<text x="{}" y="{}">{}</text>"#,
+            w - mr - 145.0,
+            ly + 4.0,
+            escape(ser.label)
+        );
     }
     s.push_str("</svg>\n");
     s
@@ -138,9 +197,24 @@ pub fn diagnosis_plots(d: &Diagnosis, dir: &Path) -> std::io::Result<Vec<PathBuf
             "validation sample",
             &d.output,
             &[
-                Series { label: "measured", colour: "black", x: &k, y: &d.baseline.measured },
-                Series { label: "baseline", colour: "#d62728", x: &k, y: &d.baseline.predicted },
-                Series { label: &ext_label, colour: "#1f77b4", x: &k, y: &d.extended.predicted },
+                Series {
+                    label: "measured",
+                    colour: "black",
+                    x: &k,
+                    y: &d.baseline.measured,
+                },
+                Series {
+                    label: "baseline",
+                    colour: "#d62728",
+                    x: &k,
+                    y: &d.baseline.predicted,
+                },
+                Series {
+                    label: &ext_label,
+                    colour: "#1f77b4",
+                    x: &k,
+                    y: &d.extended.predicted,
+                },
             ],
             &[],
         ),
@@ -154,8 +228,18 @@ pub fn diagnosis_plots(d: &Diagnosis, dir: &Path) -> std::io::Result<Vec<PathBuf
             "validation sample",
             &d.output,
             &[
-                Series { label: "baseline", colour: "#d62728", x: &k, y: &rb },
-                Series { label: &ext_label, colour: "#1f77b4", x: &k, y: &re },
+                Series {
+                    label: "baseline",
+                    colour: "#d62728",
+                    x: &k,
+                    y: &rb,
+                },
+                Series {
+                    label: &ext_label,
+                    colour: "#1f77b4",
+                    x: &k,
+                    y: &re,
+                },
             ],
             &[0.0],
         ),
@@ -171,8 +255,18 @@ pub fn diagnosis_plots(d: &Diagnosis, dir: &Path) -> std::io::Result<Vec<PathBuf
             "lag (samples)",
             "normalised autocorrelation",
             &[
-                Series { label: "baseline", colour: "#d62728", x: &lag_x, y: &ab },
-                Series { label: &ext_label, colour: "#1f77b4", x: &lag_x, y: &ae },
+                Series {
+                    label: "baseline",
+                    colour: "#d62728",
+                    x: &lag_x,
+                    y: &ab,
+                },
+                Series {
+                    label: &ext_label,
+                    colour: "#1f77b4",
+                    x: &lag_x,
+                    y: &ae,
+                },
             ],
             &[d.whiteness.band, -d.whiteness.band],
         ),
@@ -188,7 +282,12 @@ pub fn diagnosis_plots(d: &Diagnosis, dir: &Path) -> std::io::Result<Vec<PathBuf
         let series: Vec<Series> = worst
             .iter()
             .zip(colours)
-            .map(|(c, colour)| Series { label: &c.name, colour, x: &lag_x[..c.correlation.len().min(lag_x.len())], y: &c.correlation })
+            .map(|(c, colour)| Series {
+                label: &c.name,
+                colour,
+                x: &lag_x[..c.correlation.len().min(lag_x.len())],
+                y: &c.correlation,
+            })
             .collect();
         put(
             "cross_correlation.svg",
@@ -221,7 +320,18 @@ mod tests {
 
     #[test]
     fn svg_is_well_formed_and_escapes_text() {
-        let s = line_plot("a < b & c", "x", "y", &[Series { label: "l", colour: "red", x: &[0.0, 1.0], y: &[1.0, f64::NAN] }], &[0.5]);
+        let s = line_plot(
+            "a < b & c",
+            "x",
+            "y",
+            &[Series {
+                label: "l",
+                colour: "red",
+                x: &[0.0, 1.0],
+                y: &[1.0, f64::NAN],
+            }],
+            &[0.5],
+        );
         assert!(s.starts_with("<svg") && s.trim_end().ends_with("</svg>"));
         assert!(s.contains("a &lt; b &amp; c"));
     }

@@ -44,7 +44,13 @@ pub fn autocorrelation(e: &[f64], max_lag: usize) -> Vec<f64> {
     let n = c.len();
     let r0: f64 = c.iter().map(|v| v * v).sum();
     (0..=max_lag.min(n.saturating_sub(1)))
-        .map(|k| if r0 > 0.0 { c[..n - k].iter().zip(&c[k..]).map(|(a, b)| a * b).sum::<f64>() / r0 } else { 0.0 })
+        .map(|k| {
+            if r0 > 0.0 {
+                c[..n - k].iter().zip(&c[k..]).map(|(a, b)| a * b).sum::<f64>() / r0
+            } else {
+                0.0
+            }
+        })
         .collect()
 }
 
@@ -122,7 +128,16 @@ pub fn whiteness(e: &[f64], lags: usize) -> Whiteness {
     let q = n as f64 * (n as f64 + 2.0) * q;
     let limit = chi2_99(used);
     let pass = q < limit && outside <= (used / 100).max(1);
-    Whiteness { lags: used, band, max_abs_rho, max_lag, outside, ljung_box_q: q, ljung_box_limit: limit, pass }
+    Whiteness {
+        lags: used,
+        band,
+        max_abs_rho,
+        max_lag,
+        outside,
+        ljung_box_q: q,
+        ljung_box_limit: limit,
+        pass,
+    }
 }
 
 /// Correlation of the residual with one signal, summarised.
@@ -149,7 +164,14 @@ pub fn cross_check(name: &str, e: &[f64], u: &[f64], lags: usize) -> CrossCheck 
         }
     }
     let band = band99(e.len().min(u.len()));
-    CrossCheck { name: name.to_string(), max_abs, at_lag, band, pass: max_abs <= band, correlation: c }
+    CrossCheck {
+        name: name.to_string(),
+        max_abs,
+        at_lag,
+        band,
+        pass: max_abs <= band,
+        correlation: c,
+    }
 }
 
 /// The residual in one group of an operating condition.
@@ -197,15 +219,30 @@ pub fn group_check(name: &str, e: &[f64], condition: &[f64]) -> GroupCheck {
     type GroupOf = Box<dyn Fn(f64) -> Option<usize>>;
     let (labels, group_of): (Vec<String>, GroupOf) = if values.len() <= 3 {
         let vals = values.clone();
-        (values.iter().map(|v| format!("= {v}")).collect(), Box::new(move |x: f64| vals.iter().position(|v| *v == x)))
+        (
+            values.iter().map(|v| format!("= {v}")).collect(),
+            Box::new(move |x: f64| vals.iter().position(|v| *v == x)),
+        )
     } else {
         let mut sorted: Vec<f64> = c.iter().copied().filter(|v| v.is_finite()).collect();
         sorted.sort_by(f64::total_cmp);
         let q = |f: f64| sorted[((sorted.len() - 1) as f64 * f).round() as usize];
         let (q1, q2) = (q(1.0 / 3.0), q(2.0 / 3.0));
         (
-            vec![format!("low (< {})", short(q1)), format!("middle ({}..{})", short(q1), short(q2)), format!("high (≥ {})", short(q2))],
-            Box::new(move |x: f64| x.is_finite().then_some(if x < q1 { 0 } else if x < q2 { 1 } else { 2 })),
+            vec![
+                format!("low (< {})", short(q1)),
+                format!("middle ({}..{})", short(q1), short(q2)),
+                format!("high (≥ {})", short(q2)),
+            ],
+            Box::new(move |x: f64| {
+                x.is_finite().then_some(if x < q1 {
+                    0
+                } else if x < q2 {
+                    1
+                } else {
+                    2
+                })
+            }),
         )
     };
     let blocks = 40.min(n / 10).max(2);
@@ -230,7 +267,12 @@ pub fn group_check(name: &str, e: &[f64], condition: &[f64]) -> GroupCheck {
             continue;
         }
         let mean = sum[g].iter().sum::<f64>() / total as f64;
-        groups.push(Group { label, samples: total, mean, rmse: (sum2[g] / total as f64).sqrt() });
+        groups.push(Group {
+            label,
+            samples: total,
+            mean,
+            rmse: (sum2[g] / total as f64).sqrt(),
+        });
         kept.push(g);
     }
     let mut z = 0.0f64;
@@ -240,15 +282,28 @@ pub fn group_check(name: &str, e: &[f64], condition: &[f64]) -> GroupCheck {
             let (ni, nj) = (groups[a].samples as f64, groups[b].samples as f64);
             // Linearised contribution of each block to the difference of the two means.
             let var: f64 = (0..blocks)
-                .map(|k| ((sum[i][k] - mi * count[i][k] as f64) / ni - (sum[j][k] - mj * count[j][k] as f64) / nj).powi(2))
+                .map(|k| {
+                    ((sum[i][k] - mi * count[i][k] as f64) / ni - (sum[j][k] - mj * count[j][k] as f64) / nj).powi(2)
+                })
                 .sum::<f64>()
                 * blocks as f64
                 / (blocks - 1) as f64;
             let d = (mi - mj).abs();
-            z = z.max(if var > 0.0 { d / var.sqrt() } else if d > 0.0 { f64::INFINITY } else { 0.0 });
+            z = z.max(if var > 0.0 {
+                d / var.sqrt()
+            } else if d > 0.0 {
+                f64::INFINITY
+            } else {
+                0.0
+            });
         }
     }
-    GroupCheck { name: name.to_string(), groups, z, pass: z < Z_GROUPS }
+    GroupCheck {
+        name: name.to_string(),
+        groups,
+        z,
+        pass: z < Z_GROUPS,
+    }
 }
 
 /// A group boundary for a label: 4 significant digits.
@@ -269,7 +324,11 @@ mod tests {
         assert!(plain.pass && plain.groups.len() == 3, "{plain:?}");
         // The same noise plus an offset of a third of its RMS where the voltage is high (the
         // upper third: 12 and 13 V of the four levels).
-        let biased: Vec<f64> = noise.iter().zip(&volt).map(|(e, v)| e + if *v >= 12.0 { 0.1 } else { 0.0 }).collect();
+        let biased: Vec<f64> = noise
+            .iter()
+            .zip(&volt)
+            .map(|(e, v)| e + if *v >= 12.0 { 0.1 } else { 0.0 })
+            .collect();
         let g = group_check("supply voltage", &biased, &volt);
         assert!(!g.pass && g.z > 8.0, "{g:?}");
         let high = g.groups.iter().find(|g| g.label.starts_with("high")).unwrap();
@@ -278,16 +337,31 @@ mod tests {
         let mut sign: Vec<f64> = (0..6000).map(|k| if (k / 300) % 2 == 0 { 1.0 } else { -1.0 }).collect();
         sign[17] = 0.0;
         let s = group_check("velocity sign", &noise, &sign);
-        assert_eq!(s.groups.iter().map(|g| g.label.as_str()).collect::<Vec<_>>(), ["= -1", "= 1"]);
+        assert_eq!(
+            s.groups.iter().map(|g| g.label.as_str()).collect::<Vec<_>>(),
+            ["= -1", "= 1"]
+        );
         assert!(s.pass, "{s:?}");
         // A slowly wandering residual: its correlation widens the standard error, so a slow
         // drift that happens to line up with a condition is not called a bias as easily.
         let mut y = 0.0;
-        let drift: Vec<f64> = noise.iter().map(|&v| { y = 0.995 * y + 0.1 * v; y }).collect();
+        let drift: Vec<f64> = noise
+            .iter()
+            .map(|&v| {
+                y = 0.995 * y + 0.1 * v;
+                y
+            })
+            .collect();
         let d = group_check("supply voltage", &drift, &volt);
         let naive_se = (d.groups.iter().map(|g| g.rmse * g.rmse / g.samples as f64).sum::<f64>()).sqrt();
-        let spread = d.groups.iter().map(|g| g.mean).fold(f64::MIN, f64::max) - d.groups.iter().map(|g| g.mean).fold(f64::MAX, f64::min);
-        assert!(d.z < spread / naive_se / 5.0, "z {} vs naive {}", d.z, spread / naive_se);
+        let spread = d.groups.iter().map(|g| g.mean).fold(f64::MIN, f64::max)
+            - d.groups.iter().map(|g| g.mean).fold(f64::MAX, f64::min);
+        assert!(
+            d.z < spread / naive_se / 5.0,
+            "z {} vs naive {}",
+            d.z,
+            spread / naive_se
+        );
     }
 
     /// A deterministic white sequence (xorshift), zero mean.
@@ -309,7 +383,13 @@ mod tests {
         assert!(whiteness(&w, 50).pass, "{:?}", whiteness(&w, 50));
         // First-order filtered noise is strongly correlated.
         let mut y = 0.0;
-        let coloured: Vec<f64> = w.iter().map(|&v| { y = 0.9 * y + v; y }).collect();
+        let coloured: Vec<f64> = w
+            .iter()
+            .map(|&v| {
+                y = 0.9 * y + v;
+                y
+            })
+            .collect();
         let wt = whiteness(&coloured, 50);
         assert!(!wt.pass && wt.max_lag == 1 && wt.max_abs_rho > 0.85, "{wt:?}");
     }
@@ -319,7 +399,9 @@ mod tests {
         let u = white(4000, 7);
         // Residual = input delayed by 5 samples + independent noise.
         let noise = white(4000, 99);
-        let e: Vec<f64> = (0..4000).map(|t| if t >= 5 { u[t - 5] } else { 0.0 } + 0.5 * noise[t]).collect();
+        let e: Vec<f64> = (0..4000)
+            .map(|t| if t >= 5 { u[t - 5] } else { 0.0 } + 0.5 * noise[t])
+            .collect();
         let c = cross_check("u", &e, &u, 20);
         assert!(!c.pass && c.at_lag == 5 && c.max_abs > 0.8, "{c:?}");
         let indep = cross_check("noise2", &white(4000, 1234), &u, 20);

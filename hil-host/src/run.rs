@@ -66,7 +66,10 @@ impl Profile {
         }
         for w in self.0.windows(2) {
             if w[1].0 <= w[0].0 || w[1].0.is_nan() {
-                return Err(format!("profile `{name}`: times must increase ({} then {})", w[0].0, w[1].0));
+                return Err(format!(
+                    "profile `{name}`: times must increase ({} then {})",
+                    w[0].0, w[1].0
+                ));
             }
         }
         if self.0.iter().any(|(t, v)| !t.is_finite() || !v.is_finite()) {
@@ -259,7 +262,13 @@ pub struct Scenario {
 }
 
 fn d_engine() -> Profile {
-    Profile(vec![(0.0, 800.0), (3.0, 800.0), (5.0, 1400.0), (8.0, 1400.0), (9.0, 1100.0)])
+    Profile(vec![
+        (0.0, 800.0),
+        (3.0, 800.0),
+        (5.0, 1400.0),
+        (8.0, 1400.0),
+        (9.0, 1100.0),
+    ])
 }
 fn d_batt() -> Profile {
     constant(14.0)
@@ -283,10 +292,22 @@ fn d_tank() -> f64 {
     40.0
 }
 fn d_phase() -> Profile {
-    Profile(vec![(0.0, 10.0), (1.0, 10.0), (1.001, 30.0), (5.0, 30.0), (5.001, 15.0)])
+    Profile(vec![
+        (0.0, 10.0),
+        (1.0, 10.0),
+        (1.001, 30.0),
+        (5.0, 30.0),
+        (5.001, 15.0),
+    ])
 }
 fn d_wg() -> Profile {
-    Profile(vec![(0.0, 20.0), (2.0, 20.0), (2.001, 60.0), (6.0, 60.0), (6.001, 40.0)])
+    Profile(vec![
+        (0.0, 20.0),
+        (2.0, 20.0),
+        (2.001, 60.0),
+        (6.0, 60.0),
+        (6.001, 40.0),
+    ])
 }
 fn d_bypass() -> Profile {
     constant(0.0)
@@ -336,10 +357,16 @@ impl Scenario {
     fn check(&self) -> Result<(), String> {
         // The logs are held in memory until written (the EHVVA log at 20 kHz: ~90 B a row).
         if !(self.duration_s > 0.0 && self.duration_s <= MAX_DURATION_S) {
-            return Err(format!("duration_s = {} must lie in (0, {MAX_DURATION_S}] s", self.duration_s));
+            return Err(format!(
+                "duration_s = {} must lie in (0, {MAX_DURATION_S}] s",
+                self.duration_s
+            ));
         }
         if !(self.p_tank_initial_kpa.is_finite() && (1.0..=110.0).contains(&self.p_tank_initial_kpa)) {
-            return Err(format!("p_tank_initial_kpa = {} must lie in 1..110", self.p_tank_initial_kpa));
+            return Err(format!(
+                "p_tank_initial_kpa = {} must lie in 1..110",
+                self.p_tank_initial_kpa
+            ));
         }
         for (name, p) in self.profiles() {
             p.check(name)?;
@@ -407,7 +434,9 @@ impl NativeLink {
         Self::with_config(EcuCoreConfig::default())
     }
     pub fn with_config(cfg: EcuCoreConfig) -> Result<Self, String> {
-        Ok(Self { core: EcuCore::new(cfg).map_err(|e| format!("ECU calibration: {e}"))? })
+        Ok(Self {
+            core: EcuCore::new(cfg).map_err(|e| format!("ECU calibration: {e}"))?,
+        })
     }
     /// The ECU's internals after the last step (measurements, engine snapshot, task outputs).
     pub fn core(&self) -> &EcuCore {
@@ -519,14 +548,21 @@ impl Summary {
             self.wall_s,
             self.simulated_s / self.wall_s.max(1e-9)
         );
-        s += &format!("EVVT   cam phase tracking: RMS error {:.2} deg\n", self.evvt_rms_error_deg);
+        s += &format!(
+            "EVVT   cam phase tracking: RMS error {:.2} deg\n",
+            self.evvt_rms_error_deg
+        );
         for (t, settle) in &self.evvt_settling_s {
             match settle {
                 Some(d) => s += &format!("       step at {t:.2} s settled (±1 deg) in {d:.2} s\n"),
                 None => s += &format!("       step at {t:.2} s did not settle (±1 deg)\n"),
             }
         }
-        s += &format!("vacuum wastegate tracking: RMS error {:.2} %, pump on {:.0} % of the time\n", self.vacuum_rms_error_pct, 100.0 * self.vacuum_pump_on_fraction);
+        s += &format!(
+            "vacuum wastegate tracking: RMS error {:.2} %, pump on {:.0} % of the time\n",
+            self.vacuum_rms_error_pct,
+            100.0 * self.vacuum_pump_on_fraction
+        );
         for (t, settle) in &self.vacuum_settling_s {
             match settle {
                 Some(d) => s += &format!("       step at {t:.2} s settled (±2 %) in {d:.2} s\n"),
@@ -549,14 +585,22 @@ impl Summary {
             s += "faults raised by the ECU: none\n";
         }
         for e in &self.fault_events {
-            s += &format!("       {:.3} s {} {}\n", e.t_s, if e.raised { "raised " } else { "cleared" }, e.fault.name());
+            s += &format!(
+                "       {:.3} s {} {}\n",
+                e.t_s,
+                if e.raised { "raised " } else { "cleared" },
+                e.fault.name()
+            );
         }
         s
     }
 
     /// The first time `fault` was raised.
     pub fn raised_at(&self, fault: Fault) -> Option<f64> {
-        self.fault_events.iter().find(|e| e.fault == fault && e.raised).map(|e| e.t_s)
+        self.fault_events
+            .iter()
+            .find(|e| e.fault == fault && e.raised)
+            .map(|e| e.t_s)
     }
 }
 
@@ -617,7 +661,12 @@ pub fn run_with(scenario: &Scenario, link: &mut dyn EcuLink, opts: &RunOptions) 
         lift_high,
         snubber_on,
     };
-    let mut valve = EhvvaReduced::<f32>::new(&ehvva_params, &ehvva_inputs(0.0, sc.lift_high.at(0.0), sc.snubber_on.at(0.0)), EHVVA_DT_MS).map_err(|e| err("EHVVA plant", &e))?;
+    let mut valve = EhvvaReduced::<f32>::new(
+        &ehvva_params,
+        &ehvva_inputs(0.0, sc.lift_high.at(0.0), sc.snubber_on.at(0.0)),
+        EHVVA_DT_MS,
+    )
+    .map_err(|e| err("EHVVA plant", &e))?;
     let mut coil = RlCoil::<f64>::new(&solenoid);
     let (mut pilot_armed, mut pilot_dropped) = (false, false);
     let mut evvt = EvvtPlant::<f32>::new(&EvvtParams::default()).map_err(|e| err("EVVT plant", &e))?;
@@ -627,7 +676,10 @@ pub fn run_with(scenario: &Scenario, link: &mut dyn EcuLink, opts: &RunOptions) 
     let mut engine = CrankSignal::new(TriggerWheel::sixty_minus_two(), 5.0);
 
     let mut out = RunOutput {
-        summary: Summary { faults_injected: sc.faults.iter().map(describe_fault).collect(), ..Default::default() },
+        summary: Summary {
+            faults_injected: sc.faults.iter().map(describe_fault).collect(),
+            ..Default::default()
+        },
         ..Default::default()
     };
     let mut faults_before = FaultSet::default();
@@ -651,7 +703,15 @@ pub fn run_with(scenario: &Scenario, link: &mut dyn EcuLink, opts: &RunOptions) 
             let t_prev = ((k - 1) * u64::from(STEP_US)) as f64 / 1e6;
             let cam_deg = f64::from(evvt_cfg.cam_edge_parked_deg) - f64::from(evvt.phase_deg());
             let crank_ok = !sc.fault_active(FaultKind::CrankLost, t_prev);
-            n_edges = engine.advance(sc.engine_rpm.at(t_prev).max(0.0), STEP_US, cam_deg, crank_ok, true, t_us.wrapping_sub(STEP_US), &mut edges);
+            n_edges = engine.advance(
+                sc.engine_rpm.at(t_prev).max(0.0),
+                STEP_US,
+                cam_deg,
+                crank_ok,
+                true,
+                t_us.wrapping_sub(STEP_US),
+                &mut edges,
+            );
         }
         if n_edges > MAX_EDGES {
             return Err(format!("t = {t:.5} s: {n_edges} edges in one {STEP_US} µs step (engine speed {rpm:.0} rpm too high for the frame)"));
@@ -679,7 +739,11 @@ pub fn run_with(scenario: &Scenario, link: &mut dyn EcuLink, opts: &RunOptions) 
         if sc.fault_active(FaultKind::SupplyPressureShort, t) {
             adc_counts[Channel::SupplyPressureMpa as usize] = 4095;
         }
-        let x_set = [sc.wastegate_setpoint_pct.at(t), sc.hpt_bypass_setpoint_pct.at(t), sc.hpc_bypass_setpoint_pct.at(t)];
+        let x_set = [
+            sc.wastegate_setpoint_pct.at(t),
+            sc.hpt_bypass_setpoint_pct.at(t),
+            sc.hpc_bypass_setpoint_pct.at(t),
+        ];
         let frame = SensorFrame {
             seq: k as u32,
             t_us,
@@ -699,14 +763,23 @@ pub fn run_with(scenario: &Scenario, link: &mut dyn EcuLink, opts: &RunOptions) 
         };
 
         // The ECU.
-        let act = link.exchange(&frame).map_err(|e| format!("step {k} (t = {t:.5} s): {e}"))?;
+        let act = link
+            .exchange(&frame)
+            .map_err(|e| format!("step {k} (t = {t:.5} s): {e}"))?;
         if act.seq != frame.seq {
-            return Err(format!("step {k} (t = {t:.5} s): the actuator frame answers seq {} instead of {}", act.seq, frame.seq));
+            return Err(format!(
+                "step {k} (t = {t:.5} s): the actuator frame answers seq {} instead of {}",
+                act.seq, frame.seq
+            ));
         }
         let faults = FaultSet(act.faults);
         for f in Fault::ALL {
             if faults.contains(f) != faults_before.contains(f) {
-                out.summary.fault_events.push(FaultEvent { t_s: t, fault: f, raised: faults.contains(f) });
+                out.summary.fault_events.push(FaultEvent {
+                    t_s: t,
+                    fault: f,
+                    raised: faults.contains(f),
+                });
             }
         }
         faults_before = faults;
@@ -716,7 +789,11 @@ pub fn run_with(scenario: &Scenario, link: &mut dyn EcuLink, opts: &RunOptions) 
 
         // Stuck rods: frozen from the fault's start.
         for (i, sx) in stuck_x.iter_mut().enumerate() {
-            let stuck = sc.faults.iter().any(|f| f.kind == FaultKind::VacuumStuck && f.actuator.unwrap_or(VacuumActuator::Lpt).index() == i && f.active(t));
+            let stuck = sc.faults.iter().any(|f| {
+                f.kind == FaultKind::VacuumStuck
+                    && f.actuator.unwrap_or(VacuumActuator::Lpt).index() == i
+                    && f.active(t)
+            });
             *sx = match (stuck, *sx) {
                 (true, Some(x)) => Some(x),
                 (true, None) => Some(actuator(&vacuum, i).x_pct()),
@@ -730,7 +807,15 @@ pub fn run_with(scenario: &Scenario, link: &mut dyn EcuLink, opts: &RunOptions) 
         let phase_ref = sc.cam_phase_setpoint_deg.at(t);
         if k % EVVT_LOG_EVERY == 0 {
             let phase = f64::from(evvt.phase_deg());
-            out.evvt.push(EvvtRow { t_s: t, motor_duty: f64::from(act.motor_duty), motor_cmd_rpm, engine_rpm: rpm, u_batt_v: u_batt, phase_ref_deg: phase_ref, phase_deg: phase });
+            out.evvt.push(EvvtRow {
+                t_s: t,
+                motor_duty: f64::from(act.motor_duty),
+                motor_cmd_rpm,
+                engine_rpm: rpm,
+                u_batt_v: u_batt,
+                phase_ref_deg: phase_ref,
+                phase_deg: phase,
+            });
             evvt_se += (phase_ref - phase).powi(2);
             evvt_n += 1;
         }
@@ -780,7 +865,11 @@ pub fn run_with(scenario: &Scenario, link: &mut dyn EcuLink, opts: &RunOptions) 
         });
         coil.step(pilot_duty * u_batt, f64::from(STEP_US));
         let inp = ehvva_inputs(t, act.lift_valve_on, act.snubber_on);
-        let stroke = if act.lift_valve_on { ehvva_params.lift_high_mm } else { ehvva_params.lift_low_mm };
+        let stroke = if act.lift_valve_on {
+            ehvva_params.lift_high_mm
+        } else {
+            ehvva_params.lift_low_mm
+        };
         let deg_per_substep = rpm * 6.0 * EHVVA_DT_MS * 1e-3;
         for j in 0..EHVVA_SUBSTEPS {
             let lift = f64::from(valve.step(u_pilot, &inp));
@@ -803,7 +892,13 @@ pub fn run_with(scenario: &Scenario, link: &mut dyn EcuLink, opts: &RunOptions) 
             let dt = (SLOW_EVERY as f64 * STEP_S) as f32;
             evvt.step(motor_cmd_rpm as f32, rpm as f32, u_batt as f32, dt);
             let pump_works = !sc.fault_active(FaultKind::VacuumPumpFailure, t);
-            vacuum.step(act.vacuum_duty.map(|d| d * 100.0), u_batt as f32, p_amb as f32, act.pump_on && pump_works, dt);
+            vacuum.step(
+                act.vacuum_duty.map(|d| d * 100.0),
+                u_batt as f32,
+                p_amb as f32,
+                act.pump_on && pump_works,
+                dt,
+            );
             pump_steps += u64::from(act.pump_on);
         }
     }
@@ -812,13 +907,28 @@ pub fn run_with(scenario: &Scenario, link: &mut dyn EcuLink, opts: &RunOptions) 
         if v.is_empty() {
             return (f64::NAN, f64::NAN);
         }
-        (v.iter().sum::<f64>() / v.len() as f64, v.iter().fold(0.0f64, |a, x| a.max(x.abs())))
+        (
+            v.iter().sum::<f64>() / v.len() as f64,
+            v.iter().fold(0.0f64, |a, x| a.max(x.abs())),
+        )
     };
     let s = &mut out.summary;
     s.evvt_rms_error_deg = (evvt_se / evvt_n.max(1) as f64).sqrt();
-    s.evvt_settling_s = settling_times(&out.evvt.iter().map(|r| (r.t_s, r.phase_ref_deg, r.phase_deg)).collect::<Vec<_>>(), 1.0);
+    s.evvt_settling_s = settling_times(
+        &out.evvt
+            .iter()
+            .map(|r| (r.t_s, r.phase_ref_deg, r.phase_deg))
+            .collect::<Vec<_>>(),
+        1.0,
+    );
     s.vacuum_rms_error_pct = (wg_se / wg_n.max(1) as f64).sqrt();
-    s.vacuum_settling_s = settling_times(&out.vacuum.iter().map(|r| (r.t_s, r.x_set_pct[0], r.x_pct[0])).collect::<Vec<_>>(), 2.0);
+    s.vacuum_settling_s = settling_times(
+        &out.vacuum
+            .iter()
+            .map(|r| (r.t_s, r.x_set_pct[0], r.x_pct[0]))
+            .collect::<Vec<_>>(),
+        2.0,
+    );
     s.vacuum_pump_on_fraction = pump_steps as f64 / (n_steps / SLOW_EVERY).max(1) as f64;
     s.ehvva_events = open_err.len();
     s.ehvva_open_error_deg = stats(&open_err);
@@ -873,7 +983,9 @@ pub fn settling_times(log: &[(f64, f64, f64)], band: f64) -> Vec<(f64, Option<f6
         if (log[i].1 - log[i - 1].1).abs() > 2.0 * band {
             let t0 = log[i].0;
             let sp = log[i].1;
-            let end = (i + 1..log.len()).find(|&j| (log[j].1 - sp).abs() > 1e-9).unwrap_or(log.len());
+            let end = (i + 1..log.len())
+                .find(|&j| (log[j].1 - sp).abs() > 1e-9)
+                .unwrap_or(log.len());
             // Last sample outside the band before the next step.
             let last_out = (i..end).rev().find(|&j| (log[j].2 - sp).abs() > band);
             let settled = match last_out {
@@ -918,12 +1030,30 @@ pub fn write_outputs(sc: &Scenario, o: &RunOutput, dir: &Path) -> std::io::Resul
     let e = &o.evvt;
     let et = times(&mut e.iter().map(|r| r.t_s));
     let col = |f: &dyn Fn(&EvvtRow) -> f64| e.iter().map(f).collect::<Vec<f64>>();
-    let (e_cmd, e_rpm, e_u, e_ref, e_ph) = (col(&|r| r.motor_cmd_rpm), col(&|r| r.engine_rpm), col(&|r| r.u_batt_v), col(&|r| r.phase_ref_deg), col(&|r| r.phase_deg));
+    let (e_cmd, e_rpm, e_u, e_ref, e_ph) = (
+        col(&|r| r.motor_cmd_rpm),
+        col(&|r| r.engine_rpm),
+        col(&|r| r.u_batt_v),
+        col(&|r| r.phase_ref_deg),
+        col(&|r| r.phase_deg),
+    );
     put(
         "evvt.csv",
         format_log(
-            &meta("evvt", "", 1e6 / (EVVT_LOG_EVERY as f64 * f64::from(STEP_US)), "model-core ecu::evvt_task (scheduled PI); motor_cmd_rpm = duty x 6000 rpm - ring speed"),
-            &[("t_s", &et), ("motor_cmd_rpm", &e_cmd), ("engine_rpm", &e_rpm), ("u_batt_V", &e_u), ("phase_ref_deg", &e_ref), ("phase_deg", &e_ph)],
+            &meta(
+                "evvt",
+                "",
+                1e6 / (EVVT_LOG_EVERY as f64 * f64::from(STEP_US)),
+                "model-core ecu::evvt_task (scheduled PI); motor_cmd_rpm = duty x 6000 rpm - ring speed",
+            ),
+            &[
+                ("t_s", &et),
+                ("motor_cmd_rpm", &e_cmd),
+                ("engine_rpm", &e_rpm),
+                ("u_batt_V", &e_u),
+                ("phase_ref_deg", &e_ref),
+                ("phase_deg", &e_ph),
+            ],
         ),
     )?;
 
@@ -931,9 +1061,17 @@ pub fn write_outputs(sc: &Scenario, o: &RunOutput, dir: &Path) -> std::io::Resul
     let vt = times(&mut v.iter().map(|r| r.t_s));
     let vcol = |f: &dyn Fn(&VacuumRow) -> f64| v.iter().map(f).collect::<Vec<f64>>();
     let (v_u, v_amb, v_tank) = (vcol(&|r| r.u_batt_v), vcol(&|r| r.p_amb_kpa), vcol(&|r| r.p_tank_kpa));
-    let names = [("vacuum.csv", "LPT wastegate"), ("vacuum-hpt.csv", "HPT bypass"), ("vacuum-hpc.csv", "HPC bypass")];
+    let names = [
+        ("vacuum.csv", "LPT wastegate"),
+        ("vacuum-hpt.csv", "HPT bypass"),
+        ("vacuum-hpc.csv", "HPC bypass"),
+    ];
     for (i, (file, what)) in names.iter().enumerate() {
-        let (duty, x, p) = (vcol(&|r| r.duty_pct[i]), vcol(&|r| r.x_pct[i]), vcol(&|r| r.p_act_kpa[i]));
+        let (duty, x, p) = (
+            vcol(&|r| r.duty_pct[i]),
+            vcol(&|r| r.x_pct[i]),
+            vcol(&|r| r.p_act_kpa[i]),
+        );
         put(
             file,
             format_log(
@@ -969,11 +1107,28 @@ pub fn write_outputs(sc: &Scenario, o: &RunOutput, dir: &Path) -> std::io::Resul
             "EVVT cam phase",
             "time (s)",
             "phase (crank deg)",
-            &[Series { label: "setpoint", colour: "black", x: &et, y: &e_ref }, Series { label: "plant", colour: "#1f77b4", x: &et, y: &e_ph }],
+            &[
+                Series {
+                    label: "setpoint",
+                    colour: "black",
+                    x: &et,
+                    y: &e_ref,
+                },
+                Series {
+                    label: "plant",
+                    colour: "#1f77b4",
+                    x: &et,
+                    y: &e_ph,
+                },
+            ],
             &[],
         ),
     )?;
-    let (wg_set, wg_x, wg_duty) = (vcol(&|r| r.x_set_pct[0]), vcol(&|r| r.x_pct[0]), vcol(&|r| r.duty_pct[0]));
+    let (wg_set, wg_x, wg_duty) = (
+        vcol(&|r| r.x_set_pct[0]),
+        vcol(&|r| r.x_pct[0]),
+        vcol(&|r| r.duty_pct[0]),
+    );
     put(
         "vacuum.svg",
         line_plot(
@@ -981,11 +1136,36 @@ pub fn write_outputs(sc: &Scenario, o: &RunOutput, dir: &Path) -> std::io::Resul
             "time (s)",
             "position (%), duty (%), kPa, V",
             &[
-                Series { label: "setpoint", colour: "black", x: &vt, y: &wg_set },
-                Series { label: "position", colour: "#1f77b4", x: &vt, y: &wg_x },
-                Series { label: "duty (%)", colour: "#2ca02c", x: &vt, y: &wg_duty },
-                Series { label: "tank (kPa)", colour: "#9467bd", x: &vt, y: &v_tank },
-                Series { label: "battery (V)", colour: "#d62728", x: &vt, y: &v_u },
+                Series {
+                    label: "setpoint",
+                    colour: "black",
+                    x: &vt,
+                    y: &wg_set,
+                },
+                Series {
+                    label: "position",
+                    colour: "#1f77b4",
+                    x: &vt,
+                    y: &wg_x,
+                },
+                Series {
+                    label: "duty (%)",
+                    colour: "#2ca02c",
+                    x: &vt,
+                    y: &wg_duty,
+                },
+                Series {
+                    label: "tank (kPa)",
+                    colour: "#9467bd",
+                    x: &vt,
+                    y: &v_tank,
+                },
+                Series {
+                    label: "battery (V)",
+                    colour: "#d62728",
+                    x: &vt,
+                    y: &v_u,
+                },
             ],
             &[],
         ),
@@ -1000,8 +1180,18 @@ pub fn write_outputs(sc: &Scenario, o: &RunOutput, dir: &Path) -> std::io::Resul
             "time (s)",
             "lift (mm), pilot duty",
             &[
-                Series { label: "lift", colour: "#1f77b4", x: &wt[..one], y: &w_lift[..one] },
-                Series { label: "pilot duty", colour: "black", x: &wt[..one], y: &w_duty[..one] },
+                Series {
+                    label: "lift",
+                    colour: "#1f77b4",
+                    x: &wt[..one],
+                    y: &w_lift[..one],
+                },
+                Series {
+                    label: "pilot duty",
+                    colour: "black",
+                    x: &wt[..one],
+                    y: &w_duty[..one],
+                },
             ],
             &[],
         ),
@@ -1028,13 +1218,22 @@ mod tests {
         assert!(e.starts_with("s.toml:") && e.contains("bogus"), "{e}");
         let e = Scenario::from_toml(Path::new("s.toml"), "name = \"x\"\nduration_s = -1.0\n").unwrap_err();
         assert!(e.contains("duration_s"), "{e}");
-        let ok = Scenario::from_toml(Path::new("s.toml"), "name = \"x\"\nduration_s = 1.0\nu_batt_v = [[0.0, 14.0], [0.5, 9.0]]\n").unwrap();
+        let ok = Scenario::from_toml(
+            Path::new("s.toml"),
+            "name = \"x\"\nduration_s = 1.0\nu_batt_v = [[0.0, 14.0], [0.5, 9.0]]\n",
+        )
+        .unwrap();
         assert_eq!(ok.u_batt_v.at(0.25), 11.5);
     }
 
     #[test]
     fn fault_entries_are_parsed_strictly() {
-        let parse = |faults: &str| Scenario::from_toml(Path::new("f.toml"), &format!("name = \"x\"\nduration_s = 1.0\n{faults}"));
+        let parse = |faults: &str| {
+            Scenario::from_toml(
+                Path::new("f.toml"),
+                &format!("name = \"x\"\nduration_s = 1.0\n{faults}"),
+            )
+        };
         let ok = parse("[[fault]]\nkind = \"battery_sag\"\nstart_s = 0.2\nend_s = 0.6\nu_batt_v = 8.0\n[[fault]]\nkind = \"vacuum_stuck\"\nstart_s = 0.1\nactuator = \"hpt\"\n").unwrap();
         assert_eq!(ok.faults.len(), 2);
         assert_eq!(ok.faults[1].actuator, Some(VacuumActuator::Hpt));
@@ -1045,13 +1244,28 @@ mod tests {
         assert_eq!(ok.u_batt_at(0.8), 14.0);
         for (text, needle) in [
             ("[[fault]]\nkind = \"gremlin\"\nstart_s = 0.0\n", "gremlin"),
-            ("[[fault]]\nkind = \"crank_lost\"\nstart_s = 0.0\ncolour = 1\n", "colour"),
+            (
+                "[[fault]]\nkind = \"crank_lost\"\nstart_s = 0.0\ncolour = 1\n",
+                "colour",
+            ),
             ("[[fault]]\nkind = \"crank_lost\"\n", "start_s"),
             ("[[fault]]\nkind = \"battery_sag\"\nstart_s = 0.0\n", "u_batt_v"),
-            ("[[fault]]\nkind = \"crank_lost\"\nstart_s = 0.5\nend_s = 0.2\n", "end_s"),
-            ("[[fault]]\nkind = \"crank_lost\"\nstart_s = 0.0\nu_batt_v = 8.0\n", "belongs to `battery_sag` only"),
-            ("[[fault]]\nkind = \"crank_lost\"\nstart_s = 0.0\nactuator = \"lpt\"\n", "belongs to `vacuum_stuck` only"),
-            ("[[fault]]\nkind = \"vacuum_stuck\"\nstart_s = 0.0\nactuator = \"egr\"\n", "egr"),
+            (
+                "[[fault]]\nkind = \"crank_lost\"\nstart_s = 0.5\nend_s = 0.2\n",
+                "end_s",
+            ),
+            (
+                "[[fault]]\nkind = \"crank_lost\"\nstart_s = 0.0\nu_batt_v = 8.0\n",
+                "belongs to `battery_sag` only",
+            ),
+            (
+                "[[fault]]\nkind = \"crank_lost\"\nstart_s = 0.0\nactuator = \"lpt\"\n",
+                "belongs to `vacuum_stuck` only",
+            ),
+            (
+                "[[fault]]\nkind = \"vacuum_stuck\"\nstart_s = 0.0\nactuator = \"egr\"\n",
+                "egr",
+            ),
         ] {
             let e = parse(text).unwrap_err();
             assert!(e.starts_with("f.toml:") && e.contains(needle), "{text}: {e}");
@@ -1060,7 +1274,8 @@ mod tests {
 
     #[test]
     fn switches_are_booleans_or_0_1_profiles() {
-        let parse = |text: &str| Scenario::from_toml(Path::new("w.toml"), &format!("name = \"x\"\nduration_s = 1.0\n{text}"));
+        let parse =
+            |text: &str| Scenario::from_toml(Path::new("w.toml"), &format!("name = \"x\"\nduration_s = 1.0\n{text}"));
         let s = parse("lift_high = [[0.0, 1.0], [0.5, 0.0]]\nsnubber_on = true\n").unwrap();
         assert!(s.lift_high.at(0.2) && !s.lift_high.at(0.7) && s.snubber_on.at(0.7));
         let e = parse("lift_high = [[0.0, 0.3]]\n").unwrap_err();

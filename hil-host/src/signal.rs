@@ -45,7 +45,10 @@ impl Butterworth {
                 let q = 1.0 / (2.0 * theta.cos()).max(1e-12);
                 let norm = 1.0 / (1.0 + k / q + k * k);
                 let b0 = k * k * norm;
-                Biquad { b: [b0, 2.0 * b0, b0], a: [2.0 * (k * k - 1.0) * norm, (1.0 - k / q + k * k) * norm] }
+                Biquad {
+                    b: [b0, 2.0 * b0, b0],
+                    a: [2.0 * (k * k - 1.0) * norm, (1.0 - k / q + k * k) * norm],
+                }
             })
             .collect();
         let pad = (4.0 * fs_hz / fc_hz).ceil() as usize;
@@ -134,7 +137,10 @@ mod tests {
         let fs = 1000.0;
         let f = Butterworth::lowpass(4, 50.0, fs).unwrap();
         let at_fc = amplitude(&f.filter(&sine(50.0, fs, 8000)));
-        assert!((at_fc - std::f64::consts::FRAC_1_SQRT_2).abs() < 0.01, "gain at cut-off {at_fc}");
+        assert!(
+            (at_fc - std::f64::consts::FRAC_1_SQRT_2).abs() < 0.01,
+            "gain at cut-off {at_fc}"
+        );
         let pass = amplitude(&f.filter(&sine(5.0, fs, 8000)));
         assert!((pass - 1.0).abs() < 0.01);
         // 4th order: -80 dB/decade, so a decade above is below 1e-4 (plus ripple margin).
@@ -149,7 +155,11 @@ mod tests {
         let fs = 1000.0;
         let x = sine(2.0, fs, 4000);
         let y = Butterworth::lowpass(4, 40.0, fs).unwrap().filtfilt(&x);
-        let err = x[500..3500].iter().zip(&y[500..3500]).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        let err = x[500..3500]
+            .iter()
+            .zip(&y[500..3500])
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
         assert!(err < 1e-3, "zero-phase error {err}");
     }
 

@@ -17,17 +17,30 @@ fn run(plant: Plant, effect: &str, seed: u64) -> Outcome {
     let (est, val) = case.logs().expect("generated logs read back");
     let family = diagnose::family_for(plant).unwrap();
     let d = diagnose::diagnose(family.as_ref(), &est, &val, false, &Rules::default(), &mut |_| {}).unwrap();
-    Outcome { cause: d.cause.clone(), gain_pct: d.gain_pct, summary: diagnose::report::summary(&d) }
+    Outcome {
+        cause: d.cause.clone(),
+        gain_pct: d.gain_pct,
+        summary: diagnose::report::summary(&d),
+    }
 }
 
 fn check(plant: Plant, effect: &str, seed: u64) {
     eprintln!("case: plant {plant}, hidden effect {effect}, seed {seed}");
     let o = run(plant, effect, seed);
-    assert_eq!(o.cause, effect, "plant {plant}, seed {seed}: hidden `{effect}`, named `{}`\n{}", o.cause, o.summary);
+    assert_eq!(
+        o.cause, effect,
+        "plant {plant}, seed {seed}: hidden `{effect}`, named `{}`\n{}",
+        o.cause, o.summary
+    );
     if effect == "none" {
         assert_eq!(o.gain_pct, 0.0);
     } else {
-        assert!(o.gain_pct >= 20.0, "plant {plant}, seed {seed}: gain {:.1} % < 20 %\n{}", o.gain_pct, o.summary);
+        assert!(
+            o.gain_pct >= 20.0,
+            "plant {plant}, seed {seed}: gain {:.1} % < 20 %\n{}",
+            o.gain_pct,
+            o.summary
+        );
     }
 }
 
@@ -101,6 +114,14 @@ fn sweep(plant: Plant) {
                 failed.push(format!("{seed} -> {} ({:.0} %)", o.cause, o.gain_pct));
             }
         }
-        println!("{plant:<11} {effect:<22} {ok}/{} found{}", seeds.len(), if failed.is_empty() { String::new() } else { format!("; missed: {}", failed.join(", ")) });
+        println!(
+            "{plant:<11} {effect:<22} {ok}/{} found{}",
+            seeds.len(),
+            if failed.is_empty() {
+                String::new()
+            } else {
+                format!("; missed: {}", failed.join(", "))
+            }
+        );
     }
 }

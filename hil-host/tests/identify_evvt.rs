@@ -11,7 +11,16 @@ use hil_host::log::{format_log, parse_log};
 use model_core::evvt::{EvvtLpvTable, EvvtParams, EvvtPlant};
 
 fn experiment(table: EvvtLpvTable, engine_rpm: f64, u_batt_v: f64, seed: u64) -> IdentificationExperiment {
-    IdentificationExperiment { params: EvvtParams { lpv: table, ..EvvtParams::default() }, engine_rpm, u_batt_v, seed, ..Default::default() }
+    IdentificationExperiment {
+        params: EvvtParams {
+            lpv: table,
+            ..EvvtParams::default()
+        },
+        engine_rpm,
+        u_batt_v,
+        seed,
+        ..Default::default()
+    }
 }
 
 fn identify_text(name: &str, text: &str) -> Result<EvvtPointResult, String> {
@@ -42,7 +51,10 @@ fn known_alpha_beta_come_back_within_5_percent() {
         // The multi-rate data were recognised: PRBS clock, operating point, cam hold.
         assert_eq!(r.prbs_hold_periods, 10);
         assert!((r.engine_rpm - n).abs() < 2.0 && (r.u_batt_v - v).abs() < 0.02);
-        assert!((r.measurement_delay_s - 15.0 / n).abs() < 1e-3 * 15.0 / n, "τ = half the cam period 30/N");
+        assert!(
+            (r.measurement_delay_s - 15.0 / n).abs() < 1e-3 * 15.0 / n,
+            "τ = half the cam period 30/N"
+        );
         // A dominant pair: the order is chosen at a clear gap of the Hankel singular values.
         assert!(r.order >= 2 && r.hankel_sv[r.order - 1] > 5.0 * r.hankel_sv[r.order]);
         assert!(r.realization_vaf_pct > 98.0);
@@ -50,7 +62,10 @@ fn known_alpha_beta_come_back_within_5_percent() {
     }
     // Phase fresh at every control instant (no cam hold, τ = 0), slowest corner.
     let (a, b) = (design.alpha_deg_per_s2_rpm[2][0], design.beta_per_s[2][0]);
-    let x = IdentificationExperiment { phase_sampling: PhaseSampling::ControlPeriod, ..experiment(EvvtLpvTable::uniform(a, b), 1400.0, 9.5, 16) };
+    let x = IdentificationExperiment {
+        phase_sampling: PhaseSampling::ControlPeriod,
+        ..experiment(EvvtLpvTable::uniform(a, b), 1400.0, 9.5, 16)
+    };
     let r = identify_text("fresh.csv", &identification_log(&x).unwrap()).unwrap();
     assert_eq!(r.measurement_delay_s, 0.0);
     let (ea, eb) = (rel_err_pct(r.alpha, a), rel_err_pct(r.beta, b));
@@ -65,9 +80,17 @@ fn known_alpha_beta_come_back_within_5_percent() {
 #[test]
 fn cam_event_sampling_holds_the_phase_between_events() {
     let change_gaps = |sampling: PhaseSampling| {
-        let x = IdentificationExperiment { phase_sampling: sampling, prbs_periods: 0.2, ..experiment(EvvtLpvTable::PAPER_DESIGN, 800.0, 14.0, 3) };
+        let x = IdentificationExperiment {
+            phase_sampling: sampling,
+            prbs_periods: 0.2,
+            ..experiment(EvvtLpvTable::PAPER_DESIGN, 800.0, 14.0, 3)
+        };
         let log = parse_log("g.csv", &identification_log(&x).unwrap(), None).unwrap();
-        let (c, r, y) = (log.col("motor_cmd_rpm").unwrap(), log.col("phase_ref_deg").unwrap(), log.col("phase_deg").unwrap());
+        let (c, r, y) = (
+            log.col("motor_cmd_rpm").unwrap(),
+            log.col("phase_ref_deg").unwrap(),
+            log.col("phase_deg").unwrap(),
+        );
         let kp = log.meta_f64("kp").unwrap().unwrap();
         for k in 0..log.len() {
             assert_eq!(c[k], (kp * (r[k] - y[k])).clamp(-1000.0, 1000.0));
@@ -84,7 +107,12 @@ fn cam_event_sampling_holds_the_phase_between_events() {
 /// Unit-step phase response of the plant built from `table` at (N, V) over 0.5 s (model-core
 /// EvvtPlant, 1 ms steps, 1 rpm command).
 fn step_response(table: &EvvtLpvTable, n: f64, v: f64) -> Vec<f64> {
-    let mut plant = EvvtPlant::<f64>::new(&EvvtParams { lpv: *table, initial_phase_deg: 20.0, ..EvvtParams::default() }).unwrap();
+    let mut plant = EvvtPlant::<f64>::new(&EvvtParams {
+        lpv: *table,
+        initial_phase_deg: 20.0,
+        ..EvvtParams::default()
+    })
+    .unwrap();
     (0..500).map(|_| plant.step(1.0, n, v, 0.001) - 20.0).collect()
 }
 
@@ -113,10 +141,25 @@ fn nine_point_family_gives_tables_with_matching_step_responses() {
         }
     }
     let json_path = dir.join("evvt.json");
-    let out = std::process::Command::new(hil_host_bin()).arg("identify").arg("evvt").args(&files).arg("--json").arg(&json_path).output().unwrap();
+    let out = std::process::Command::new(hil_host_bin())
+        .arg("identify")
+        .arg("evvt")
+        .args(&files)
+        .arg("--json")
+        .arg(&json_path)
+        .output()
+        .unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{}\n{}", stdout, String::from_utf8_lossy(&out.stderr));
-    assert!(stdout.contains("Hankel singular values") && stdout.contains("EvvtLpvTable {"), "{stdout}");
+    assert!(
+        out.status.success(),
+        "{}\n{}",
+        stdout,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains("Hankel singular values") && stdout.contains("EvvtLpvTable {"),
+        "{stdout}"
+    );
     let doc: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json_path).unwrap()).unwrap();
     let points = doc["points"].as_array().unwrap();
     assert_eq!(points.len(), 9);
@@ -129,7 +172,10 @@ fn nine_point_family_gives_tables_with_matching_step_responses() {
         let log_path = p["file"].as_str().unwrap();
         let log = hil_host::log::read_log(Path::new(log_path), None).unwrap();
         let r = identify_log(&log, &EvvtIdentifyOptions::default()).unwrap();
-        assert_eq!((r.alpha, r.beta), (p["alpha"].as_f64().unwrap(), p["beta"].as_f64().unwrap()));
+        assert_eq!(
+            (r.alpha, r.beta),
+            (p["alpha"].as_f64().unwrap(), p["beta"].as_f64().unwrap())
+        );
         results.push(r);
     }
     let table = lpv_table(&results).unwrap();
@@ -146,22 +192,45 @@ fn nine_point_family_gives_tables_with_matching_step_responses() {
                 .max(rel_err_pct(table.beta_per_s[i][j], design.beta_per_s[i][j]).abs());
         }
     }
-    let mut checks: Vec<(f64, f64)> = design.engine_speed_rpm.iter().flat_map(|&n| design.battery_voltage_v.iter().map(move |&v| (n, v))).collect();
+    let mut checks: Vec<(f64, f64)> = design
+        .engine_speed_rpm
+        .iter()
+        .flat_map(|&n| design.battery_voltage_v.iter().map(move |&v| (n, v)))
+        .collect();
     checks.extend([(950.0, 10.5), (950.0, 12.75), (1250.0, 10.5), (1250.0, 12.75)]);
     for (n, v) in checks {
         let truth = step_response(&design, n, v);
         let ident = step_response(&table, n, v);
-        let (a, b) = EvvtPlant::<f64>::new(&EvvtParams { lpv: design, ..EvvtParams::default() }).unwrap().alpha_beta(n, v);
+        let (a, b) = EvvtPlant::<f64>::new(&EvvtParams {
+            lpv: design,
+            ..EvvtParams::default()
+        })
+        .unwrap()
+        .alpha_beta(n, v);
         let scale = a / b * 0.5;
         let err = truth.iter().zip(&ident).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max) / scale;
-        println!("{n} rpm {v} V: step response error {:.2} % of slope × 0.5 s", 100.0 * err);
+        println!(
+            "{n} rpm {v} V: step response error {:.2} % of slope × 0.5 s",
+            100.0 * err
+        );
         if err > worst.0 {
             worst = (err, n, v);
         }
     }
-    println!("nine-point family: worst α/β error {worst_param:.2} %, worst step-response error {:.2} % at {} rpm, {} V", 100.0 * worst.0, worst.1, worst.2);
+    println!(
+        "nine-point family: worst α/β error {worst_param:.2} %, worst step-response error {:.2} % at {} rpm, {} V",
+        100.0 * worst.0,
+        worst.1,
+        worst.2
+    );
     assert!(worst_param < 5.0, "table entry off by {worst_param:.2} %");
-    assert!(worst.0 < 0.05, "step responses differ by {:.2} % at {} rpm {} V", 100.0 * worst.0, worst.1, worst.2);
+    assert!(
+        worst.0 < 0.05,
+        "step responses differ by {:.2} % at {} rpm {} V",
+        100.0 * worst.0,
+        worst.1,
+        worst.2
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -170,11 +239,18 @@ fn nine_point_family_gives_tables_with_matching_step_responses() {
 /// is missing.
 #[test]
 fn bad_logs_give_errors_naming_file_and_what_is_missing() {
-    let x = IdentificationExperiment { prbs_periods: 0.5, ..experiment(EvvtLpvTable::PAPER_DESIGN, 1100.0, 11.5, 7) };
+    let x = IdentificationExperiment {
+        prbs_periods: 0.5,
+        ..experiment(EvvtLpvTable::PAPER_DESIGN, 1100.0, 11.5, 7)
+    };
     let good = identification_log(&x).unwrap();
     assert!(identify_text("good.csv", &good).is_ok());
 
-    let no_kp: String = good.lines().filter(|l| !l.starts_with("# kp:")).map(|l| format!("{l}\n")).collect();
+    let no_kp: String = good
+        .lines()
+        .filter(|l| !l.starts_with("# kp:"))
+        .map(|l| format!("{l}\n"))
+        .collect();
     let e = identify_text("no-kp.csv", &no_kp).unwrap_err();
     assert!(e.starts_with("no-kp.csv:") && e.contains("`# kp:`"), "{e}");
 
@@ -184,15 +260,26 @@ fn bad_logs_give_errors_naming_file_and_what_is_missing() {
     let data: Vec<(&str, &[f64])> = cols.iter().map(|c| (*c, log.col(c).unwrap())).collect();
     let meta: Vec<(String, String)> = log.meta.clone();
     let e = identify_text("open-loop.csv", &format_log(&meta, &data)).unwrap_err();
-    assert!(e.starts_with("open-loop.csv:") && e.contains("phase_ref_deg") && e.contains("open-loop"), "{e}");
+    assert!(
+        e.starts_with("open-loop.csv:") && e.contains("phase_ref_deg") && e.contains("open-loop"),
+        "{e}"
+    );
 
     // The reference column is there but the command is an open-loop PRBS of its own.
-    let cmd: Vec<f64> = log.col("phase_ref_deg").unwrap().iter().map(|r| 20.0 * (r - 25.0)).collect();
+    let cmd: Vec<f64> = log
+        .col("phase_ref_deg")
+        .unwrap()
+        .iter()
+        .map(|r| 20.0 * (r - 25.0))
+        .collect();
     let mut data: Vec<(&str, &[f64])> = cols.iter().map(|c| (*c, log.col(c).unwrap())).collect();
     data[1] = ("motor_cmd_rpm", &cmd);
     data.push(("phase_ref_deg", log.col("phase_ref_deg").unwrap()));
     let e = identify_text("not-closed.csv", &format_log(&meta, &data)).unwrap_err();
-    assert!(e.starts_with("not-closed.csv:") && e.contains("does not follow kp"), "{e}");
+    assert!(
+        e.starts_with("not-closed.csv:") && e.contains("does not follow kp"),
+        "{e}"
+    );
 
     // A step/ramp validation log of the diagnosis generator: closed loop, but not a PRBS.
     let case = hil_host::generate::evvt::generate("none", 4).unwrap();
@@ -200,7 +287,10 @@ fn bad_logs_give_errors_naming_file_and_what_is_missing() {
     assert!(e.starts_with("steps.csv:") && e.contains("two-level PRBS"), "{e}");
 
     // Through the command line: a missing file is named.
-    let out = std::process::Command::new(hil_host_bin()).args(["identify", "evvt", "/nonexistent/prbs.csv"]).output().unwrap();
+    let out = std::process::Command::new(hil_host_bin())
+        .args(["identify", "evvt", "/nonexistent/prbs.csv"])
+        .output()
+        .unwrap();
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("/nonexistent/prbs.csv"));
 }
@@ -219,7 +309,8 @@ fn sweep_nine_points_ten_seeds() {
             let (a, b) = (design.alpha_deg_per_s2_rpm[i][j], design.beta_per_s[i][j]);
             let (mut wa, mut wb) = (0.0f64, 0.0f64);
             for seed in 0..10 {
-                let text = identification_log(&experiment(design, n, v, 1000 + 37 * seed + 3 * i as u64 + j as u64)).unwrap();
+                let text =
+                    identification_log(&experiment(design, n, v, 1000 + 37 * seed + 3 * i as u64 + j as u64)).unwrap();
                 let r = identify_text("sweep.csv", &text).unwrap();
                 let (ea, eb) = (rel_err_pct(r.alpha, a), rel_err_pct(r.beta, b));
                 wa = wa.max(ea.abs());
@@ -250,9 +341,17 @@ fn belt_vibration_shows_as_a_4th_order_mode_without_biasing_alpha_beta() {
     let r = identify_text("belt.csv", &identification_log(&x).unwrap()).unwrap();
     let (ea, eb) = (rel_err_pct(r.alpha, a), rel_err_pct(r.beta, b));
     let belt_hz = 0.5 * 1100.0 / 60.0;
-    let pole_hz: Vec<f64> = r.closed_loop_poles_z.iter().map(|p| p.1.atan2(p.0).abs() / (2.0 * std::f64::consts::PI * r.control_period_s)).collect();
+    let pole_hz: Vec<f64> = r
+        .closed_loop_poles_z
+        .iter()
+        .map(|p| p.1.atan2(p.0).abs() / (2.0 * std::f64::consts::PI * r.control_period_s))
+        .collect();
     println!("belt vibration 1 deg at {belt_hz:.2} Hz: order {}, pole frequencies {pole_hz:.2?} Hz, α {ea:+.2} %, β {eb:+.2} %", r.order);
     assert_eq!(r.order, 4, "{}", r.report);
-    assert!(pole_hz.iter().filter(|f| (*f / belt_hz - 1.0).abs() < 0.02).count() == 2, "{}", r.report);
+    assert!(
+        pole_hz.iter().filter(|f| (*f / belt_hz - 1.0).abs() < 0.02).count() == 2,
+        "{}",
+        r.report
+    );
     assert!(ea.abs() < 5.0 && eb.abs() < 5.0, "{}", r.report);
 }

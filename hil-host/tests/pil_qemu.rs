@@ -11,8 +11,10 @@ use std::time::Duration;
 
 use hil_host::pil::{self, LinkFaults, PilLink, PilOptions};
 use hil_host::run::{run_with, NativeLink, RunOptions, Scenario};
-use model_core::ecu::frame::{crc16, encode, ActuatorFrame, Frame, FrameError, SensorFrame, FRAME_VERSION, MAX_FRAME_BYTES};
 use model_core::ecu::board::SolenoidCmd;
+use model_core::ecu::frame::{
+    crc16, encode, ActuatorFrame, Frame, FrameError, SensorFrame, FRAME_VERSION, MAX_FRAME_BYTES,
+};
 
 /// The firmware image, or `None` (with the reason printed) when QEMU is not installed.
 fn firmware() -> Option<PathBuf> {
@@ -57,7 +59,17 @@ fn assert_bit_exact(native: &[ActuatorFrame], pil: &[ActuatorFrame]) {
                 SolenoidCmd::Full => (1, 0),
                 SolenoidCmd::Pwm(d) => (2, d.to_bits()),
             };
-            (a.seq, a.t_us, pilot, a.lift_valve_on, a.snubber_on, a.motor_duty.to_bits(), a.vacuum_duty.map(f32::to_bits), a.pump_on, a.faults)
+            (
+                a.seq,
+                a.t_us,
+                pilot,
+                a.lift_valve_on,
+                a.snubber_on,
+                a.motor_duty.to_bits(),
+                a.vacuum_duty.map(f32::to_bits),
+                a.pump_on,
+                a.faults,
+            )
         };
         assert_eq!(bits(n), bits(&p), "step {k}: native {n:?}\n PIL {p:?}");
     }
@@ -81,7 +93,15 @@ fn closed_loop_frames() -> Vec<SensorFrame> {
     static FRAMES: OnceLock<Vec<SensorFrame>> = OnceLock::new();
     FRAMES
         .get_or_init(|| {
-            let out = run_with(&short_scenario(), &mut NativeLink::new().unwrap(), &RunOptions { until_s: None, keep_frames: true }).unwrap();
+            let out = run_with(
+                &short_scenario(),
+                &mut NativeLink::new().unwrap(),
+                &RunOptions {
+                    until_s: None,
+                    keep_frames: true,
+                },
+            )
+            .unwrap();
             out.frames.into_iter().map(|(s, _)| s).collect()
         })
         .clone()
@@ -102,8 +122,14 @@ fn closed_loop_pil_run_equals_native_run_bit_for_bit() {
     assert_eq!(r.compared_steps, Some(3000));
     assert!(r.first_difference.is_none(), "{}", r.text());
     let pilots: Vec<SolenoidCmd> = r.output.frames.iter().map(|(_, a)| a.pilot).collect();
-    assert!(pilots.contains(&SolenoidCmd::Full), "no valve event in the compared steps");
-    assert!(r.output.frames.iter().any(|(_, a)| a.motor_duty != 0.0), "EVVT never commanded");
+    assert!(
+        pilots.contains(&SolenoidCmd::Full),
+        "no valve event in the compared steps"
+    );
+    assert!(
+        r.output.frames.iter().any(|(_, a)| a.motor_duty != 0.0),
+        "EVVT never commanded"
+    );
     assert_eq!(r.stats.ecu_bad_frames, 0);
     assert_eq!(r.stats.bad_frames_received, 0);
 }
@@ -120,11 +146,31 @@ fn target_bench_counts_every_task_and_plant_and_matches_the_host() {
     let b = pil::target_bench(&elf, &frames, &dir).unwrap();
     eprint!("{}", b.text());
     let n = model_core::plant_bench::N_STATE;
-    assert_eq!(b.plant_bits_target[n..], b.plant_bits_host[n..], "Q32 plant states differ");
-    assert_eq!(b.plant_bits_target[..n], b.plant_bits_host[..n], "f32 plant states differ");
+    assert_eq!(
+        b.plant_bits_target[n..],
+        b.plant_bits_host[n..],
+        "Q32 plant states differ"
+    );
+    assert_eq!(
+        b.plant_bits_target[..n],
+        b.plant_bits_host[..n],
+        "f32 plant states differ"
+    );
     assert!(b.answers_equal_native);
-    let count = |label: &str| b.counts.iter().find(|c| c.label == label).unwrap_or_else(|| panic!("no {label} count: {:?}", b.counts)).clone();
-    for (label, n) in [("core_step", 300), ("ehvva", 300), ("supervisor", 2), ("evvt", 2), ("vacuum", 2)] {
+    let count = |label: &str| {
+        b.counts
+            .iter()
+            .find(|c| c.label == label)
+            .unwrap_or_else(|| panic!("no {label} count: {:?}", b.counts))
+            .clone()
+    };
+    for (label, n) in [
+        ("core_step", 300),
+        ("ehvva", 300),
+        ("supervisor", 2),
+        ("evvt", 2),
+        ("vacuum", 2),
+    ] {
         let c = count(label);
         assert_eq!(c.n, n, "{label}: {c:?}");
         assert!(c.min > 50, "{label}: {c:?}");
@@ -146,8 +192,18 @@ fn corrupted_and_dropped_frames_are_counted_and_retransmitted_losslessly() {
     let _one = one_at_a_time();
     let frames = feed(400);
     let native = pil::run_frames_native(&frames).unwrap();
-    let faults = LinkFaults { corrupt_every: Some(7), drop_every: Some(40) };
-    let mut link = PilLink::start(&elf, PilOptions { faults, ..PilOptions::default() }).unwrap();
+    let faults = LinkFaults {
+        corrupt_every: Some(7),
+        drop_every: Some(40),
+    };
+    let mut link = PilLink::start(
+        &elf,
+        PilOptions {
+            faults,
+            ..PilOptions::default()
+        },
+    )
+    .unwrap();
     let run = pil::run_frames(&mut link, &frames).unwrap();
     let s = run.stats;
     eprintln!("{s:?}");
@@ -157,7 +213,10 @@ fn corrupted_and_dropped_frames_are_counted_and_retransmitted_losslessly() {
     let attempts = s.transmissions + s.dropped_injected;
     assert_eq!(s.dropped_injected, attempts / 40);
     assert_eq!(s.corrupted_injected, attempts / 7 - attempts / 280);
-    assert!(s.corrupted_injected >= 50 && s.dropped_injected >= 10, "too few faults injected: {s:?}");
+    assert!(
+        s.corrupted_injected >= 50 && s.dropped_injected >= 10,
+        "too few faults injected: {s:?}"
+    );
     // The firmware rejected exactly the corrupted frames and said so each time.
     assert_eq!(u64::from(s.ecu_bad_frames), s.corrupted_injected);
     assert_eq!(s.nacks_received, s.corrupted_injected);
@@ -186,7 +245,11 @@ fn a_silent_link_drives_the_safe_outputs_and_stepping_resumes() {
     assert_eq!(reports.len(), 1, "one safe-state report per silence: {reports:?}");
     let r = reports[0];
     assert_eq!(r.seq, last.seq);
-    assert!(r.t_us.wrapping_sub(last.t_us) >= 100_000, "reported after {} µs, before the 100 ms timeout", r.t_us.wrapping_sub(last.t_us));
+    assert!(
+        r.t_us.wrapping_sub(last.t_us) >= 100_000,
+        "reported after {} µs, before the 100 ms timeout",
+        r.t_us.wrapping_sub(last.t_us)
+    );
     assert_eq!(r.pilot, SolenoidCmd::Off);
     assert!(!r.lift_valve_on && !r.snubber_on && !r.pump_on);
     assert_eq!((r.motor_duty, r.vacuum_duty), (0.0, [0.0; 3]));
@@ -223,7 +286,10 @@ fn well_formed_but_invalid_frames_are_answered_with_a_nack_and_never_used() {
     let mut count_too_big = wire[..n].to_vec();
     let at = 5 + 9 + 5 * frames[20].n_edges as usize;
     count_too_big[at..at + 2].copy_from_slice(&4096u16.to_le_bytes());
-    for (bytes, why, bad_so_far) in [(reseal(wrong_version), FrameError::BadVersion, 1), (reseal(count_too_big), FrameError::BadPayload, 2)] {
+    for (bytes, why, bad_so_far) in [
+        (reseal(wrong_version), FrameError::BadVersion, 1),
+        (reseal(count_too_big), FrameError::BadPayload, 2),
+    ] {
         link.send_raw(&bytes).unwrap();
         match link.next_frame(Duration::from_secs(5)).unwrap() {
             Some(Ok(Frame::Nack(nack))) => {

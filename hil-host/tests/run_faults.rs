@@ -28,8 +28,19 @@ fn load(name: &str) -> Scenario {
 
 fn run(name: &str) -> (Scenario, RunOutput, Vec<f32>) {
     let sc = load(name);
-    let mut link = Observed { link: NativeLink::new().unwrap(), kp: Vec::new() };
-    let o = run_with(&sc, &mut link, &RunOptions { until_s: None, keep_frames: true }).unwrap();
+    let mut link = Observed {
+        link: NativeLink::new().unwrap(),
+        kp: Vec::new(),
+    };
+    let o = run_with(
+        &sc,
+        &mut link,
+        &RunOptions {
+            until_s: None,
+            keep_frames: true,
+        },
+    )
+    .unwrap();
     (sc, o, link.kp)
 }
 
@@ -41,7 +52,11 @@ fn t_of(k: usize) -> f64 {
 
 /// Frames with their step index between two times.
 fn window(o: &RunOutput, t0: f64, t1: f64) -> impl Iterator<Item = (usize, &ActuatorFrame)> {
-    o.frames.iter().enumerate().filter(move |(k, _)| t_of(*k) >= t0 && t_of(*k) < t1).map(|(k, (_, a))| (k, a))
+    o.frames
+        .iter()
+        .enumerate()
+        .filter(move |(k, _)| t_of(*k) >= t0 && t_of(*k) < t1)
+        .map(|(k, (_, a))| (k, a))
 }
 
 /// Pilot events in a window: (steps at full voltage, hold duties seen).
@@ -77,7 +92,10 @@ fn only_faults(o: &RunOutput) -> FaultSet {
 
 /// The plant's lift stays at the seat in a window.
 fn valve_closed(o: &RunOutput, t0: f64, t1: f64) -> bool {
-    o.ehvva.iter().filter(|r| r.t_s >= t0 && r.t_s < t1).all(|r| r.lift_mm < 1e-3 && !r.u_pilot)
+    o.ehvva
+        .iter()
+        .filter(|r| r.t_s >= t0 && r.t_s < t1)
+        .all(|r| r.lift_mm < 1e-3 && !r.u_pilot)
 }
 
 #[test]
@@ -99,27 +117,52 @@ fn battery_sag_to_8_v_is_compensated_without_a_fault() {
         let p = plan::<f32>(&coil, u);
         for (peak_steps, holds) in &ev[1..ev.len() - 1] {
             let peak_us = *peak_steps as f32 * 50.0;
-            assert!((peak_us - p.t_peak_us).abs() <= 60.0, "{u} V: peak {peak_us} µs, plan {} µs", p.t_peak_us);
+            assert!(
+                (peak_us - p.t_peak_us).abs() <= 60.0,
+                "{u} V: peak {peak_us} µs, plan {} µs",
+                p.t_peak_us
+            );
             let hold = holds.iter().sum::<f32>() / holds.len() as f32;
-            assert!((hold - p.hold_duty).abs() < 0.02 * p.hold_duty, "{u} V: hold duty {hold} vs {}", p.hold_duty);
+            assert!(
+                (hold - p.hold_duty).abs() < 0.02 * p.hold_duty,
+                "{u} V: hold duty {hold} vs {}",
+                p.hold_duty
+            );
         }
         // The plant's coil holds about 1 A either way, so the pilot never drops out.
-        let hold_rows: Vec<_> = o.ehvva.iter().filter(|r| r.t_s >= t0 && r.t_s < t1 && r.pilot_duty > 0.0 && r.pilot_duty < 1.0).collect();
+        let hold_rows: Vec<_> = o
+            .ehvva
+            .iter()
+            .filter(|r| r.t_s >= t0 && r.t_s < t1 && r.pilot_duty > 0.0 && r.pilot_duty < 1.0)
+            .collect();
         let i_end = hold_rows.iter().map(|r| r.coil_a).fold(f64::MAX, f64::min);
         assert!((0.9..1.1).contains(&i_end), "{u} V: lowest hold current {i_end} A");
-        assert!(o.ehvva.iter().filter(|r| r.t_s >= t0 && r.t_s < t1).all(|r| r.u_pilot == (r.pilot_duty > 0.0)), "pilot dropped out at {u} V");
+        assert!(
+            o.ehvva
+                .iter()
+                .filter(|r| r.t_s >= t0 && r.t_s < t1)
+                .all(|r| r.u_pilot == (r.pilot_duty > 0.0)),
+            "pilot dropped out at {u} V"
+        );
     }
     // Without compensation the 14 V hold duty at 8 V gives 0.57 A: below the drop-out.
     assert!(f64::from(plan::<f32>(&coil, 14.0).hold_duty) * 8.0 / coil.r_ohm < 0.7);
     // The valve keeps its timing through the sag (events advanced by the same td).
     let open_err = |t0: f64, t1: f64| {
         let lifts: Vec<_> = o.ehvva.iter().filter(|r| r.t_s >= t0 && r.t_s < t1).collect();
-        lifts.windows(2).filter(|w| w[0].lift_mm < 0.075 && w[1].lift_mm >= 0.075).map(|w| w[1].crank_deg - 360.0).collect::<Vec<f64>>()
+        lifts
+            .windows(2)
+            .filter(|w| w[0].lift_mm < 0.075 && w[1].lift_mm >= 0.075)
+            .map(|w| w[1].crank_deg - 360.0)
+            .collect::<Vec<f64>>()
     };
     let (before, during) = (open_err(0.2, 0.6), open_err(0.75, 1.25));
     assert!(before.len() >= 4 && during.len() >= 5);
     let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
-    assert!((mean(&during) - mean(&before)).abs() < 1.0, "opening angle before {before:?}, during {during:?}");
+    assert!(
+        (mean(&during) - mean(&before)).abs() < 1.0,
+        "opening angle before {before:?}, during {during:?}"
+    );
 
     // Vacuum: the compensated duty times the voltage stays the same (the valve sees duty·U),
     // and the wastegate holds its position.
@@ -132,14 +175,25 @@ fn battery_sag_to_8_v_is_compensated_without_a_fault() {
     let (ramped, set) = (at(1.45), [40.0, 30.0]);
     for i in 0..2 {
         let (vb, vd) = (b.duty_pct[i] * b.u_batt_v, d.duty_pct[i] * d.u_batt_v);
-        assert!(vb > 0.0 && (vd - vb).abs() < 0.01 * vb, "actuator {i}: duty·U {vb} before, {vd} in the sag");
+        assert!(
+            vb > 0.0 && (vd - vb).abs() < 0.01 * vb,
+            "actuator {i}: duty·U {vb} before, {vd} in the sag"
+        );
         let (e_ramped, e_after) = ((ramped.x_pct[i] - set[i]).abs(), (a.x_pct[i] - set[i]).abs());
-        assert!(e_after < e_ramped - 0.3, "actuator {i} after recovery: {e_ramped} % off at 1.45 s, {e_after} % at 1.9 s");
+        assert!(
+            e_after < e_ramped - 0.3,
+            "actuator {i} after recovery: {e_ramped} % off at 1.45 s, {e_after} % at 1.9 s"
+        );
     }
     // On the sag's plateau the wastegate stays where it was (uncompensated, the valve would
     // see 8/14 of the duty). Across the 0.1 s ramps the 80 Hz duty lags the voltage by up to
     // 0.75 V, and the rod's friction keeps what that transient moved (a few %).
-    let x_sag = o.vacuum.iter().filter(|r| r.t_s > 0.75 && r.t_s < 1.3).map(|r| (r.x_pct[0] - b.x_pct[0]).abs()).fold(0.0, f64::max);
+    let x_sag = o
+        .vacuum
+        .iter()
+        .filter(|r| r.t_s > 0.75 && r.t_s < 1.3)
+        .map(|r| (r.x_pct[0] - b.x_pct[0]).abs())
+        .fold(0.0, f64::max);
     assert!(x_sag < 1.0, "wastegate moved {x_sag} % in the sag");
 
     // EVVT: the scheduled gain rises as the motor weakens, and falls back after.
@@ -147,19 +201,40 @@ fn battery_sag_to_8_v_is_compensated_without_a_fault() {
     let (kp14, kp8, kp_after) = (kp_at(0.55), kp_at(1.0), kp_at(1.9));
     assert!(kp14 > 0.0 && kp8 > 1.15 * kp14, "kp 14 V {kp14}, 8 V {kp8}");
     assert!((kp_after - kp14).abs() < 1e-3 * kp14);
-    let phase_err = o.evvt.iter().filter(|r| r.t_s > 0.6).map(|r| (r.phase_deg - r.phase_ref_deg).abs()).fold(0.0, f64::max);
+    let phase_err = o
+        .evvt
+        .iter()
+        .filter(|r| r.t_s > 0.6)
+        .map(|r| (r.phase_deg - r.phase_ref_deg).abs())
+        .fold(0.0, f64::max);
     assert!(phase_err < 1.5, "phase error {phase_err} deg through the sag");
 }
 
 fn supply_pressure_sensor_fault(name: &str, counts: u16) {
     let (_, o, _) = run(name);
     // The channel really reads the faulty counts while the fault lasts.
-    assert!(o.frames.iter().filter(|(s, _)| (500_000..800_000).contains(&s.t_us)).all(|(s, _)| s.adc_counts[1] == counts));
+    assert!(o
+        .frames
+        .iter()
+        .filter(|(s, _)| (500_000..800_000).contains(&s.t_us))
+        .all(|(s, _)| s.adc_counts[1] == counts));
     // Debounced 50 ms (scans every 10 ms), then latched past the sensor's recovery at 0.8 s.
-    let t = o.summary.raised_at(Fault::SupplyPressureSensor).expect("fault not raised");
+    let t = o
+        .summary
+        .raised_at(Fault::SupplyPressureSensor)
+        .expect("fault not raised");
     assert!((0.549..=0.57).contains(&t), "raised at {t}");
-    assert!(o.frames.last().is_some_and(|(_, a)| FaultSet(a.faults).contains(Fault::SupplyPressureSensor)), "not latched");
-    assert_eq!(only_faults(&o), { let mut f = FaultSet::default(); f.insert(Fault::SupplyPressureSensor); f });
+    assert!(
+        o.frames
+            .last()
+            .is_some_and(|(_, a)| FaultSet(a.faults).contains(Fault::SupplyPressureSensor)),
+        "not latched"
+    );
+    assert_eq!(only_faults(&o), {
+        let mut f = FaultSet::default();
+        f.insert(Fault::SupplyPressureSensor);
+        f
+    });
     // Pilot off, lift and snubber valves off from the fault on; the engine valve closed by its
     // spring once the event in progress has ended (td,VC + closing < 20 ms).
     for (k, a) in window(&o, t, 1.0) {
@@ -173,8 +248,15 @@ fn supply_pressure_sensor_fault(name: &str, counts: u16) {
     let last = o.frames.last().unwrap().1;
     assert!(last.vacuum_duty[0] > 0.1 && last.motor_duty > 0.05);
     // (The phaser is still settling from the start-up: within 2.5 deg, then 1.5 deg.)
-    assert!(o.evvt.iter().filter(|r| r.t_s > 0.5).all(|r| (r.phase_deg - r.phase_ref_deg).abs() < 2.5));
-    assert!(o.evvt.last().is_some_and(|r| (r.phase_deg - r.phase_ref_deg).abs() < 1.5));
+    assert!(o
+        .evvt
+        .iter()
+        .filter(|r| r.t_s > 0.5)
+        .all(|r| (r.phase_deg - r.phase_ref_deg).abs() < 2.5));
+    assert!(o
+        .evvt
+        .last()
+        .is_some_and(|r| (r.phase_deg - r.phase_ref_deg).abs() < 1.5));
 }
 
 #[test]
@@ -213,10 +295,16 @@ fn lost_crank_signal_stops_events_and_parks_the_phaser() {
 fn stuck_wastegate_is_flagged_and_the_vacuum_side_goes_safe() {
     let (_, o, _) = run("fault-vacuum-stuck");
     let x_stuck = o.vacuum.iter().find(|r| r.t_s >= 0.5).unwrap().x_pct[0];
-    assert!(o.vacuum.iter().filter(|r| r.t_s >= 0.5).all(|r| r.x_pct[0] == x_stuck), "rod moved");
+    assert!(
+        o.vacuum.iter().filter(|r| r.t_s >= 0.5).all(|r| r.x_pct[0] == x_stuck),
+        "rod moved"
+    );
     // The observer leaves the measurement behind once the set-point steps at 0.6 s; the flag
     // needs 1 s beyond 15 %, the supervisor's debounce 50 ms.
-    let t = o.summary.raised_at(Fault::VacuumActuatorStuck).expect("stuck not raised");
+    let t = o
+        .summary
+        .raised_at(Fault::VacuumActuatorStuck)
+        .expect("stuck not raised");
     assert!((1.6..1.8).contains(&t), "raised at {t}");
     assert_eq!(only_faults(&o).0, 1 << Fault::VacuumActuatorStuck as u32);
     // Before: the HPT bypass driven to its set-point; after: every valve unpowered.
@@ -235,12 +323,22 @@ fn vacuum_pump_failure_raises_the_tank_pressure_and_the_leak_flag() {
     let (_, o, _) = run("fault-vacuum-pump");
     // The tank starts above what the set-points need: the pump is on when it fails.
     let at = |t: f64| o.vacuum.iter().find(|r| r.t_s >= t).unwrap();
-    assert!(at(0.4).pump_on && at(0.4).p_tank_kpa < 60.0, "pump {} tank {}", at(0.4).pump_on, at(0.4).p_tank_kpa);
+    assert!(
+        at(0.4).pump_on && at(0.4).p_tank_kpa < 60.0,
+        "pump {} tank {}",
+        at(0.4).pump_on,
+        at(0.4).p_tank_kpa
+    );
     // From the failure on the tank pressure only rises although the pump is switched on.
     let rising: Vec<_> = o.vacuum.iter().filter(|r| r.t_s > 0.55 && r.t_s < 3.9).collect();
     assert!(rising.iter().all(|r| r.pump_on));
     assert!(rising.windows(2).all(|w| w[1].p_tank_kpa >= w[0].p_tank_kpa));
-    assert!(at(3.9).p_tank_kpa > at(0.55).p_tank_kpa + 0.5, "tank {} -> {}", at(0.55).p_tank_kpa, at(3.9).p_tank_kpa);
+    assert!(
+        at(3.9).p_tank_kpa > at(0.55).p_tank_kpa + 0.5,
+        "tank {} -> {}",
+        at(0.55).p_tank_kpa,
+        at(3.9).p_tank_kpa
+    );
     // Two abnormal 2 s residual windows: flagged at 4 s.
     let t = o.summary.raised_at(Fault::AbnormalLeak).expect("leak not raised");
     assert!((3.95..4.1).contains(&t), "raised at {t}");
@@ -261,7 +359,11 @@ fn motor_driver_fault_pin_parks_the_phaser() {
     // From the next 10 ms tick: motor at ring speed + the park command (−100 rpm).
     for (k, a) in window(&o, 1.011, 2.0) {
         let motor_rpm = a.motor_duty * 6000.0;
-        assert!((motor_rpm - (750.0 - 100.0)).abs() < 5.0, "motor {motor_rpm} rpm at {} s", t_of(k));
+        assert!(
+            (motor_rpm - (750.0 - 100.0)).abs() < 5.0,
+            "motor {motor_rpm} rpm at {} s",
+            t_of(k)
+        );
     }
     // The phase moves towards the retard stop.
     let end = o.evvt.last().unwrap().phase_deg;

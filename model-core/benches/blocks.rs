@@ -14,7 +14,9 @@ fn bench_type<R: Real>(c: &mut Criterion) {
         b.iter(|| comp.apply(black_box(R::from_f64(40.0)), black_box(R::from_f64(12.3))))
     });
     let p = SolenoidParams::pilot_default();
-    c.bench_function(&format!("peak_hold_plan/{name}"), |b| b.iter(|| plan::<R>(&p, black_box(R::from_f64(12.3)))));
+    c.bench_function(&format!("peak_hold_plan/{name}"), |b| {
+        b.iter(|| plan::<R>(&p, black_box(R::from_f64(12.3))))
+    });
     let mut d = DelayLine::<R, 64>::new(R::ZERO);
     c.bench_function(&format!("delay_push_get/{name}"), |b| {
         b.iter(|| {
@@ -23,7 +25,9 @@ fn bench_type<R: Real>(c: &mut Criterion) {
         })
     });
     let t = Lut2::<R, 4, 4>::new([5.0, 6.0, 7.0, 8.0], [-20.0, 22.0, 60.0, 100.0], [[1.0; 4]; 4]).expect("valid");
-    c.bench_function(&format!("lut2_eval/{name}"), |b| b.iter(|| t.eval(black_box(R::from_f64(6.4)), black_box(R::from_f64(31.0)))));
+    c.bench_function(&format!("lut2_eval/{name}"), |b| {
+        b.iter(|| t.eval(black_box(R::from_f64(6.4)), black_box(R::from_f64(31.0))))
+    });
 }
 
 fn benches(c: &mut Criterion) {

@@ -24,13 +24,26 @@ fn bench_type<R: Real>(c: &mut Criterion) {
     });
 
     let mut vac = VacuumValveActuator::<R>::new(&VacuumParams::hpt()).expect("valid");
-    let inputs = VacuumInputs { duty_pct: f(55.0), u_batt_v: f(12.5), p_amb_kpa: f(100.0), p_tank_kpa: f(30.0) };
-    c.bench_function(&format!("vacuum_hpt_step/{name}"), |b| b.iter(|| vac.step(black_box(&inputs), f(0.001))));
+    let inputs = VacuumInputs {
+        duty_pct: f(55.0),
+        u_batt_v: f(12.5),
+        p_amb_kpa: f(100.0),
+        p_tank_kpa: f(30.0),
+    };
+    c.bench_function(&format!("vacuum_hpt_step/{name}"), |b| {
+        b.iter(|| vac.step(black_box(&inputs), f(0.001)))
+    });
 
     // EHVVA: one 10 µs step (the models sub-step internally) with the pilot on, mid-opening
     // after 2 ms of pilot so the orifice and snubber terms are live.
     let ehvva_params = EhvvaParams::paper_default();
-    let ehvva_in = EhvvaInputs { p_supply_mpa: f(7.0), p_back_mpa: f(1.0), temp_c: f(22.0), lift_high: true, snubber_on: true };
+    let ehvva_in = EhvvaInputs {
+        p_supply_mpa: f(7.0),
+        p_back_mpa: f(1.0),
+        temp_c: f(22.0),
+        lift_high: true,
+        snubber_on: true,
+    };
     let mut reduced = EhvvaReduced::<R>::new(&ehvva_params, &ehvva_in, 0.01).expect("valid");
     let mut lpv = EhvvaLpv::<R>::new(&ehvva_params, &ehvva_in, 0.01).expect("valid");
     let mut full = EhvvaFull::<R>::new(&ehvva_params, &ehvva_in, 0.01).expect("valid");
@@ -39,12 +52,20 @@ fn bench_type<R: Real>(c: &mut Criterion) {
         lpv.step(true, &ehvva_in);
         full.step(true, &ehvva_in);
     }
-    c.bench_function(&format!("ehvva_reduced_step/{name}"), |b| b.iter(|| reduced.step(black_box(true), black_box(&ehvva_in))));
-    c.bench_function(&format!("ehvva_lpv_step/{name}"), |b| b.iter(|| lpv.step(black_box(true), black_box(&ehvva_in))));
-    c.bench_function(&format!("ehvva_full_step/{name}"), |b| b.iter(|| full.step(black_box(true), black_box(&ehvva_in))));
+    c.bench_function(&format!("ehvva_reduced_step/{name}"), |b| {
+        b.iter(|| reduced.step(black_box(true), black_box(&ehvva_in)))
+    });
+    c.bench_function(&format!("ehvva_lpv_step/{name}"), |b| {
+        b.iter(|| lpv.step(black_box(true), black_box(&ehvva_in)))
+    });
+    c.bench_function(&format!("ehvva_full_step/{name}"), |b| {
+        b.iter(|| full.step(black_box(true), black_box(&ehvva_in)))
+    });
 
     let mut pos = Positioner::<R>::new(&PositionerParams::emps()).expect("valid");
-    c.bench_function(&format!("positioner_step/{name}"), |b| b.iter(|| pos.step(black_box(f(30.0)), f(0.001))));
+    c.bench_function(&format!("positioner_step/{name}"), |b| {
+        b.iter(|| pos.step(black_box(f(30.0)), f(0.001)))
+    });
 }
 
 fn benches(c: &mut Criterion) {

@@ -19,7 +19,10 @@ impl<R: Real, const N: usize> DelayLine<R, N> {
     pub fn new(initial: R) -> Self {
         // N = 0 would make every index invalid; it is rejected at compile time.
         const { assert!(N >= 2, "a delay line needs at least two samples") };
-        Self { buf: [initial; N], head: 0 }
+        Self {
+            buf: [initial; N],
+            head: 0,
+        }
     }
 
     /// Forgets the history: every past sample becomes `value`.

@@ -54,11 +54,9 @@ pub const BATTERY_VOLTAGE_BREAKPOINTS_V: [f64; 3] = [9.5, 11.5, 14.0];
 
 /// α(N, V), crank-deg/(s²·rpm), rows: engine speed 800/1100/1400 rpm, columns: battery
 /// voltage 9.5/11.5/14 V. Designed (see the module doc); maximum 0.595 as eq. (13).
-pub const PAPER_DESIGN_ALPHA: [[f64; 3]; 3] =
-    [[0.27, 0.36, 0.54], [0.16, 0.34, 0.57], [0.07, 0.32, 0.595]];
+pub const PAPER_DESIGN_ALPHA: [[f64; 3]; 3] = [[0.27, 0.36, 0.54], [0.16, 0.34, 0.57], [0.07, 0.32, 0.595]];
 /// β(N, V), 1/s, same layout as [`PAPER_DESIGN_ALPHA`]; maximum 6.975 as eq. (14).
-pub const PAPER_DESIGN_BETA: [[f64; 3]; 3] =
-    [[3.4, 4.8, 6.2], [2.4, 4.7, 6.6], [1.55, 4.6, 6.975]];
+pub const PAPER_DESIGN_BETA: [[f64; 3]; 3] = [[3.4, 4.8, 6.2], [2.4, 4.7, 6.6], [1.55, 4.6, 6.975]];
 /// The one proportional gain (motor rpm per crank degree of phase error) for which the table
 /// reproduces the Fig. 3 settling-time ratios (Section IV-A: "a well-tuned proportional
 /// controller").
@@ -105,11 +103,17 @@ impl EvvtLpvTable {
             for j in 0..3 {
                 let a = self.alpha_deg_per_s2_rpm[i][j];
                 if !(a > 0.0 && a < 1.0e3) {
-                    return Err(EvvtParamError::AlphaDegPerS2Rpm { speed_index: i, voltage_index: j });
+                    return Err(EvvtParamError::AlphaDegPerS2Rpm {
+                        speed_index: i,
+                        voltage_index: j,
+                    });
                 }
                 let b = self.beta_per_s[i][j];
                 if !(0.0..1.0e4).contains(&b) {
-                    return Err(EvvtParamError::BetaPerS { speed_index: i, voltage_index: j });
+                    return Err(EvvtParamError::BetaPerS {
+                        speed_index: i,
+                        voltage_index: j,
+                    });
                 }
             }
         }
@@ -347,7 +351,10 @@ pub struct PlanetaryGear {
 
 impl Default for PlanetaryGear {
     fn default() -> Self {
-        Self { sun_teeth: 24.0, ring_teeth: 60.0 }
+        Self {
+            sun_teeth: 24.0,
+            ring_teeth: 60.0,
+        }
     }
 }
 
@@ -377,8 +384,7 @@ impl PlanetaryGear {
     /// Inverse of eq. (11) for the firmware: the motor (carrier) speed that moves the phase at
     /// `phase_rate_deg_per_s`: ring speed (holds the phase) plus the correction.
     pub fn motor_speed_for_phase_rate_rpm<R: Real>(&self, phase_rate_deg_per_s: R, engine_rpm: R) -> R {
-        Self::ring_speed_rpm(engine_rpm)
-            + phase_rate_deg_per_s / R::from_f64(self.phase_rate_gain_deg_per_s_rpm())
+        Self::ring_speed_rpm(engine_rpm) + phase_rate_deg_per_s / R::from_f64(self.phase_rate_gain_deg_per_s_rpm())
     }
 }
 
@@ -439,8 +445,7 @@ impl<R: Real> EvvtPlant<R> {
     /// voltage `u_batt_v`, with the `supply-voltage` and `engine-speed` effect scales applied.
     pub fn alpha_beta(&self, engine_rpm: R, u_batt_v: R) -> (R, R) {
         let v = self.nominal_voltage_v + self.voltage_effect_scale * (u_batt_v - self.nominal_voltage_v);
-        let n = self.nominal_engine_rpm
-            + self.engine_speed_effect_scale * (engine_rpm - self.nominal_engine_rpm);
+        let n = self.nominal_engine_rpm + self.engine_speed_effect_scale * (engine_rpm - self.nominal_engine_rpm);
         (self.alpha.eval(n, v), self.beta.eval(n, v))
     }
 
@@ -624,8 +629,8 @@ mod tests {
         let max_a = a.iter().flatten().fold(0.0f64, |m, &x| m.max(x));
         let max_b = b.iter().flatten().fold(0.0f64, |m, &x| m.max(x));
         assert_eq!((max_a, max_b), (0.595, 6.975)); // eqs. (13), (14)
-        // Voltage has more influence than speed: the largest ratio over voltage at any speed
-        // exceeds the largest ratio over speed at 14 V and 11.5 V.
+                                                    // Voltage has more influence than speed: the largest ratio over voltage at any speed
+                                                    // exceeds the largest ratio over speed at 14 V and 11.5 V.
         for j in 1..3 {
             let speed_ratio = a[2][j].max(a[0][j]) / a[2][j].min(a[0][j]);
             assert!(speed_ratio < 1.2, "speed ratio {speed_ratio} at voltage column {j}");
@@ -641,14 +646,29 @@ mod tests {
         p.lpv.beta_per_s[1][2] = -1.0;
         assert_eq!(
             EvvtPlant::<f32>::new(&p).unwrap_err(),
-            EvvtParamError::BetaPerS { speed_index: 1, voltage_index: 2 }
+            EvvtParamError::BetaPerS {
+                speed_index: 1,
+                voltage_index: 2
+            }
         );
         let mut p = EvvtParams::default();
         p.lpv.alpha_deg_per_s2_rpm[0][0] = f64::NAN;
-        assert!(matches!(EvvtPlant::<f64>::new(&p), Err(EvvtParamError::AlphaDegPerS2Rpm { .. })));
-        let p = EvvtParams { advance_alpha_factor: 0.0, ..EvvtParams::default() };
-        assert_eq!(EvvtPlant::<f64>::new(&p).unwrap_err(), EvvtParamError::AdvanceAlphaFactor);
-        let p = EvvtParams { initial_phase_deg: 41.0, ..EvvtParams::default() };
+        assert!(matches!(
+            EvvtPlant::<f64>::new(&p),
+            Err(EvvtParamError::AlphaDegPerS2Rpm { .. })
+        ));
+        let p = EvvtParams {
+            advance_alpha_factor: 0.0,
+            ..EvvtParams::default()
+        };
+        assert_eq!(
+            EvvtPlant::<f64>::new(&p).unwrap_err(),
+            EvvtParamError::AdvanceAlphaFactor
+        );
+        let p = EvvtParams {
+            initial_phase_deg: 41.0,
+            ..EvvtParams::default()
+        };
         assert_eq!(EvvtPlant::<f64>::new(&p).unwrap_err(), EvvtParamError::InitialPhaseDeg);
         let mut p = EvvtParams::default();
         p.lpv.battery_voltage_v = [9.5, 9.5, 14.0];
@@ -657,7 +677,10 @@ mod tests {
 
     #[test]
     fn zero_command_holds_the_phase_and_stops_clamp() {
-        let p = EvvtParams { initial_phase_deg: 20.0, ..EvvtParams::default() };
+        let p = EvvtParams {
+            initial_phase_deg: 20.0,
+            ..EvvtParams::default()
+        };
         let mut plant = EvvtPlant::<f64>::new(&p).unwrap();
         for _ in 0..1000 {
             plant.step(0.0, 1100.0, 12.0, 0.01);
@@ -681,7 +704,11 @@ mod tests {
 
     #[test]
     fn steady_phase_rate_is_alpha_over_beta_times_command() {
-        let mut plant = EvvtPlant::<f64>::new(&EvvtParams { initial_phase_deg: 0.0, ..Default::default() }).unwrap();
+        let mut plant = EvvtPlant::<f64>::new(&EvvtParams {
+            initial_phase_deg: 0.0,
+            ..Default::default()
+        })
+        .unwrap();
         for _ in 0..300 {
             plant.step(100.0, 800.0, 14.0, 0.01);
         }
@@ -709,7 +736,10 @@ mod tests {
 
     #[test]
     fn uniform_table_is_lti() {
-        let p = EvvtParams { lpv: EvvtLpvTable::uniform(0.3, 4.0), ..EvvtParams::default() };
+        let p = EvvtParams {
+            lpv: EvvtLpvTable::uniform(0.3, 4.0),
+            ..EvvtParams::default()
+        };
         let plant = EvvtPlant::<f64>::new(&p).unwrap();
         for &(n, v) in &[(800.0, 9.5), (1234.0, 12.3), (1400.0, 14.0)] {
             let (a, b) = plant.alpha_beta(n, v);
@@ -719,9 +749,17 @@ mod tests {
 
     #[test]
     fn direction_effect_slows_advancing_only() {
-        let p = EvvtParams { advance_alpha_factor: 0.7, initial_phase_deg: 20.0, ..EvvtParams::default() };
+        let p = EvvtParams {
+            advance_alpha_factor: 0.7,
+            initial_phase_deg: 20.0,
+            ..EvvtParams::default()
+        };
         let mut slow = EvvtPlant::<f64>::new(&p).unwrap();
-        let mut sym = EvvtPlant::<f64>::new(&EvvtParams { initial_phase_deg: 20.0, ..EvvtParams::default() }).unwrap();
+        let mut sym = EvvtPlant::<f64>::new(&EvvtParams {
+            initial_phase_deg: 20.0,
+            ..EvvtParams::default()
+        })
+        .unwrap();
         for _ in 0..50 {
             slow.step(100.0, 1100.0, 14.0, 0.01);
             sym.step(100.0, 1100.0, 14.0, 0.01);
@@ -759,11 +797,18 @@ mod tests {
                 prev = d;
             }
             let expected = 0.5 * n / 60.0 * 2.0;
-            assert!((crossings as f64 - expected).abs() <= 1.0, "{crossings} crossings at {n} rpm");
+            assert!(
+                (crossings as f64 - expected).abs() <= 1.0,
+                "{crossings} crossings at {n} rpm"
+            );
             assert!((peak - 0.8).abs() < 0.01);
         }
         // Off: no disturbance at all.
-        let mut plant = EvvtPlant::<f64>::new(&EvvtParams { initial_phase_deg: 20.0, ..Default::default() }).unwrap();
+        let mut plant = EvvtPlant::<f64>::new(&EvvtParams {
+            initial_phase_deg: 20.0,
+            ..Default::default()
+        })
+        .unwrap();
         for _ in 0..100 {
             assert_eq!(plant.step(0.0, 1400.0, 14.0, 0.001), 20.0);
         }

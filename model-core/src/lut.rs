@@ -53,7 +53,10 @@ pub struct Lut1<R: Real, const N: usize> {
 impl<R: Real, const N: usize> Lut1<R, N> {
     pub fn new(x: [f64; N], y: [f64; N]) -> Result<Self, LutError> {
         check_axis(&x, 0)?;
-        Ok(Self { x: x.map(R::from_f64), y: y.map(R::from_f64) })
+        Ok(Self {
+            x: x.map(R::from_f64),
+            y: y.map(R::from_f64),
+        })
     }
     pub fn eval(&self, x: R) -> R {
         let (i, w) = locate(&self.x, x);
@@ -80,7 +83,11 @@ impl<R: Real, const NX: usize, const NY: usize> Lut2<R, NX, NY> {
     pub fn new(x: [f64; NX], y: [f64; NY], z: [[f64; NY]; NX]) -> Result<Self, LutError> {
         check_axis(&x, 0)?;
         check_axis(&y, 1)?;
-        Ok(Self { x: x.map(R::from_f64), y: y.map(R::from_f64), z: z.map(|row| row.map(R::from_f64)) })
+        Ok(Self {
+            x: x.map(R::from_f64),
+            y: y.map(R::from_f64),
+            z: z.map(|row| row.map(R::from_f64)),
+        })
     }
     pub fn eval(&self, x: R, y: R) -> R {
         let (i, wx) = locate(&self.x, x);

@@ -31,7 +31,13 @@ impl SolenoidParams {
     /// A pilot coil like a port-injector's: 2 Ω, 2 mH (τ = 1 ms), 3 A peak, 1 A hold; the peak
     /// is reached in 0.56 ms at 14 V and 1.39 ms at 8 V, and not at all below 6 V.
     pub const fn pilot_default() -> Self {
-        Self { r_ohm: 2.0, l_mh: 2.0, i_peak_a: 3.0, i_hold_a: 1.0, t_peak_max_us: 2500.0 }
+        Self {
+            r_ohm: 2.0,
+            l_mh: 2.0,
+            i_peak_a: 3.0,
+            i_hold_a: 1.0,
+            t_peak_max_us: 2500.0,
+        }
     }
 
     /// Checks the calibration; the error names the offending parameter.
@@ -102,7 +108,11 @@ pub fn plan<R: Real>(p: &SolenoidParams, u_batt_v: R) -> PeakHoldPlan<R> {
     } else {
         duty
     };
-    PeakHoldPlan { t_peak_us, hold_duty, fault }
+    PeakHoldPlan {
+        t_peak_us,
+        hold_duty,
+        fault,
+    }
 }
 
 /// Where the driver is in the event.
@@ -110,7 +120,9 @@ pub fn plan<R: Real>(p: &SolenoidParams, u_batt_v: R) -> PeakHoldPlan<R> {
 pub enum PilotPhase {
     Off,
     /// Full voltage; `elapsed_us` since the event began.
-    Peak { elapsed_us: f32 },
+    Peak {
+        elapsed_us: f32,
+    },
     Hold,
 }
 
@@ -126,7 +138,15 @@ pub struct PeakHoldDriver<R: Real> {
 impl<R: Real> PeakHoldDriver<R> {
     pub fn new(params: SolenoidParams) -> Result<Self, &'static str> {
         params.validate()?;
-        Ok(Self { params, phase: PilotPhase::Off, plan: PeakHoldPlan { t_peak_us: R::ZERO, hold_duty: R::ZERO, fault: None } })
+        Ok(Self {
+            params,
+            phase: PilotPhase::Off,
+            plan: PeakHoldPlan {
+                t_peak_us: R::ZERO,
+                hold_duty: R::ZERO,
+                fault: None,
+            },
+        })
     }
 
     /// Command edge: on starts a new event planned at the present battery voltage; off ends it.
@@ -155,7 +175,9 @@ impl<R: Real> PeakHoldDriver<R> {
             self.phase = if reached || elapsed >= self.plan.t_peak_us {
                 PilotPhase::Hold
             } else {
-                PilotPhase::Peak { elapsed_us: elapsed.to_f32() }
+                PilotPhase::Peak {
+                    elapsed_us: elapsed.to_f32(),
+                }
             };
         }
         self.duty()
@@ -190,7 +212,11 @@ pub struct RlCoil<R: Real> {
 
 impl<R: Real> RlCoil<R> {
     pub fn new(p: &SolenoidParams) -> Self {
-        Self { r_ohm: R::from_f64(p.r_ohm), tau_us: R::from_f64(p.l_mh / p.r_ohm * 1000.0), current_a: R::ZERO }
+        Self {
+            r_ohm: R::from_f64(p.r_ohm),
+            tau_us: R::from_f64(p.l_mh / p.r_ohm * 1000.0),
+            current_a: R::ZERO,
+        }
     }
     /// Applies `u_v` for `dt_us` (a freewheel diode keeps the current from going negative).
     pub fn step(&mut self, u_v: R, dt_us: R) -> R {

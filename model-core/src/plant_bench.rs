@@ -38,8 +38,15 @@ pub struct PlantBench<R: Real> {
 impl<R: Real> PlantBench<R> {
     pub fn new() -> Result<Self, &'static str> {
         let f = R::from_f64;
-        let ehvva_in = EhvvaInputs { p_supply_mpa: f(7.0), p_back_mpa: f(1.0), temp_c: f(22.0), lift_high: true, snubber_on: true };
-        let mut ehvva = EhvvaReduced::new(&EhvvaParams::paper_default(), &ehvva_in, 0.01).map_err(|_| "EHVVA reduced model parameters")?;
+        let ehvva_in = EhvvaInputs {
+            p_supply_mpa: f(7.0),
+            p_back_mpa: f(1.0),
+            temp_c: f(22.0),
+            lift_high: true,
+            snubber_on: true,
+        };
+        let mut ehvva = EhvvaReduced::new(&EhvvaParams::paper_default(), &ehvva_in, 0.01)
+            .map_err(|_| "EHVVA reduced model parameters")?;
         for _ in 0..EHVVA_WARMUP_STEPS {
             ehvva.step(true, &ehvva_in);
         }
@@ -48,7 +55,12 @@ impl<R: Real> PlantBench<R> {
             evvt: EvvtPlant::new(&EvvtParams::default()).map_err(|_| "EVVT plant parameters")?,
             vacuum: VacuumValveActuator::new(&VacuumParams::hpt()).map_err(|_| "vacuum HPT parameters")?,
             ehvva_in,
-            vacuum_in: VacuumInputs { duty_pct: f(55.0), u_batt_v: f(12.5), p_amb_kpa: f(100.0), p_tank_kpa: f(30.0) },
+            vacuum_in: VacuumInputs {
+                duty_pct: f(55.0),
+                u_batt_v: f(12.5),
+                p_amb_kpa: f(100.0),
+                p_tank_kpa: f(30.0),
+            },
             evvt_cmd_rpm: f(40.0),
             evvt_u_batt_v: f(12.0),
             evvt_dt_s: f(0.01),
@@ -71,7 +83,8 @@ impl<R: Real> PlantBench<R> {
 
     /// One 10 ms EVVT plant step at `engine_rpm`; the cam phase in degrees.
     pub fn step_evvt(&mut self, engine_rpm: R) -> R {
-        self.evvt.step(self.evvt_cmd_rpm, engine_rpm, self.evvt_u_batt_v, self.evvt_dt_s)
+        self.evvt
+            .step(self.evvt_cmd_rpm, engine_rpm, self.evvt_u_batt_v, self.evvt_dt_s)
     }
 
     /// One 1 ms step of the HPT vacuum valve and actuator; the position in %.

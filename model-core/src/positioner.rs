@@ -36,7 +36,10 @@ pub struct PositionerEffects {
 }
 
 impl PositionerEffects {
-    pub const NONE: Self = Self { coulomb_friction: false, asymmetric_friction: false };
+    pub const NONE: Self = Self {
+        coulomb_friction: false,
+        asymmetric_friction: false,
+    };
 }
 
 /// Positioner parameters. Plain f64, unit in the name.
@@ -83,7 +86,10 @@ impl PositionerParams {
             fv_neg_n_s_per_m: 240.4236,
             fc_neg_n: 20.6277,
             v_stick_m_s: 1e-6,
-            effects: PositionerEffects { coulomb_friction: true, asymmetric_friction: false },
+            effects: PositionerEffects {
+                coulomb_friction: true,
+                asymmetric_friction: false,
+            },
         }
     }
 
@@ -95,14 +101,20 @@ impl PositionerParams {
         Self {
             mass_kg: 95.1540,
             offset_n: 0.0,
-            effects: PositionerEffects { coulomb_friction: true, asymmetric_friction: true },
+            effects: PositionerEffects {
+                coulomb_friction: true,
+                asymmetric_friction: true,
+            },
             ..Self::emps()
         }
     }
 
     /// The same positioner with every catalogue effect off (viscous friction and offset only).
     pub fn baseline(&self) -> Self {
-        Self { effects: PositionerEffects::NONE, ..*self }
+        Self {
+            effects: PositionerEffects::NONE,
+            ..*self
+        }
     }
 
     fn validate(&self) -> Result<(), PositionerParamError> {
@@ -162,7 +174,11 @@ impl<R: Real> Positioner<R> {
         } else {
             (p.fv_n_s_per_m, p.fv_n_s_per_m, p.fc_n, p.fc_n)
         };
-        let (fc_pos, fc_neg) = if p.effects.coulomb_friction { (fc_pos, fc_neg) } else { (0.0, 0.0) };
+        let (fc_pos, fc_neg) = if p.effects.coulomb_friction {
+            (fc_pos, fc_neg)
+        } else {
+            (0.0, 0.0)
+        };
         let f = R::from_f64;
         Ok(Self {
             inv_mass: f(1.0 / p.mass_kg),
@@ -431,7 +447,10 @@ mod tests {
         for force in [100.0, -100.0, 300.0] {
             let expected = (force - p.offset_n - p.fc_n * force.signum()) / p.fv_n_s_per_m;
             let v = steady_velocity::<f64>(&p, force);
-            assert!((v - expected).abs() < 1e-6 * expected.abs(), "F {force}: v {v} vs {expected}");
+            assert!(
+                (v - expected).abs() < 1e-6 * expected.abs(),
+                "F {force}: v {v} vs {expected}"
+            );
         }
         // Eq. (12): each direction with its own coefficients.
         let a = PositionerParams::emps_asymmetric();
@@ -542,7 +561,12 @@ mod tests {
                 let force = c.update(row[2], row[3]);
                 // The first two rows still carry the start-up history.
                 if k >= 2 {
-                    assert!((force - row[1]).abs() < 0.3, "t {}: {force} vs logged {}", row[0], row[1]);
+                    assert!(
+                        (force - row[1]).abs() < 0.3,
+                        "t {}: {force} vs logged {}",
+                        row[0],
+                        row[1]
+                    );
                 }
             }
         }
@@ -595,7 +619,11 @@ mod tests {
                 }
             }
             pub fn max_dev(&self, other: &Trace) -> f64 {
-                self.data.iter().zip(other.data.iter()).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max)
+                self.data
+                    .iter()
+                    .zip(other.data.iter())
+                    .map(|(a, b)| (a - b).abs())
+                    .fold(0.0, f64::max)
             }
         }
     }
@@ -611,9 +639,21 @@ mod tests {
             // Measured (8 s at 1 kHz): f32 1.2e-7 m / 0.35 N, Q32.32 6.6e-9 m / 0.011 N. f32 holds
             // a 0.2 m position to 1.5e-8 m, and the loop turns position into force at
             // kp·kv·gτ = 1.37e6 N/m, so the f32 force differs by a few tenths of a newton.
-            let dev = [pos64.max_dev(&pos32), f64_force.max_dev(&f32_force), pos64.max_dev(&posq), f64_force.max_dev(&q_force)];
+            let dev = [
+                pos64.max_dev(&pos32),
+                f64_force.max_dev(&f32_force),
+                pos64.max_dev(&posq),
+                f64_force.max_dev(&q_force),
+            ];
             extern crate std;
-            std::println!("asymmetric {}: f32 {:.2e} m {:.2e} N, Q32 {:.2e} m {:.2e} N", p.effects.asymmetric_friction, dev[0], dev[1], dev[2], dev[3]);
+            std::println!(
+                "asymmetric {}: f32 {:.2e} m {:.2e} N, Q32 {:.2e} m {:.2e} N",
+                p.effects.asymmetric_friction,
+                dev[0],
+                dev[1],
+                dev[2],
+                dev[3]
+            );
             assert!(dev[0] < 3e-7 && dev[1] < 0.6, "f32 deviations {dev:?}");
             assert!(dev[2] < 2e-8 && dev[3] < 0.03, "Q32 deviations {dev:?}");
         }
@@ -623,12 +663,21 @@ mod tests {
     fn bad_parameters_are_named() {
         let mut p = PositionerParams::emps();
         p.mass_kg = 0.0;
-        assert_eq!(Positioner::<f32>::new(&p).err(), Some(PositionerParamError::BadParameter("mass_kg")));
+        assert_eq!(
+            Positioner::<f32>::new(&p).err(),
+            Some(PositionerParamError::BadParameter("mass_kg"))
+        );
         let mut p = PositionerParams::emps();
         p.fc_neg_n = f64::NAN;
-        assert_eq!(Positioner::<f32>::new(&p).err(), Some(PositionerParamError::BadParameter("fc_neg_n")));
+        assert_eq!(
+            Positioner::<f32>::new(&p).err(),
+            Some(PositionerParamError::BadParameter("fc_neg_n"))
+        );
         let mut c = EmpsControllerParams::emps();
         c.control_period_s = 0.0;
-        assert_eq!(EmpsController::<f32>::new(&c, 0.0).err(), Some(PositionerParamError::BadParameter("control_period_s")));
+        assert_eq!(
+            EmpsController::<f32>::new(&c, 0.0).err(),
+            Some(PositionerParamError::BadParameter("control_period_s"))
+        );
     }
 }

@@ -30,21 +30,21 @@ pub const MAX_ORDER: u8 = 16;
 /// Tap sets (the i with a_i = 1 in eq. (3)) as a bit mask: bit i−1 set for a_i = 1. Index =
 /// order − 2. Characteristic polynomial `1 + Σ a_i x^i`.
 const TAP_MASKS: [u32; 15] = [
-    taps(&[1, 2]),           // 2
-    taps(&[2, 3]),           // 3
-    taps(&[3, 4]),           // 4
-    taps(&[3, 5]),           // 5
-    taps(&[5, 6]),           // 6
-    taps(&[6, 7]),           // 7
-    taps(&[2, 3, 4, 8]),     // 8
-    taps(&[5, 9]),           // 9
-    taps(&[7, 10]),          // 10
-    taps(&[9, 11]),          // 11
-    taps(&[1, 4, 6, 12]),    // 12
-    taps(&[1, 3, 4, 13]),    // 13
-    taps(&[1, 3, 5, 14]),    // 14
-    taps(&[14, 15]),         // 15
-    taps(&[4, 13, 15, 16]),  // 16
+    taps(&[1, 2]),          // 2
+    taps(&[2, 3]),          // 3
+    taps(&[3, 4]),          // 4
+    taps(&[3, 5]),          // 5
+    taps(&[5, 6]),          // 6
+    taps(&[6, 7]),          // 7
+    taps(&[2, 3, 4, 8]),    // 8
+    taps(&[5, 9]),          // 9
+    taps(&[7, 10]),         // 10
+    taps(&[9, 11]),         // 11
+    taps(&[1, 4, 6, 12]),   // 12
+    taps(&[1, 3, 4, 13]),   // 13
+    taps(&[1, 3, 5, 14]),   // 14
+    taps(&[14, 15]),        // 15
+    taps(&[4, 13, 15, 16]), // 16
 ];
 
 const fn taps(idx: &[u32]) -> u32 {
@@ -81,8 +81,15 @@ impl MSequence {
         if !(MIN_ORDER..=MAX_ORDER).contains(&order) {
             return Err(PrbsError::Order(order));
         }
-        let tap_mask = TAP_MASKS.get((order - MIN_ORDER) as usize).copied().ok_or(PrbsError::Order(order))?;
-        Ok(Self { register: 1, tap_mask, order })
+        let tap_mask = TAP_MASKS
+            .get((order - MIN_ORDER) as usize)
+            .copied()
+            .ok_or(PrbsError::Order(order))?;
+        Ok(Self {
+            register: 1,
+            tap_mask,
+            order,
+        })
     }
 
     pub fn order(&self) -> u8 {
@@ -125,7 +132,11 @@ impl<R: Real> InversePrbs<R> {
     /// Order n of the underlying m-sequence and amplitude a (Section IV-B used a = 7.5 crank
     /// degrees around 25 degrees).
     pub fn new(order: u8, amplitude: R) -> Result<Self, PrbsError> {
-        Ok(Self { sequence: MSequence::new(order)?, amplitude, even: true })
+        Ok(Self {
+            sequence: MSequence::new(order)?,
+            amplitude,
+            even: true,
+        })
     }
 
     /// 2m: the period of the inverse PRBS.
@@ -171,7 +182,12 @@ where
         if hold_periods == 0 {
             return Err(PrbsError::HoldPeriods);
         }
-        Ok(Self { source, hold_periods, remaining: 0, current: None })
+        Ok(Self {
+            source,
+            hold_periods,
+            remaining: 0,
+            current: None,
+        })
     }
 }
 

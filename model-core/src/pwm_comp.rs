@@ -66,7 +66,11 @@ impl<R: Real> PwmCompensator<R> {
         let u = if supply_low { self.u_min_v } else { u_batt_v };
         let raw = duty_pct * self.u_ref_v / u;
         let clamped = raw.clamp(self.duty_min_pct, self.duty_max_pct);
-        Compensated { duty_pct: clamped, duty_limited: clamped != raw, supply_low }
+        Compensated {
+            duty_pct: clamped,
+            duty_limited: clamped != raw,
+            supply_low,
+        }
     }
 
     pub fn u_ref_v(&self) -> R {
@@ -86,9 +90,18 @@ mod tests {
 
     #[test]
     fn rejects_bad_parameters_by_name() {
-        assert_eq!(PwmCompensator::<f32>::new(0.0, 6.0, 0.0, 100.0).unwrap_err(), PwmCompError::BadParameter("u_ref_v"));
-        assert_eq!(PwmCompensator::<f32>::new(13.5, f64::NAN, 0.0, 100.0).unwrap_err(), PwmCompError::BadParameter("u_min_v"));
-        assert_eq!(PwmCompensator::<f32>::new(13.5, 6.0, 50.0, 40.0).unwrap_err(), PwmCompError::BadParameter("duty_max_pct"));
+        assert_eq!(
+            PwmCompensator::<f32>::new(0.0, 6.0, 0.0, 100.0).unwrap_err(),
+            PwmCompError::BadParameter("u_ref_v")
+        );
+        assert_eq!(
+            PwmCompensator::<f32>::new(13.5, f64::NAN, 0.0, 100.0).unwrap_err(),
+            PwmCompError::BadParameter("u_min_v")
+        );
+        assert_eq!(
+            PwmCompensator::<f32>::new(13.5, 6.0, 50.0, 40.0).unwrap_err(),
+            PwmCompError::BadParameter("duty_max_pct")
+        );
     }
 
     #[test]

@@ -523,7 +523,10 @@ mod tests {
                 (micromath::F32Ext::sqrt(x) as f64 - r).abs() / r
             })
             .fold(0.0, f64::max);
-        assert!(worst > 1e-2 && worst < 1e-1, "micromath sqrt worst relative error {worst}");
+        assert!(
+            worst > 1e-2 && worst < 1e-1,
+            "micromath sqrt worst relative error {worst}"
+        );
     }
 
     #[test]

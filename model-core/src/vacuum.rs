@@ -44,10 +44,20 @@ pub enum VacuumParamError {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum StaticPressureMap {
     /// Eq. (2): p* = min(k1·u + p01, k2·u + p02) (LPT and HPT valves).
-    PiecewiseLinear { k1_kpa_per_pct: f64, p01_kpa: f64, k2_kpa_per_pct: f64, p02_kpa: f64 },
+    PiecewiseLinear {
+        k1_kpa_per_pct: f64,
+        p01_kpa: f64,
+        k2_kpa_per_pct: f64,
+        p02_kpa: f64,
+    },
     /// Eq. (5): p* = min(k1·u + p01, p_amb + k2·max(0, u − u0)³) (HPC valve); `k2` is
     /// negative: the pressure leaves ambient at u0.
-    Cubic { k1_kpa_per_pct: f64, p01_kpa: f64, k2_kpa_per_pct3: f64, u0_pct: f64 },
+    Cubic {
+        k1_kpa_per_pct: f64,
+        p01_kpa: f64,
+        k2_kpa_per_pct3: f64,
+        u0_pct: f64,
+    },
 }
 
 /// Static pressure-to-position relation, identified at `p_amb_ref_kpa` (Figs. 9, 10).
@@ -56,7 +66,12 @@ pub enum PositionMap {
     /// Eq. (8): x = k·p + x0.
     Linear { k_pct_per_kpa: f64, x0_pct: f64 },
     /// Eq. (9): x = a1 + a2·atan((a3 − p)/a4).
-    Arctan { a1_pct: f64, a2_pct_per_rad: f64, a3_kpa: f64, a4_kpa: f64 },
+    Arctan {
+        a1_pct: f64,
+        a2_pct_per_rad: f64,
+        a3_kpa: f64,
+        a4_kpa: f64,
+    },
 }
 
 /// The catalogue effects (DATA-FORMAT.md, plant `vacuum`). `false` gives the baseline.
@@ -74,8 +89,12 @@ pub struct VacuumEffects {
 }
 
 impl VacuumEffects {
-    pub const NONE: Self =
-        Self { supply_voltage: false, pressure_direction: false, coulomb_friction: false, backlash: false };
+    pub const NONE: Self = Self {
+        supply_voltage: false,
+        pressure_direction: false,
+        coulomb_friction: false,
+        backlash: false,
+    };
 }
 
 /// One solenoid valve and its membrane actuator. Plain f64, unit in the name.
@@ -154,7 +173,10 @@ impl VacuumParams {
             tau_rise_s: 0.04,
             tau_fall_s: 0.07,
             // x = 0 at 90 kPa (10 kPa spring preload), x = 100 % at 40 kPa (Fig. 9).
-            position_map: PositionMap::Linear { k_pct_per_kpa: -2.0, x0_pct: 180.0 },
+            position_map: PositionMap::Linear {
+                k_pct_per_kpa: -2.0,
+                x0_pct: 180.0,
+            },
             p_amb_ref_kpa: P_AMB_REF_KPA,
             // Mass and damping are not given numerically; chosen so that the rod follows the
             // pressure within a few tens of ms as in Fig. 11: spring 0.5 kPa/%,
@@ -198,7 +220,12 @@ impl VacuumParams {
             tau_rise_s: 0.05,
             tau_fall_s: 0.08,
             // x(80 kPa) = 14 %, 5 %/kPa at 70 kPa; x = 0 at 94 kPa, 100 % at 46 kPa.
-            position_map: PositionMap::Arctan { a1_pct: 50.0, a2_pct_per_rad: 40.0, a3_kpa: 70.0, a4_kpa: 8.0 },
+            position_map: PositionMap::Arctan {
+                a1_pct: 50.0,
+                a2_pct_per_rad: 40.0,
+                a3_kpa: 70.0,
+                a4_kpa: 8.0,
+            },
             // Spring 0.2 kPa/% mid-stroke: ω = 45 rad/s.
             mass_kpa_s2_per_pct: 1.0e-4,
             damping_extend_kpa_s_per_pct: 0.006,
@@ -226,7 +253,12 @@ impl VacuumParams {
             tau_rise_s: 0.05,
             tau_fall_s: 0.085,
             // x = 0 at 93 kPa, 100 % at 31 kPa.
-            position_map: PositionMap::Arctan { a1_pct: 50.0, a2_pct_per_rad: 38.0, a3_kpa: 62.0, a4_kpa: 8.0 },
+            position_map: PositionMap::Arctan {
+                a1_pct: 50.0,
+                a2_pct_per_rad: 38.0,
+                a3_kpa: 62.0,
+                a4_kpa: 8.0,
+            },
             mass_kpa_s2_per_pct: 1.0e-4,
             damping_extend_kpa_s_per_pct: 0.007,
             damping_retract_kpa_s_per_pct: 0.014,
@@ -246,7 +278,10 @@ impl VacuumParams {
 
     /// The same actuator with every catalogue effect off (the diagnosis baseline).
     pub fn baseline(&self) -> Self {
-        Self { effects: VacuumEffects::NONE, ..*self }
+        Self {
+            effects: VacuumEffects::NONE,
+            ..*self
+        }
     }
 
     /// The same actuator with the given effects.
@@ -261,14 +296,28 @@ impl VacuumParams {
             return bad("u_ref_v");
         }
         match self.static_map {
-            StaticPressureMap::PiecewiseLinear { k1_kpa_per_pct, p01_kpa, k2_kpa_per_pct, p02_kpa } => {
+            StaticPressureMap::PiecewiseLinear {
+                k1_kpa_per_pct,
+                p01_kpa,
+                k2_kpa_per_pct,
+                p02_kpa,
+            } => {
                 if !(fin(k1_kpa_per_pct) && fin(p01_kpa) && fin(k2_kpa_per_pct) && fin(p02_kpa)) {
                     return bad("static_map");
                 }
             }
-            StaticPressureMap::Cubic { k1_kpa_per_pct, p01_kpa, k2_kpa_per_pct3, u0_pct } => {
+            StaticPressureMap::Cubic {
+                k1_kpa_per_pct,
+                p01_kpa,
+                k2_kpa_per_pct3,
+                u0_pct,
+            } => {
                 // |k2|·100³ must stay far inside the Q32 range.
-                if !(fin(k1_kpa_per_pct) && fin(p01_kpa) && fin(k2_kpa_per_pct3) && k2_kpa_per_pct3.abs() < 1.0 && fin(u0_pct))
+                if !(fin(k1_kpa_per_pct)
+                    && fin(p01_kpa)
+                    && fin(k2_kpa_per_pct3)
+                    && k2_kpa_per_pct3.abs() < 1.0
+                    && fin(u0_pct))
                 {
                     return bad("static_map");
                 }
@@ -286,10 +335,23 @@ impl VacuumParams {
                     return bad("position_map");
                 }
             }
-            PositionMap::Arctan { a1_pct, a2_pct_per_rad, a3_kpa, a4_kpa } => {
-                let ok = fin(a1_pct) && fin(a2_pct_per_rad) && a2_pct_per_rad > 0.0 && fin(a3_kpa) && fin(a4_kpa) && a4_kpa > 0.0;
+            PositionMap::Arctan {
+                a1_pct,
+                a2_pct_per_rad,
+                a3_kpa,
+                a4_kpa,
+            } => {
+                let ok = fin(a1_pct)
+                    && fin(a2_pct_per_rad)
+                    && a2_pct_per_rad > 0.0
+                    && fin(a3_kpa)
+                    && fin(a4_kpa)
+                    && a4_kpa > 0.0;
                 // The stroke 0..100 % must lie inside the map's open range a1 ± a2·π/2.
-                if !ok || (a1_pct / a2_pct_per_rad).abs() > THETA_MAX_RAD || ((100.0 - a1_pct) / a2_pct_per_rad).abs() > THETA_MAX_RAD {
+                if !ok
+                    || (a1_pct / a2_pct_per_rad).abs() > THETA_MAX_RAD
+                    || ((100.0 - a1_pct) / a2_pct_per_rad).abs() > THETA_MAX_RAD
+                {
                     return bad("position_map");
                 }
             }
@@ -309,7 +371,8 @@ impl VacuumParams {
         if !(fin(self.fc_kpa) && self.fc_kpa >= 0.0) {
             return bad("fc_kpa");
         }
-        if !(fin(self.dahl_sigma_kpa_per_pct) && self.dahl_sigma_kpa_per_pct > 0.0 && self.dahl_sigma_kpa_per_pct < 1e4) {
+        if !(fin(self.dahl_sigma_kpa_per_pct) && self.dahl_sigma_kpa_per_pct > 0.0 && self.dahl_sigma_kpa_per_pct < 1e4)
+        {
             return bad("dahl_sigma_kpa_per_pct");
         }
         if !(fin(self.backlash_pct) && (0.0..=50.0).contains(&self.backlash_pct)) {
@@ -364,7 +427,11 @@ pub struct VacuumOutputs<R> {
 /// Compressible orifice flow eq. (3), signed from `p_a` to `p_b`, in mg/s for an effective
 /// area in mm². `c_orifice` = 1e3/sqrt(R·T) converts kPa·mm² to mg/s.
 pub fn orifice_flow_mg_s<R: Real>(p_a_kpa: R, p_b_kpa: R, area_mm2: R, c_orifice: R) -> R {
-    let (p_up, p_down, dir) = if p_a_kpa >= p_b_kpa { (p_a_kpa, p_b_kpa, R::ONE) } else { (p_b_kpa, p_a_kpa, -R::ONE) };
+    let (p_up, p_down, dir) = if p_a_kpa >= p_b_kpa {
+        (p_a_kpa, p_b_kpa, R::ONE)
+    } else {
+        (p_b_kpa, p_a_kpa, -R::ONE)
+    };
     if !positive(p_up) || !positive(area_mm2) {
         return R::ZERO;
     }
@@ -397,18 +464,33 @@ impl<R: Real> VacuumStaticModel<R> {
     pub fn new(p: &VacuumParams) -> Result<Self, VacuumParamError> {
         p.validate()?;
         let falling = match p.static_map {
-            StaticPressureMap::PiecewiseLinear { k1_kpa_per_pct, k2_kpa_per_pct, .. } => k1_kpa_per_pct < 0.0 && k2_kpa_per_pct < 0.0,
-            StaticPressureMap::Cubic { k1_kpa_per_pct, k2_kpa_per_pct3, .. } => k1_kpa_per_pct < 0.0 && k2_kpa_per_pct3 < 0.0,
+            StaticPressureMap::PiecewiseLinear {
+                k1_kpa_per_pct,
+                k2_kpa_per_pct,
+                ..
+            } => k1_kpa_per_pct < 0.0 && k2_kpa_per_pct < 0.0,
+            StaticPressureMap::Cubic {
+                k1_kpa_per_pct,
+                k2_kpa_per_pct3,
+                ..
+            } => k1_kpa_per_pct < 0.0 && k2_kpa_per_pct3 < 0.0,
         };
         if !falling {
             return Err(VacuumParamError::BadParameter("static_map"));
         }
-        Ok(Self { maps: Maps::new(p), p_amb_ref_kpa: R::from_f64(p.p_amb_ref_kpa) })
+        Ok(Self {
+            maps: Maps::new(p),
+            p_amb_ref_kpa: R::from_f64(p.p_amb_ref_kpa),
+        })
     }
 
     /// Eq. (2)/(5) saturated: the static pressure at corrected duty `u_corr_pct`.
     pub fn pressure_for_duty_kpa(&self, u_corr_pct: R, p_amb_kpa: R, p_tank_kpa: R) -> R {
-        saturate(self.maps.unsaturated_pressure(u_corr_pct, p_amb_kpa), p_tank_kpa, p_amb_kpa)
+        saturate(
+            self.maps.unsaturated_pressure(u_corr_pct, p_amb_kpa),
+            p_tank_kpa,
+            p_amb_kpa,
+        )
     }
 
     /// Inverse of eq. (2)/(5): the corrected duty whose static pressure is `p_kpa`, not limited
@@ -420,7 +502,11 @@ impl<R: Real> VacuumStaticModel<R> {
             StaticMapR::PiecewiseLinear { k1, p01, k2, p02 } => ((p_kpa - p01) / k1).min((p_kpa - p02) / k2),
             StaticMapR::Cubic { k1, p01, k2, u0 } => {
                 let drop = ((p_kpa - p_amb_kpa) / k2).max(R::ZERO);
-                let cube_root = if drop > R::ZERO { (drop.ln() / R::from_f64(3.0)).exp() } else { R::ZERO };
+                let cube_root = if drop > R::ZERO {
+                    (drop.ln() / R::from_f64(3.0)).exp()
+                } else {
+                    R::ZERO
+                };
                 ((p_kpa - p01) / k1).min(u0 + cube_root)
             }
         }
@@ -520,20 +606,50 @@ impl<R: Real> Maps<R> {
     fn new(p: &VacuumParams) -> Self {
         let f = R::from_f64;
         let static_map = match p.static_map {
-            StaticPressureMap::PiecewiseLinear { k1_kpa_per_pct, p01_kpa, k2_kpa_per_pct, p02_kpa } => {
-                StaticMapR::PiecewiseLinear { k1: f(k1_kpa_per_pct), p01: f(p01_kpa), k2: f(k2_kpa_per_pct), p02: f(p02_kpa) }
-            }
-            StaticPressureMap::Cubic { k1_kpa_per_pct, p01_kpa, k2_kpa_per_pct3, u0_pct } => {
-                StaticMapR::Cubic { k1: f(k1_kpa_per_pct), p01: f(p01_kpa), k2: f(k2_kpa_per_pct3), u0: f(u0_pct) }
-            }
+            StaticPressureMap::PiecewiseLinear {
+                k1_kpa_per_pct,
+                p01_kpa,
+                k2_kpa_per_pct,
+                p02_kpa,
+            } => StaticMapR::PiecewiseLinear {
+                k1: f(k1_kpa_per_pct),
+                p01: f(p01_kpa),
+                k2: f(k2_kpa_per_pct),
+                p02: f(p02_kpa),
+            },
+            StaticPressureMap::Cubic {
+                k1_kpa_per_pct,
+                p01_kpa,
+                k2_kpa_per_pct3,
+                u0_pct,
+            } => StaticMapR::Cubic {
+                k1: f(k1_kpa_per_pct),
+                p01: f(p01_kpa),
+                k2: f(k2_kpa_per_pct3),
+                u0: f(u0_pct),
+            },
         };
         let position_map = match p.position_map {
-            PositionMap::Linear { k_pct_per_kpa, x0_pct } => PositionMapR::Linear { k: f(k_pct_per_kpa), x0: f(x0_pct) },
-            PositionMap::Arctan { a1_pct, a2_pct_per_rad, a3_kpa, a4_kpa } => {
-                PositionMapR::Arctan { a1: f(a1_pct), a2: f(a2_pct_per_rad), a3: f(a3_kpa), a4: f(a4_kpa) }
-            }
+            PositionMap::Linear { k_pct_per_kpa, x0_pct } => PositionMapR::Linear {
+                k: f(k_pct_per_kpa),
+                x0: f(x0_pct),
+            },
+            PositionMap::Arctan {
+                a1_pct,
+                a2_pct_per_rad,
+                a3_kpa,
+                a4_kpa,
+            } => PositionMapR::Arctan {
+                a1: f(a1_pct),
+                a2: f(a2_pct_per_rad),
+                a3: f(a3_kpa),
+                a4: f(a4_kpa),
+            },
         };
-        Self { static_map, position_map }
+        Self {
+            static_map,
+            position_map,
+        }
     }
 
     /// Eq. (2)/(5) before saturation, at effective duty `u`.
@@ -701,7 +817,11 @@ impl<R: Real> VacuumValveActuator<R> {
     /// Saturated static pressure, eqs. (1), (2)/(5).
     pub fn static_pressure_kpa(&self, inputs: &VacuumInputs<R>) -> R {
         let u = self.effective_duty_pct(inputs.duty_pct, inputs.u_batt_v);
-        saturate(self.maps.unsaturated_pressure(u, inputs.p_amb_kpa), inputs.p_tank_kpa, inputs.p_amb_kpa)
+        saturate(
+            self.maps.unsaturated_pressure(u, inputs.p_amb_kpa),
+            inputs.p_tank_kpa,
+            inputs.p_amb_kpa,
+        )
     }
 
     /// Frictionless static membrane position for a chamber pressure, eqs. (7)-(9), on the
@@ -796,7 +916,11 @@ impl<R: Real> VacuumValveActuator<R> {
                 self.decay_rise = one_minus_exp_neg(dt_s / self.tau_rise_s);
                 self.decay_fall = one_minus_exp_neg(dt_s / self.tau_fall_s);
             }
-            let decay = if self.effects.pressure_direction && p_stat < p_old { self.decay_fall } else { self.decay_rise };
+            let decay = if self.effects.pressure_direction && p_stat < p_old {
+                self.decay_fall
+            } else {
+                self.decay_rise
+            };
             self.p_act_kpa = p_old + (p_stat - p_old) * decay;
         }
         self.p_act_kpa
@@ -807,7 +931,11 @@ impl<R: Real> VacuumValveActuator<R> {
     fn mechanics_substep(&mut self, dp_membrane_kpa: R, h: R, hundred: R) {
         let x = self.x_mem_pct;
         let spring = self.p_amb_ref_kpa - self.maps.pressure_at(x);
-        let b = if self.v_pct_s >= R::ZERO { self.damping_extend } else { self.damping_retract };
+        let b = if self.v_pct_s >= R::ZERO {
+            self.damping_extend
+        } else {
+            self.damping_retract
+        };
         let drive = dp_membrane_kpa - spring - self.friction_kpa;
         // Damping implicit: stable for any b.
         let mut v = (self.v_pct_s + h * drive * self.inv_mass) / (R::ONE + h * b * self.inv_mass);
@@ -964,7 +1092,11 @@ impl<R: Real> VacuumTank<R> {
         let p_min = R::from_f64(P_TANK_MIN_KPA);
         for _ in 0..(n as u32) {
             let p = self.p_tank_kpa;
-            let pump = if pump_on { self.pump_flow_mg_s(p_amb_kpa, p) } else { R::ZERO };
+            let pump = if pump_on {
+                self.pump_flow_mg_s(p_amb_kpa, p)
+            } else {
+                R::ZERO
+            };
             let net = inflow_mg_s + self.base_leak_mg_s(p_amb_kpa, p) - pump;
             self.p_tank_kpa = (p + self.c_pressure * net * h).clamp(p_min, p_amb_kpa.max(p_min));
         }
@@ -996,7 +1128,13 @@ impl<R: Real> VacuumSystem<R> {
     /// The paper's system: [`VacuumParams::lpt`], [`VacuumParams::hpt`], [`VacuumParams::hpc`]
     /// and [`VacuumTankParams::paper`].
     pub fn paper(p_tank_initial_kpa: f64) -> Result<Self, VacuumParamError> {
-        Self::new(&VacuumParams::lpt(), &VacuumParams::hpt(), &VacuumParams::hpc(), &VacuumTankParams::paper(), p_tank_initial_kpa)
+        Self::new(
+            &VacuumParams::lpt(),
+            &VacuumParams::hpt(),
+            &VacuumParams::hpc(),
+            &VacuumTankParams::paper(),
+            p_tank_initial_kpa,
+        )
     }
 
     pub fn new(
@@ -1016,9 +1154,21 @@ impl<R: Real> VacuumSystem<R> {
 
     /// Duties in the order LPT, HPT, HPC. The actuators see the tank pressure at the start of
     /// the step; the tank then integrates their summed flow.
-    pub fn step(&mut self, duties_pct: [R; 3], u_batt_v: R, p_amb_kpa: R, pump_on: bool, dt_s: R) -> VacuumSystemOutputs<R> {
+    pub fn step(
+        &mut self,
+        duties_pct: [R; 3],
+        u_batt_v: R,
+        p_amb_kpa: R,
+        pump_on: bool,
+        dt_s: R,
+    ) -> VacuumSystemOutputs<R> {
         let p_tank = self.tank.p_tank_kpa();
-        let input = |duty_pct| VacuumInputs { duty_pct, u_batt_v, p_amb_kpa, p_tank_kpa: p_tank };
+        let input = |duty_pct| VacuumInputs {
+            duty_pct,
+            u_batt_v,
+            p_amb_kpa,
+            p_tank_kpa: p_tank,
+        };
         let [d_lpt, d_hpt, d_hpc] = duties_pct;
         let outs = [
             self.lpt.step(&input(d_lpt), dt_s),
@@ -1026,9 +1176,17 @@ impl<R: Real> VacuumSystem<R> {
             self.hpc.step(&input(d_hpc), dt_s),
         ];
         let inflow = outs[0].flow_to_tank_mg_s + outs[1].flow_to_tank_mg_s + outs[2].flow_to_tank_mg_s;
-        let pump_flow = if pump_on { self.tank.pump_flow_mg_s(p_amb_kpa, p_tank) } else { R::ZERO };
+        let pump_flow = if pump_on {
+            self.tank.pump_flow_mg_s(p_amb_kpa, p_tank)
+        } else {
+            R::ZERO
+        };
         let p_tank_new = self.tank.step(pump_on, inflow, p_amb_kpa, dt_s);
-        VacuumSystemOutputs { actuators: outs, p_tank_kpa: p_tank_new, pump_flow_mg_s: pump_flow }
+        VacuumSystemOutputs {
+            actuators: outs,
+            p_tank_kpa: p_tank_new,
+            pump_flow_mg_s: pump_flow,
+        }
     }
 }
 
@@ -1057,7 +1215,11 @@ mod tests {
             let ratio = i as f64 / 40.0;
             let got = psi(R::from_f64(ratio.max(P_CRIT))).to_f64();
             let want = psi_reference(ratio);
-            assert!((got - want).abs() < tol, "{}: psi({ratio}) = {got}, want {want}", R::NAME);
+            assert!(
+                (got - want).abs() < tol,
+                "{}: psi({ratio}) = {got}, want {want}",
+                R::NAME
+            );
         }
     }
 
@@ -1076,7 +1238,10 @@ mod tests {
         // Unchoked flow falls to zero at equal pressures and reverses with them.
         assert!(orifice_flow_mg_s(100.0, 80.0, 0.02, c) < choked);
         assert_eq!(orifice_flow_mg_s(60.0, 60.0, 0.02, c), 0.0);
-        assert_eq!(orifice_flow_mg_s(40.0, 70.0, 0.02, c), -orifice_flow_mg_s(70.0, 40.0, 0.02, c));
+        assert_eq!(
+            orifice_flow_mg_s(40.0, 70.0, 0.02, c),
+            -orifice_flow_mg_s(70.0, 40.0, 0.02, c)
+        );
     }
 
     #[test]
@@ -1102,8 +1267,14 @@ mod tests {
         extern crate std;
         std::println!("tan error f64/f32/Q32 {tan_err:?}, 1 - exp(-x) error {exp_err:?}");
         // Measured: tan 1.8e-9 / 1.1e-6 / 1.6e-8, 1 − e^(−x) 1e-20 / 1.9e-8 / 1.2e-10.
-        assert!(tan_err[0] < 5e-9 && tan_err[1] < 3e-6 && tan_err[2] < 5e-8, "{tan_err:?}");
-        assert!(exp_err[0] < 1e-13 && exp_err[1] < 1e-7 && exp_err[2] < 1e-9, "{exp_err:?}");
+        assert!(
+            tan_err[0] < 5e-9 && tan_err[1] < 3e-6 && tan_err[2] < 5e-8,
+            "{tan_err:?}"
+        );
+        assert!(
+            exp_err[0] < 1e-13 && exp_err[1] < 1e-7 && exp_err[2] < 1e-9,
+            "{exp_err:?}"
+        );
     }
 
     #[test]
@@ -1117,7 +1288,10 @@ mod tests {
                 let seen = on.static_pressure_kpa(&inp(duty, u, 20.0));
                 let at_ref = on.static_pressure_kpa(&inp(duty * u / p.u_ref_v, p.u_ref_v, 20.0));
                 assert!((seen - at_ref).abs() < 1e-9);
-                assert_eq!(off.static_pressure_kpa(&inp(duty, u, 20.0)), off.static_pressure_kpa(&inp(duty, 12.0, 20.0)));
+                assert_eq!(
+                    off.static_pressure_kpa(&inp(duty, u, 20.0)),
+                    off.static_pressure_kpa(&inp(duty, 12.0, 20.0))
+                );
             }
             // Lower voltage, less effective duty, higher pressure (Fig. 16).
             assert!(on.static_pressure_kpa(&inp(duty, 10.0, 20.0)) > on.static_pressure_kpa(&inp(duty, 12.0, 20.0)));
@@ -1134,7 +1308,12 @@ mod tests {
             for _ in 0..2000 {
                 a.step(&i, 0.001);
             }
-            assert!((a.p_act_kpa() - p0).abs() < 1e-9 && (a.x_pct() - x0).abs() < 1e-6, "{} {} vs {p0} {x0}", a.p_act_kpa(), a.x_pct());
+            assert!(
+                (a.p_act_kpa() - p0).abs() < 1e-9 && (a.x_pct() - x0).abs() < 1e-6,
+                "{} {} vs {p0} {x0}",
+                a.p_act_kpa(),
+                a.x_pct()
+            );
         }
     }
 
@@ -1155,9 +1334,14 @@ mod tests {
         let pv1 = a.p_act_kpa() * volume(a.x_membrane_pct());
         let expected = (pv0 - pv1) * 1e6 / (R_AIR_J_PER_KG_K * p.temp_amb_k);
         assert!(a.x_membrane_pct() > 99.0, "the membrane should be at its stop");
-        assert!((mass_mg - expected).abs() < 1e-9 * expected, "{mass_mg} vs {expected} mg");
+        assert!(
+            (mass_mg - expected).abs() < 1e-9 * expected,
+            "{mass_mg} vs {expected} mg"
+        );
         // Venting back does not push anything into the tank.
-        let back: f64 = (0..1000).map(|_| a.step(&inp(0.0, 12.0, 20.0), 0.001).flow_to_tank_mg_s).sum();
+        let back: f64 = (0..1000)
+            .map(|_| a.step(&inp(0.0, 12.0, 20.0), 0.001).flow_to_tank_mg_s)
+            .sum();
         assert_eq!(back, 0.0);
     }
 
@@ -1187,7 +1371,13 @@ mod tests {
     #[test]
     fn advance_and_rod_step_settings_keep_the_model() {
         // Ramps up over 1.5 s and steps down: 25..100 % reaches every preset's travel.
-        let duty = |k: usize| if (k / 150).is_multiple_of(2) { 25.0 + (k % 150) as f64 * 0.5 } else { 100.0 - (k % 90) as f64 };
+        let duty = |k: usize| {
+            if (k / 150).is_multiple_of(2) {
+                25.0 + (k % 150) as f64 * 0.5
+            } else {
+                100.0 - (k % 90) as f64
+            }
+        };
         for p in [VacuumParams::lpt(), VacuumParams::hpt(), VacuumParams::hpc()] {
             let base = VacuumValveActuator::<f64>::new(&p).unwrap();
             assert_eq!(base.rod_step_s(), 0.0005);
@@ -1205,7 +1395,10 @@ mod tests {
                 let x_before = pressure_only.x_pct();
                 assert_eq!(pressure_only.advance_pressure(&i, 0.01), o.p_act_kpa);
                 assert_eq!(pressure_only.x_pct(), x_before, "the rod must stay");
-                assert_eq!((advanced.p_act_kpa(), advanced.x_pct(), advanced.x_membrane_pct()), (o.p_act_kpa, o.x_pct, o.x_membrane_pct));
+                assert_eq!(
+                    (advanced.p_act_kpa(), advanced.x_pct(), advanced.x_membrane_pct()),
+                    (o.p_act_kpa, o.x_pct, o.x_membrane_pct)
+                );
                 assert_eq!((same_step.p_act_kpa(), same_step.x_pct()), (o.p_act_kpa, o.x_pct));
                 assert_eq!(coarse.p_act_kpa(), o.p_act_kpa);
                 dev_coarse = dev_coarse.max((coarse.x_pct() - o.x_pct).abs());
@@ -1214,9 +1407,16 @@ mod tests {
             // The rod really moves, and a 4x coarser rod step stays within 2 % of stroke of it
             // while not being the same computation.
             assert!(span.1 - span.0 > 30.0, "{span:?}");
-            assert!(dev_coarse > 1e-9 && dev_coarse < 2.0, "coarse rod step deviates {dev_coarse} %");
+            assert!(
+                dev_coarse > 1e-9 && dev_coarse < 2.0,
+                "coarse rod step deviates {dev_coarse} %"
+            );
             for bad in [0.0, -0.001, 0.006, f64::NAN] {
-                assert_eq!(base.with_rod_step_s(bad).unwrap_err(), VacuumParamError::BadParameter("rod_step_max_s"), "{bad}");
+                assert_eq!(
+                    base.with_rod_step_s(bad).unwrap_err(),
+                    VacuumParamError::BadParameter("rod_step_max_s"),
+                    "{bad}"
+                );
             }
         }
     }
@@ -1235,7 +1435,10 @@ mod tests {
         };
         let (p1, x1) = run(0.001);
         let (p10, x10) = run(0.01);
-        assert!((p1 - p10).abs() < 1e-6 && (x1 - x10).abs() < 0.05, "{p1} {x1} vs {p10} {x10}");
+        assert!(
+            (p1 - p10).abs() < 1e-6 && (x1 - x10).abs() < 0.05,
+            "{p1} {x1} vs {p10} {x10}"
+        );
     }
 
     #[test]
@@ -1260,27 +1463,58 @@ mod tests {
             }
             // The controller's model agrees with the plant's.
             let a = VacuumValveActuator::<f64>::new(&p).unwrap();
-            assert_eq!(a.static_pressure_kpa(&inp(55.0, 12.0, 20.0)), m.pressure_for_duty_kpa(55.0, 100.0, 20.0));
+            assert_eq!(
+                a.static_pressure_kpa(&inp(55.0, 12.0, 20.0)),
+                m.pressure_for_duty_kpa(55.0, 100.0, 20.0)
+            );
         }
         let mut rising = VacuumParams::lpt();
-        rising.static_map = StaticPressureMap::PiecewiseLinear { k1_kpa_per_pct: 0.4, p01_kpa: 20.0, k2_kpa_per_pct: -1.0, p02_kpa: 122.0 };
-        assert_eq!(VacuumStaticModel::<f64>::new(&rising).err(), Some(VacuumParamError::BadParameter("static_map")));
+        rising.static_map = StaticPressureMap::PiecewiseLinear {
+            k1_kpa_per_pct: 0.4,
+            p01_kpa: 20.0,
+            k2_kpa_per_pct: -1.0,
+            p02_kpa: 122.0,
+        };
+        assert_eq!(
+            VacuumStaticModel::<f64>::new(&rising).err(),
+            Some(VacuumParamError::BadParameter("static_map"))
+        );
     }
 
     #[test]
     fn bad_parameters_are_named() {
         let mut p = VacuumParams::lpt();
         p.tau_fall_s = 0.0;
-        assert_eq!(VacuumValveActuator::<f32>::new(&p).err(), Some(VacuumParamError::BadParameter("tau_fall_s")));
+        assert_eq!(
+            VacuumValveActuator::<f32>::new(&p).err(),
+            Some(VacuumParamError::BadParameter("tau_fall_s"))
+        );
         let mut p = VacuumParams::hpt();
-        p.position_map = PositionMap::Arctan { a1_pct: 50.0, a2_pct_per_rad: 20.0, a3_kpa: 70.0, a4_kpa: 8.0 };
-        assert_eq!(VacuumValveActuator::<f32>::new(&p).err(), Some(VacuumParamError::BadParameter("position_map")));
+        p.position_map = PositionMap::Arctan {
+            a1_pct: 50.0,
+            a2_pct_per_rad: 20.0,
+            a3_kpa: 70.0,
+            a4_kpa: 8.0,
+        };
+        assert_eq!(
+            VacuumValveActuator::<f32>::new(&p).err(),
+            Some(VacuumParamError::BadParameter("position_map"))
+        );
         let mut p = VacuumParams::hpc();
         p.volume_stroke_l = 1.0;
-        assert_eq!(VacuumValveActuator::<Q32>::new(&p).err(), Some(VacuumParamError::BadParameter("volume_stroke_l")));
+        assert_eq!(
+            VacuumValveActuator::<Q32>::new(&p).err(),
+            Some(VacuumParamError::BadParameter("volume_stroke_l"))
+        );
         let mut t = VacuumTankParams::paper();
         t.volume_l = f64::NAN;
-        assert_eq!(VacuumTank::<f64>::new(&t, 50.0).err(), Some(VacuumParamError::BadParameter("volume_l")));
-        assert_eq!(VacuumTank::<f64>::new(&VacuumTankParams::paper(), 0.0).err(), Some(VacuumParamError::BadParameter("p_tank_initial_kpa")));
+        assert_eq!(
+            VacuumTank::<f64>::new(&t, 50.0).err(),
+            Some(VacuumParamError::BadParameter("volume_l"))
+        );
+        assert_eq!(
+            VacuumTank::<f64>::new(&VacuumTankParams::paper(), 0.0).err(),
+            Some(VacuumParamError::BadParameter("p_tank_initial_kpa"))
+        );
     }
 }

@@ -55,7 +55,8 @@ pub fn init(mut core: cortex_m::Peripherals) -> Board {
     unsafe {
         core.NVIC.set_priority(Interrupt::USART1, PRIO_LINK_RX);
         core.NVIC.set_priority(EXECUTOR_IRQ, PRIO_TASKS);
-        core.SCB.set_priority(cortex_m::peripheral::scb::SystemHandler::SysTick, PRIO_SYSTICK);
+        core.SCB
+            .set_priority(cortex_m::peripheral::scb::SystemHandler::SysTick, PRIO_SYSTICK);
     }
     systick_time::start(&mut core.SYST);
     let link = usart1::Link::init();

@@ -56,7 +56,11 @@ impl SysTickDriver {
         let first = SYST::get_current();
         let wrapped = SCB::is_pendst_pending();
         let second = SYST::get_current();
-        let (periods, current) = if wrapped || second > first { (periods + 1, second) } else { (periods, first) };
+        let (periods, current) = if wrapped || second > first {
+            (periods + 1, second)
+        } else {
+            (periods, first)
+        };
         let clocks = periods * CLOCKS_PER_PERIOD as u64 + u64::from(CLOCKS_PER_PERIOD - 1 - current);
         clocks / CLOCKS_PER_TICK
     }

@@ -46,7 +46,10 @@ bind_interrupts!(pub struct Irqs {
 pub fn config() -> embassy_stm32::Config {
     use embassy_stm32::rcc::*;
     let mut c = embassy_stm32::Config::default();
-    c.rcc.hse = Some(Hse { freq: embassy_stm32::time::mhz(8), mode: HseMode::Oscillator });
+    c.rcc.hse = Some(Hse {
+        freq: embassy_stm32::time::mhz(8),
+        mode: HseMode::Oscillator,
+    });
     c.rcc.pll_src = PllSource::HSE;
     c.rcc.pll = Some(Pll {
         prediv: PllPreDiv::DIV4,
@@ -132,7 +135,10 @@ impl EcuEhvvaIo {
         // Keep time order: the cam edge (read after the crank edge) goes in front of a newer
         // crank edge (wrapping compare). A full queue drops the edge; the decoder's tooth
         // count catches the loss.
-        let back_is_newer = self.pending.back().is_some_and(|b| b.t_us != e.t_us && b.t_us.wrapping_sub(e.t_us) < u32::MAX / 2);
+        let back_is_newer = self
+            .pending
+            .back()
+            .is_some_and(|b| b.t_us != e.t_us && b.t_us.wrapping_sub(e.t_us) < u32::MAX / 2);
         if back_is_newer {
             if let Some(b) = self.pending.pop_back() {
                 let _ = self.pending.push_back(e);
@@ -150,14 +156,24 @@ impl EhvvaIo for EcuEhvvaIo {
 
     async fn wait_edge_or(&mut self, wake_at_us: u32) {
         let sleep_us = until_us(self.now_us(), wake_at_us);
-        let crank = select(self.capture.wait_for_rising_edge(Channel::Ch1), Timer::after_micros(sleep_us as u64)).await;
+        let crank = select(
+            self.capture.wait_for_rising_edge(Channel::Ch1),
+            Timer::after_micros(sleep_us as u64),
+        )
+        .await;
         if let embassy_futures::select::Either::First(t_us) = crank {
-            self.push_sorted(Edge { source: EdgeSource::CrankTooth, t_us });
+            self.push_sorted(Edge {
+                source: EdgeSource::CrankTooth,
+                t_us,
+            });
         }
         if self.capture.get_input_interrupt(Channel::Ch2) {
             // Reading CCR2 clears the flag.
             let t_us = self.capture.get_capture_value(Channel::Ch2);
-            self.push_sorted(Edge { source: EdgeSource::CamSync, t_us });
+            self.push_sorted(Edge {
+                source: EdgeSource::CamSync,
+                t_us,
+            });
         }
     }
     fn pilot(&mut self) -> &mut Pwm4 {
@@ -195,7 +211,10 @@ impl AnalogIn for EcuAnalog<'_> {
 impl AnalogBank for EcuAdc {
     type In<'a> = EcuAnalog<'a>;
     fn analog(&mut self, index: usize) -> EcuAnalog<'_> {
-        EcuAnalog { adc: &mut self.adc, channel: self.channels.get_mut(index) }
+        EcuAnalog {
+            adc: &mut self.adc,
+            channel: self.channels.get_mut(index),
+        }
     }
 }
 
@@ -289,8 +308,14 @@ impl EcuBoard {
                 lift: switch(p.PB13),
                 snubber: switch(p.PB14),
             },
-            evvt: EcuEvvtIo { motor, driver_fault_n: Input::new(p.PB15, Pull::Up) },
-            vacuum: EcuVacuumIo { valves, pump: switch(p.PB12) },
+            evvt: EcuEvvtIo {
+                motor,
+                driver_fault_n: Input::new(p.PB15, Pull::Up),
+            },
+            vacuum: EcuVacuumIo {
+                valves,
+                pump: switch(p.PB12),
+            },
             adc: EcuAdc { adc, channels },
             watchdog: embassy_stm32::wdg::IndependentWatchdog::new(p.IWDG, 200_000),
         }

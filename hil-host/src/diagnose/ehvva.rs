@@ -86,11 +86,21 @@ fn median(v: &mut [f64]) -> f64 {
 impl Events {
     pub fn from_log(log: &Log) -> Result<Self, String> {
         let col = |name: &str| log.col(name).ok_or_else(|| format!("{}: no `{name}` column", log.file));
-        let (u, ph, pl, temp, high, snub, lift) =
-            (col("u_pilot")?, col("p_supply_MPa")?, col("p_back_MPa")?, col("temp_C")?, col("lift_high")?, col("snubber_on")?, col("lift_mm")?);
+        let (u, ph, pl, temp, high, snub, lift) = (
+            col("u_pilot")?,
+            col("p_supply_MPa")?,
+            col("p_back_MPa")?,
+            col("temp_C")?,
+            col("lift_high")?,
+            col("snubber_on")?,
+            col("lift_mm")?,
+        );
         let dt_ms = log.dt_s * 1e3;
         if !(dt_ms > 0.0 && dt_ms <= 0.1) {
-            return Err(format!("{}: sample period {} ms; the EHVVA models need 0.1 ms or less (10 kHz or more)", log.file, dt_ms));
+            return Err(format!(
+                "{}: sample period {} ms; the EHVVA models need 0.1 ms or less (10 kHz or more)",
+                log.file, dt_ms
+            ));
         }
         let n = lift.len();
         let pre = ((PRE_MS / dt_ms).round() as usize).max(1);
@@ -102,7 +112,11 @@ impl Events {
         let skip = unsettled_prefix(u, lift, rising[0], pre);
         let mut starts: Vec<usize> = Vec::with_capacity(rising.len());
         for (i, &r) in rising.iter().enumerate() {
-            let s = if i == 0 { skip } else { r.saturating_sub(pre).max(starts[i - 1] + 1) };
+            let s = if i == 0 {
+                skip
+            } else {
+                r.saturating_sub(pre).max(starts[i - 1] + 1)
+            };
             starts.push(s);
         }
         let mut events = Vec::with_capacity(rising.len());
@@ -121,7 +135,10 @@ impl Events {
                     median(&mut v)
                 }
             };
-            let off_index = (s + on + 1..e).rev().find(|&k| u[k] <= 0.5 && u[k - 1] > 0.5).map(|k| k - s);
+            let off_index = (s + on + 1..e)
+                .rev()
+                .find(|&k| u[k] <= 0.5 && u[k - 1] > 0.5)
+                .map(|k| k - s);
             let inputs = EhvvaInputs {
                 p_supply_mpa: setpoint(ph),
                 p_back_mpa: setpoint(pl),
@@ -129,9 +146,21 @@ impl Events {
                 lift_high: high[rising[i]] > 0.5,
                 snubber_on: snub[rising[i]] > 0.5,
             };
-            events.push(Event { start: s, u_pilot: u[s..e].iter().map(|&v| v > 0.5).collect(), lift_mm: lift[s..e].to_vec(), inputs, on_index: on, off_index });
+            events.push(Event {
+                start: s,
+                u_pilot: u[s..e].iter().map(|&v| v > 0.5).collect(),
+                lift_mm: lift[s..e].to_vec(),
+                inputs,
+                on_index: on,
+                off_index,
+            });
         }
-        Ok(Events { dt_ms, events, samples: n, file: log.file.clone() })
+        Ok(Events {
+            dt_ms,
+            events,
+            samples: n,
+            file: log.file.clone(),
+        })
     }
 
     /// Samples before the first event: the log began while the valve was still moving (e.g. a
@@ -166,7 +195,12 @@ impl Events {
                 e
             })
             .collect();
-        Events { dt_ms: self.dt_ms, events, samples: at, file: self.file.clone() }
+        Events {
+            dt_ms: self.dt_ms,
+            events,
+            samples: at,
+            file: self.file.clone(),
+        }
     }
 
     fn key(&self) -> u64 {
@@ -197,7 +231,10 @@ fn unsettled_prefix(u: &[f64], lift: &[f64], first_on: usize, pre: usize) -> usi
         return 0;
     }
     let level = lift[rest.clone()].iter().sum::<f64>() / rest.len() as f64;
-    (0..first_on).rev().find(|&k| u[k] > 0.5 || (lift[k] - level).abs() > REST_BAND_MM).map_or(0, |k| k + 1)
+    (0..first_on)
+        .rev()
+        .find(|&k| u[k] > 0.5 || (lift[k] - level).abs() > REST_BAND_MM)
+        .map_or(0, |k| k + 1)
 }
 
 /// Simulates one event from rest with model-core's reduced model, writing the lift into `out`
@@ -222,7 +259,11 @@ pub fn simulate_event(params: &EhvvaParams, ev: &Event, dt_ms: f64, out: &mut [f
             return Err(format!("simulation diverged at sample {}", ev.start + k));
         }
         *slot = y;
-        seated_for = if k > last_off && y == 0.0 && m.velocity_m_s() == 0.0 { seated_for + 1 } else { 0 };
+        seated_for = if k > last_off && y == 0.0 && m.velocity_m_s() == 0.0 {
+            seated_for + 1
+        } else {
+            0
+        };
     }
     Ok(())
 }
@@ -277,7 +318,9 @@ pub fn simulate_all_on(params: &EhvvaParams, set: &Events, out: &mut [f64], thre
                 })
             })
             .collect();
-        handles.into_iter().try_for_each(|h| h.join().map_err(|_| "event simulation thread panicked".to_string())?)
+        handles
+            .into_iter()
+            .try_for_each(|h| h.join().map_err(|_| "event simulation thread panicked".to_string())?)
     })
 }
 
@@ -332,20 +375,65 @@ fn scale_tau(p: &mut EhvvaParams, tau_ms: f64) {
 
 /// Knobs of the baseline (module doc).
 pub const BASELINE_KNOBS: [Knob; 4] = [
-    Knob { name: "td_ms_at_7MPa_22C", lo: 1.0, hi: 7.0, apply: scale_td },
-    Knob { name: "cd_at_22C", lo: 0.1, hi: 0.9, apply: scale_cd },
-    Knob { name: "tau_p_ms_at_6p5MPa_22C", lo: 0.02, hi: 0.5, apply: scale_tau },
-    Knob { name: "mass_kg", lo: 0.08, hi: 0.4, apply: |p, v| p.mass_kg = v },
+    Knob {
+        name: "td_ms_at_7MPa_22C",
+        lo: 1.0,
+        hi: 7.0,
+        apply: scale_td,
+    },
+    Knob {
+        name: "cd_at_22C",
+        lo: 0.1,
+        hi: 0.9,
+        apply: scale_cd,
+    },
+    Knob {
+        name: "tau_p_ms_at_6p5MPa_22C",
+        lo: 0.02,
+        hi: 0.5,
+        apply: scale_tau,
+    },
+    Knob {
+        name: "mass_kg",
+        lo: 0.08,
+        hi: 0.4,
+        apply: |p, v| p.mass_kg = v,
+    },
 ];
 
 /// The knob each catalogue effect adds.
 pub fn effect_knob(effect: &str) -> Result<Knob, String> {
     Ok(match effect {
-        "viscosity" => Knob { name: "viscosity_gain", lo: 0.0, hi: 2.0, apply: |p, v| p.effect_viscosity = v },
-        "pressure-delay" => Knob { name: "pressure_delay_gain", lo: 0.0, hi: 2.0, apply: |p, v| p.effect_pressure_delay = v },
-        "direction-delay" => Knob { name: "direction_delay_gain", lo: 0.0, hi: 2.0, apply: |p, v| p.effect_direction_delay = v },
-        "snubber" => Knob { name: "snubber_gain", lo: 0.0, hi: 2.0, apply: |p, v| p.effect_snubber = v },
-        other => return Err(format!("unknown ehvva effect `{other}` (known: {})", EFFECTS.join(", "))),
+        "viscosity" => Knob {
+            name: "viscosity_gain",
+            lo: 0.0,
+            hi: 2.0,
+            apply: |p, v| p.effect_viscosity = v,
+        },
+        "pressure-delay" => Knob {
+            name: "pressure_delay_gain",
+            lo: 0.0,
+            hi: 2.0,
+            apply: |p, v| p.effect_pressure_delay = v,
+        },
+        "direction-delay" => Knob {
+            name: "direction_delay_gain",
+            lo: 0.0,
+            hi: 2.0,
+            apply: |p, v| p.effect_direction_delay = v,
+        },
+        "snubber" => Knob {
+            name: "snubber_gain",
+            lo: 0.0,
+            hi: 2.0,
+            apply: |p, v| p.effect_snubber = v,
+        },
+        other => {
+            return Err(format!(
+                "unknown ehvva effect `{other}` (known: {})",
+                EFFECTS.join(", ")
+            ))
+        }
     })
 }
 
@@ -360,7 +448,13 @@ pub fn apply_knobs(base: &EhvvaParams, knobs: &[Knob], x: &[f64]) -> EhvvaParams
 
 /// Fits `knobs` (starting at `x0`) on the lift simulation error of `set` by the trust-region
 /// solver: the calibration problem of eqs. (16)-(20), shared by `diagnose` and `identify`.
-pub fn calibrate(base: &EhvvaParams, knobs: &[Knob], x0: &[f64], set: &Events, opts: &LsqOptions) -> Result<LsqResult, String> {
+pub fn calibrate(
+    base: &EhvvaParams,
+    knobs: &[Knob],
+    x0: &[f64],
+    set: &Events,
+    opts: &LsqOptions,
+) -> Result<LsqResult, String> {
     calibrate_with(base, knobs, x0, set, opts, &|_| Ok(()))
 }
 
@@ -389,7 +483,10 @@ pub fn calibrate_with(
         }
         Ok(())
     };
-    let serial = LsqOptions { threads: 1, ..opts.clone() };
+    let serial = LsqOptions {
+        threads: 1,
+        ..opts.clone()
+    };
     solve(residual, x0, &lo, &hi, set.samples, &serial).map_err(|e| format!("{}: {e}", set.file))
 }
 
@@ -398,7 +495,13 @@ pub fn calibrate_with(
 /// lift is first smoothed by a centred moving average over ±0.25 ms: the first passage of a
 /// noisy signal through a level comes early where the lift leaves its stop slowly, and
 /// measured and simulated lifts are treated alike.
-pub fn edge_delays_ms(lift: &[f64], on_index: usize, off_index: Option<usize>, stroke_mm: f64, dt_ms: f64) -> (Option<f64>, Option<f64>) {
+pub fn edge_delays_ms(
+    lift: &[f64],
+    on_index: usize,
+    off_index: Option<usize>,
+    stroke_mm: f64,
+    dt_ms: f64,
+) -> (Option<f64>, Option<f64>) {
     let half = ((0.25 / dt_ms).round() as usize).max(1);
     let n = lift.len();
     let mut prefix = vec![0.0; n + 1];
@@ -414,7 +517,11 @@ pub fn edge_delays_ms(lift: &[f64], on_index: usize, off_index: Option<usize>, s
     let cross = |from: usize, level: f64, rising: bool| -> Option<f64> {
         (from.max(1)..lift.len()).find_map(|k| {
             let (a, b) = (lift[k - 1], lift[k]);
-            let hit = if rising { a < level && b >= level } else { a >= level && b < level };
+            let hit = if rising {
+                a < level && b >= level
+            } else {
+                a >= level && b < level
+            };
             hit.then(|| (k - 1) as f64 + (level - a) / (b - a))
         })
     };
@@ -433,7 +540,15 @@ pub struct EhvvaFamily {
 
 impl Default for EhvvaFamily {
     fn default() -> Self {
-        Self { lsq: LsqOptions { max_iterations: 30, cost_tolerance: 1e-6, fd_step: 1e-5, ..LsqOptions::default() }, baseline: Mutex::new(None) }
+        Self {
+            lsq: LsqOptions {
+                max_iterations: 30,
+                cost_tolerance: 1e-6,
+                fd_step: 1e-5,
+                ..LsqOptions::default()
+            },
+            baseline: Mutex::new(None),
+        }
     }
 }
 
@@ -513,17 +628,33 @@ impl Family for EhvvaFamily {
         // Samples before the validation log's first event are not predicted (the valve's state
         // there is unknown): they are scored as measured, the same for every candidate.
         let mut measured = dv.measured();
-        let lift = val.col("lift_mm").ok_or_else(|| format!("{}: no `lift_mm` column", val.file))?;
+        let lift = val
+            .col("lift_mm")
+            .ok_or_else(|| format!("{}: no `lift_mm` column", val.file))?;
         let skip = dv.skipped();
         measured[..skip].copy_from_slice(&lift[..skip]);
         predicted[..skip].copy_from_slice(&lift[..skip]);
         let params = knobs.iter().zip(&r.x).map(|(k, v)| (k.name.to_string(), *v)).collect();
-        Ok(Fit::new(effect.unwrap_or("baseline"), params, r.ci95.clone(), measured, predicted, r.iterations))
+        Ok(Fit::new(
+            effect.unwrap_or("baseline"),
+            params,
+            r.ci95.clone(),
+            measured,
+            predicted,
+            r.iterations,
+        ))
     }
 
     fn regressors(&self, val: &Log) -> Vec<(String, Vec<f64>)> {
         let mut out: Vec<(String, Vec<f64>)> = Vec::new();
-        for name in ["u_pilot", "p_supply_MPa", "p_back_MPa", "temp_C", "lift_high", "snubber_on"] {
+        for name in [
+            "u_pilot",
+            "p_supply_MPa",
+            "p_back_MPa",
+            "temp_C",
+            "lift_high",
+            "snubber_on",
+        ] {
             if let Some(c) = val.col(name) {
                 out.push((name.to_string(), c.to_vec()));
             }
@@ -531,11 +662,25 @@ impl Family for EhvvaFamily {
         if let Some(y) = val.col("lift_mm") {
             // Direction of motion from the lift smoothed over 0.5 ms, and the seating zone.
             let w = ((0.5e-3 / val.dt_s).round() as usize).max(1);
-            let v: Vec<f64> = (0..y.len()).map(|k| y[(k + w).min(y.len() - 1)] - y[k.saturating_sub(w)]).collect();
+            let v: Vec<f64> = (0..y.len())
+                .map(|k| y[(k + w).min(y.len() - 1)] - y[k.saturating_sub(w)])
+                .collect();
             let thr = 0.02;
-            out.push(("valve closing (lift falling)".into(), v.iter().map(|&d| if d < -thr { 1.0 } else { 0.0 }).collect()));
-            out.push(("valve opening (lift rising)".into(), v.iter().map(|&d| if d > thr { 1.0 } else { 0.0 }).collect()));
-            out.push(("closing within 1 mm of the seat".into(), v.iter().zip(y).map(|(&d, &l)| if d < -thr && l < 1.0 { 1.0 } else { 0.0 }).collect()));
+            out.push((
+                "valve closing (lift falling)".into(),
+                v.iter().map(|&d| if d < -thr { 1.0 } else { 0.0 }).collect(),
+            ));
+            out.push((
+                "valve opening (lift rising)".into(),
+                v.iter().map(|&d| if d > thr { 1.0 } else { 0.0 }).collect(),
+            ));
+            out.push((
+                "closing within 1 mm of the seat".into(),
+                v.iter()
+                    .zip(y)
+                    .map(|(&d, &l)| if d < -thr && l < 1.0 { 1.0 } else { 0.0 })
+                    .collect(),
+            ));
         }
         out
     }
@@ -553,7 +698,10 @@ mod tests {
     }
 
     fn get(v: &[(String, f64)], key: &str) -> f64 {
-        v.iter().find(|(k, _)| k == key).map(|(_, v)| *v).unwrap_or_else(|| panic!("no {key}"))
+        v.iter()
+            .find(|(k, _)| k == key)
+            .map(|(_, v)| *v)
+            .unwrap_or_else(|| panic!("no {key}"))
     }
 
     /// Simulating the events of a generated log with the generator's true parameters gives
@@ -592,7 +740,9 @@ mod tests {
         // Cut where the third event's valve is fully open.
         let ev = &full.events[2];
         let lift = est.col("lift_mm").unwrap();
-        let cut = (ev.start..ev.start + ev.lift_mm.len()).max_by(|&a, &b| lift[a].total_cmp(&lift[b])).unwrap();
+        let cut = (ev.start..ev.start + ev.lift_mm.len())
+            .max_by(|&a, &b| lift[a].total_cmp(&lift[b]))
+            .unwrap();
         assert!(lift[cut] > 0.5, "lift {} mm at the cut", lift[cut]);
         let mut tail = est.clone();
         for c in tail.columns.values_mut() {
@@ -601,7 +751,9 @@ mod tests {
         let set = Events::from_log(&tail).unwrap();
         let seated = set.skipped();
         assert!(seated > 0 && seated < full.events[3].start - cut, "skipped {seated}");
-        assert!(tail.col("lift_mm").unwrap()[seated..seated + 5].iter().all(|l| l.abs() < 0.05));
+        assert!(tail.col("lift_mm").unwrap()[seated..seated + 5]
+            .iter()
+            .all(|l| l.abs() < 0.05));
         let mut knobs = BASELINE_KNOBS.to_vec();
         knobs.push(effect_knob("snubber").unwrap());
         let x: Vec<f64> = knobs.iter().map(|k| get(&truth, k.name)).collect();

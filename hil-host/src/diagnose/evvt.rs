@@ -76,7 +76,11 @@ impl Default for EvvtFamily {
             min_order: 0.25,
             max_order: 4.0,
             quantizer_ramp_lsb: 0.5,
-            lsq: LsqOptions { max_iterations: 40, cost_tolerance: 1e-7, ..LsqOptions::default() },
+            lsq: LsqOptions {
+                max_iterations: 40,
+                cost_tolerance: 1e-7,
+                ..LsqOptions::default()
+            },
             baseline: Mutex::new(None),
         }
     }
@@ -130,7 +134,11 @@ fn detect_resolution(y: &[f64]) -> f64 {
 
 impl Data {
     fn from_log(log: &Log, window_s: f64, ramp_lsb: f64) -> Result<Self, String> {
-        let col = |name: &str| log.col(name).map(<[f64]>::to_vec).ok_or_else(|| format!("{}: no `{name}` column", log.file));
+        let col = |name: &str| {
+            log.col(name)
+                .map(<[f64]>::to_vec)
+                .ok_or_else(|| format!("{}: no `{name}` column", log.file))
+        };
         let y = col("phase_deg")?;
         let cmd = col("motor_cmd_rpm")?;
         let rpm = col("engine_rpm")?;
@@ -147,8 +155,12 @@ impl Data {
             revs.push(theta);
             theta += n.max(0.0) / 60.0 * dt;
         }
-        let (ymin, ymax) = y.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
-        let mut drive = Drive::OpenLoop { window: ((window_s / dt).round() as usize).max(1) };
+        let (ymin, ymax) = y
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+        let mut drive = Drive::OpenLoop {
+            window: ((window_s / dt).round() as usize).max(1),
+        };
         let mut reference = Vec::new();
         if let (Some(r), Some(kp)) = (log.col("phase_ref_deg"), meta("kp")?) {
             let cmd_max = meta("motor_cmd_max_rpm")?.filter(|m| *m > 0.0).unwrap_or(f64::INFINITY);
@@ -169,7 +181,20 @@ impl Data {
                 reference = r.to_vec();
             }
         }
-        Ok(Data { dt, y, cmd, rpm, volt, reference, revs, drive, lsb, ramp: ramp_lsb, stop_lo: ymin.min(0.0), stop_hi: ymax.max(40.0) })
+        Ok(Data {
+            dt,
+            y,
+            cmd,
+            rpm,
+            volt,
+            reference,
+            revs,
+            drive,
+            lsb,
+            ramp: ramp_lsb,
+            stop_lo: ymin.min(0.0),
+            stop_hi: ymax.max(40.0),
+        })
     }
 
     fn key(&self) -> u64 {
@@ -338,7 +363,9 @@ fn fft(re: &mut [f64], im: &mut [f64]) {
             im.swap(i, j);
         }
     }
-    let twiddle: Vec<(f64, f64)> = (0..n / 2).map(|k| (-2.0 * PI * k as f64 / n as f64).sin_cos()).collect();
+    let twiddle: Vec<(f64, f64)> = (0..n / 2)
+        .map(|k| (-2.0 * PI * k as f64 / n as f64).sin_cos())
+        .collect();
     let mut len = 2;
     while len <= n {
         let stride = n / len;
@@ -392,8 +419,12 @@ fn order_peak(r: &[f64], revs: &[f64], lo: f64, hi: f64) -> Option<(f64, f64)> {
     }
     fft(&mut re, &mut im);
     let bin_order = per_rev / nfft as f64;
-    let (m_lo, m_hi) = ((lo / bin_order).ceil() as usize, ((hi / bin_order).floor() as usize).min(nfft / 2));
-    let best = (m_lo..=m_hi).max_by(|&a, &b| (re[a] * re[a] + im[a] * im[a]).total_cmp(&(re[b] * re[b] + im[b] * im[b])))?;
+    let (m_lo, m_hi) = (
+        (lo / bin_order).ceil() as usize,
+        ((hi / bin_order).floor() as usize).min(nfft / 2),
+    );
+    let best =
+        (m_lo..=m_hi).max_by(|&a, &b| (re[a] * re[a] + im[a] * im[a]).total_cmp(&(re[b] * re[b] + im[b] * im[b])))?;
     let centred: Vec<f64> = r.iter().map(|v| v - mean).collect();
     let power = |o: f64| {
         let (c, s) = order_dft(&centred, revs, o);
@@ -456,7 +487,11 @@ struct Ctx {
 }
 
 fn model_from(effect: Option<&str>, x: &[f64], ctx: &Ctx) -> Model {
-    let mut m = Model { v_ref: ctx.v_ref, n_ref_krpm: ctx.n_ref_krpm, ..Model::lti(x[0], x[1]) };
+    let mut m = Model {
+        v_ref: ctx.v_ref,
+        n_ref_krpm: ctx.n_ref_krpm,
+        ..Model::lti(x[0], x[1])
+    };
     match effect {
         Some("supply-voltage") => {
             m.alpha_per_v = x[2];
@@ -521,12 +556,19 @@ impl EvvtFamily {
 
     fn cached_baseline(&self, d: &Data) -> Option<(f64, f64)> {
         let key = d.key();
-        self.baseline.lock().ok().and_then(|g| g.filter(|(k, _, _)| *k == key).map(|(_, a, b)| (a, b)))
+        self.baseline
+            .lock()
+            .ok()
+            .and_then(|g| g.filter(|(k, _, _)| *k == key).map(|(_, a, b)| (a, b)))
     }
 
     fn order_range(&self, d: &Data) -> (f64, f64) {
         let n_max = d.rpm.iter().fold(0.0f64, |m, &v| m.max(v));
-        let nyquist_order = if n_max > 0.0 { 0.49 / d.dt / (n_max / 60.0) } else { self.max_order };
+        let nyquist_order = if n_max > 0.0 {
+            0.49 / d.dt / (n_max / 60.0)
+        } else {
+            self.max_order
+        };
         (self.min_order, self.max_order.min(nyquist_order))
     }
 
@@ -537,7 +579,11 @@ impl EvvtFamily {
         };
         let mut names = Vec::new();
         ab(&mut names);
-        let (mut x0, mut lo, mut hi) = (vec![alpha, beta], vec![ALPHA_BOUNDS.0, BETA_BOUNDS.0], vec![ALPHA_BOUNDS.1, BETA_BOUNDS.1]);
+        let (mut x0, mut lo, mut hi) = (
+            vec![alpha, beta],
+            vec![ALPHA_BOUNDS.0, BETA_BOUNDS.0],
+            vec![ALPHA_BOUNDS.1, BETA_BOUNDS.1],
+        );
         match effect {
             "supply-voltage" => {
                 names[0] = format!("alpha_deg_per_s2_rpm_at_{:.2}V", ctx.v_ref);
@@ -550,7 +596,10 @@ impl EvvtFamily {
             "engine-speed" => {
                 names[0] = format!("alpha_deg_per_s2_rpm_at_{:.0}rpm", ctx.n_ref_krpm * 1000.0);
                 names[1] = format!("beta_per_s_at_{:.0}rpm", ctx.n_ref_krpm * 1000.0);
-                names.extend(["alpha_rel_slope_per_1000rpm".to_string(), "beta_rel_slope_per_1000rpm".to_string()]);
+                names.extend([
+                    "alpha_rel_slope_per_1000rpm".to_string(),
+                    "beta_rel_slope_per_1000rpm".to_string(),
+                ]);
                 x0.extend([0.0, 0.0]);
                 lo.extend([-3.0, -3.0]);
                 hi.extend([3.0, 3.0]);
@@ -563,15 +612,29 @@ impl EvvtFamily {
             }
             "belt-vibration" => {
                 let mut out = vec![0.0; d.y.len()];
-                sim_error(&Model { v_ref: ctx.v_ref, n_ref_krpm: ctx.n_ref_krpm, ..Model::lti(alpha, beta) }, d, &mut out)?;
+                sim_error(
+                    &Model {
+                        v_ref: ctx.v_ref,
+                        n_ref_krpm: ctx.n_ref_krpm,
+                        ..Model::lti(alpha, beta)
+                    },
+                    d,
+                    &mut out,
+                )?;
                 // The residual is model − measured; the disturbance is in the measurement.
                 let resid: Vec<f64> = out.iter().map(|e| -e).collect();
                 let (olo, ohi) = self.order_range(d);
-                let (order, _) = order_peak(&resid, &d.revs, olo, ohi).ok_or("no order spectrum: the log is too short or its sample rate too low for orders above the minimum")?;
+                let (order, _) = order_peak(&resid, &d.revs, olo, ohi).ok_or(
+                    "no order spectrum: the log is too short or its sample rate too low for orders above the minimum",
+                )?;
                 let (c, s) = project_sinusoid(&resid, &d.revs, order);
                 // The order is refined within the peak's main lobe (± 1/total revolutions).
                 let lobe = 1.0 / d.revs.last().copied().unwrap_or(1.0).max(1.0);
-                names.extend(["belt_order".to_string(), "belt_cos_deg".to_string(), "belt_sin_deg".to_string()]);
+                names.extend([
+                    "belt_order".to_string(),
+                    "belt_cos_deg".to_string(),
+                    "belt_sin_deg".to_string(),
+                ]);
                 x0.extend([order, c, s]);
                 lo.extend([order - lobe, -20.0, -20.0]);
                 hi.extend([order + lobe, 20.0, 20.0]);
@@ -586,13 +649,21 @@ impl EvvtFamily {
     fn predict(&self, m: &Model, d: &Data) -> Result<Vec<f64>, String> {
         let mut out = vec![0.0; d.y.len()];
         if m.belt_on() {
-            let off = Model { belt_cos: 0.0, belt_sin: 0.0, ..*m };
+            let off = Model {
+                belt_cos: 0.0,
+                belt_sin: 0.0,
+                ..*m
+            };
             simulate(&off, d, &mut out)?;
             let resid: Vec<f64> = d.y.iter().zip(&out).map(|(y, p)| y - p).collect();
             let (c, s) = project_sinusoid(&resid, &d.revs, m.belt_order);
             let amp = m.belt_cos.hypot(m.belt_sin);
             let phase = c.atan2(s);
-            let on = Model { belt_cos: amp * phase.sin(), belt_sin: amp * phase.cos(), ..*m };
+            let on = Model {
+                belt_cos: amp * phase.sin(),
+                belt_sin: amp * phase.cos(),
+                ..*m
+            };
             simulate(&on, d, &mut out)?;
         } else {
             simulate(m, d, &mut out)?;
@@ -618,7 +689,10 @@ impl Family for EvvtFamily {
     fn fit(&self, effect: Option<&str>, est: &Log, val: &Log) -> Result<Fit, String> {
         let de = Data::from_log(est, self.open_loop_window_s, self.quantizer_ramp_lsb)?;
         let dv = Data::from_log(val, self.open_loop_window_s, self.quantizer_ramp_lsb)?;
-        let ctx = Ctx { v_ref: Data::mean(&de.volt), n_ref_krpm: Data::mean(&de.rpm) / 1000.0 };
+        let ctx = Ctx {
+            v_ref: Data::mean(&de.volt),
+            n_ref_krpm: Data::mean(&de.rpm) / 1000.0,
+        };
         let (alpha, beta, base_res) = match self.cached_baseline(&de).filter(|_| effect.is_some()) {
             Some((a, b)) => (a, b, None),
             None => {
@@ -629,7 +703,12 @@ impl Family for EvvtFamily {
         let (x, ci, names, iterations) = match effect {
             None => {
                 let r = base_res.ok_or("baseline fit missing")?;
-                (r.x.clone(), r.ci95.clone(), vec!["alpha_deg_per_s2_rpm".to_string(), "beta_per_s".to_string()], r.iterations)
+                (
+                    r.x.clone(),
+                    r.ci95.clone(),
+                    vec!["alpha_deg_per_s2_rpm".to_string(), "beta_per_s".to_string()],
+                    r.iterations,
+                )
             }
             Some(e) => {
                 let spec = self.spec(e, &de, &ctx, alpha, beta)?;
@@ -639,7 +718,8 @@ impl Family for EvvtFamily {
         };
         let model = model_from(effect, &x, &ctx);
         let predicted = self.predict(&model, &dv)?;
-        let (mut params, mut ci95): (Vec<(String, f64)>, Vec<Option<f64>>) = (names.into_iter().zip(x.iter().copied()).collect(), ci);
+        let (mut params, mut ci95): (Vec<(String, f64)>, Vec<Option<f64>>) =
+            (names.into_iter().zip(x.iter().copied()).collect(), ci);
         if effect == Some("belt-vibration") {
             // Report amplitude and phase instead of the cos/sin pair (same count).
             let (c, s) = (x[3], x[4]);
@@ -657,22 +737,39 @@ impl Family for EvvtFamily {
             ci95[3] = ci_a;
             ci95[4] = ci_p;
         }
-        Ok(Fit::new(effect.unwrap_or("baseline"), params, ci95, dv.y.clone(), predicted, iterations))
+        Ok(Fit::new(
+            effect.unwrap_or("baseline"),
+            params,
+            ci95,
+            dv.y.clone(),
+            predicted,
+            iterations,
+        ))
     }
 
     fn regressors(&self, val: &Log) -> Vec<(String, Vec<f64>)> {
-        let Ok(d) = Data::from_log(val, self.open_loop_window_s, self.quantizer_ramp_lsb) else { return Vec::new() };
+        let Ok(d) = Data::from_log(val, self.open_loop_window_s, self.quantizer_ramp_lsb) else {
+            return Vec::new();
+        };
         let mut out: Vec<(String, Vec<f64>)> = vec![
             ("battery voltage u_batt_V".into(), d.volt.clone()),
             ("engine speed engine_rpm".into(), d.rpm.clone()),
             ("motor_cmd_rpm".into(), d.cmd.clone()),
-            ("advancing (motor_cmd_rpm > 0)".into(), d.cmd.iter().map(|&u| if u > 0.0 { 1.0 } else { 0.0 }).collect()),
+            (
+                "advancing (motor_cmd_rpm > 0)".into(),
+                d.cmd.iter().map(|&u| if u > 0.0 { 1.0 } else { 0.0 }).collect(),
+            ),
         ];
         if !d.reference.is_empty() {
             out.push(("phase_ref_deg".into(), d.reference.clone()));
         }
         let (_, ohi) = self.order_range(&d);
-        let sinusoid = |o: f64, f: fn(f64) -> f64| d.revs.iter().map(|th| f(2.0 * PI * (o * th).fract())).collect::<Vec<f64>>();
+        let sinusoid = |o: f64, f: fn(f64) -> f64| {
+            d.revs
+                .iter()
+                .map(|th| f(2.0 * PI * (o * th).fract()))
+                .collect::<Vec<f64>>()
+        };
         // The peak of the baseline residual's order spectrum on this record: a disturbance
         // locked to crank angle shows here whatever the engine speed.
         let last = self.baseline.lock().ok().and_then(|g| *g);
@@ -683,7 +780,10 @@ impl Family for EvvtFamily {
                 let resid: Vec<f64> = d.y.iter().zip(&pred).map(|(y, p)| y - p).collect();
                 if let Some((o, amp)) = order_peak(&resid, &d.revs, self.min_order, ohi) {
                     out.push((format!("sin(2π·{o:.3}·crank revolutions) (order-spectrum peak of the baseline residual, {amp:.2} deg)"), sinusoid(o, f64::sin)));
-                    out.push((format!("cos(2π·{o:.3}·crank revolutions) (order-spectrum peak)"), sinusoid(o, f64::cos)));
+                    out.push((
+                        format!("cos(2π·{o:.3}·crank revolutions) (order-spectrum peak)"),
+                        sinusoid(o, f64::cos),
+                    ));
                 }
             }
         }
@@ -745,18 +845,32 @@ mod tests {
             let (est, _, t) = logs(effect, 21);
             let d = Data::from_log(&est, 2.0, 0.0).unwrap();
             assert!(matches!(d.drive, Drive::ClosedLoop { hold: 1, .. }) && d.lsb == 1.0);
-            let mut m = Model::lti(truth(&t, "alpha_at_nominal_deg_per_s2_rpm"), truth(&t, "beta_at_nominal_per_s"));
+            let mut m = Model::lti(
+                truth(&t, "alpha_at_nominal_deg_per_s2_rpm"),
+                truth(&t, "beta_at_nominal_per_s"),
+            );
             if effect == "direction" {
                 m.advance_factor = truth(&t, "advance_alpha_factor");
             }
             let mut out = vec![0.0; d.y.len()];
             simulate(&m, &d, &mut out).unwrap();
-            let same = out.iter().zip(&d.y).filter(|(p, y)| quantize_phase_deg(**p, 1.0) == **y).count();
+            let same = out
+                .iter()
+                .zip(&d.y)
+                .filter(|(p, y)| quantize_phase_deg(**p, 1.0) == **y)
+                .count();
             assert_eq!(same, d.y.len(), "{effect}: quantized simulation differs from the log");
             // A 10 % wrong α does not.
-            let wrong = Model { alpha: m.alpha * 1.1, ..m };
+            let wrong = Model {
+                alpha: m.alpha * 1.1,
+                ..m
+            };
             simulate(&wrong, &d, &mut out).unwrap();
-            let same = out.iter().zip(&d.y).filter(|(p, y)| quantize_phase_deg(**p, 1.0) == **y).count();
+            let same = out
+                .iter()
+                .zip(&d.y)
+                .filter(|(p, y)| quantize_phase_deg(**p, 1.0) == **y)
+                .count();
             assert!(same < d.y.len() * 99 / 100);
         }
     }
@@ -772,7 +886,10 @@ mod tests {
             revs.push(th);
             th += [820.0, 1370.0, 1090.0, 950.0][k / 5000] / 60.0 * dt;
         }
-        let r: Vec<f64> = revs.iter().map(|t| 0.7 * (2.0 * PI * 1.37 * t + 0.4).sin() + 0.5 * rng.normal()).collect();
+        let r: Vec<f64> = revs
+            .iter()
+            .map(|t| 0.7 * (2.0 * PI * 1.37 * t + 0.4).sin() + 0.5 * rng.normal())
+            .collect();
         let (o, amp) = order_peak(&r, &revs, 0.25, 2.1).unwrap();
         assert!((o - 1.37).abs() < 2e-4, "order {o}");
         assert!((amp - 0.7).abs() < 0.05, "amplitude {amp}");
@@ -785,9 +902,20 @@ mod tests {
         let (est, val, t) = logs("none", 33);
         let f = EvvtFamily::default();
         let fit = f.fit(None, &est, &val).unwrap();
-        let (a, b) = (truth(&t, "alpha_at_nominal_deg_per_s2_rpm"), truth(&t, "beta_at_nominal_per_s"));
-        assert!((fit.params[0].1 / a - 1.0).abs() < 0.03, "alpha {} vs {a}", fit.params[0].1);
-        assert!((fit.params[1].1 / b - 1.0).abs() < 0.05, "beta {} vs {b}", fit.params[1].1);
+        let (a, b) = (
+            truth(&t, "alpha_at_nominal_deg_per_s2_rpm"),
+            truth(&t, "beta_at_nominal_per_s"),
+        );
+        assert!(
+            (fit.params[0].1 / a - 1.0).abs() < 0.03,
+            "alpha {} vs {a}",
+            fit.params[0].1
+        );
+        assert!(
+            (fit.params[1].1 / b - 1.0).abs() < 0.05,
+            "beta {} vs {b}",
+            fit.params[1].1
+        );
         // Validation error is about the 1-degree quantization (uniform: 0.29 rms).
         assert!(fit.rmse < 0.4, "rmse {}", fit.rmse);
     }
@@ -801,12 +929,19 @@ mod tests {
         let fit = f.fit(Some("direction"), &est, &val).unwrap();
         let factor = fit.params.iter().find(|(k, _)| k == "advance_alpha_factor").unwrap().1;
         let truth_factor = truth(&t, "advance_alpha_factor");
-        assert!((factor / truth_factor - 1.0).abs() < 0.03, "advance factor {factor} vs {truth_factor}");
+        assert!(
+            (factor / truth_factor - 1.0).abs() < 0.03,
+            "advance factor {factor} vs {truth_factor}"
+        );
         let (est, val, t) = logs("belt-vibration", 45);
         let fit = f.fit(Some("belt-vibration"), &est, &val).unwrap();
         let p = |k: &str| fit.params.iter().find(|(n, _)| n == k).unwrap().1;
         let order = truth(&t, "belt_order");
-        assert!((p("belt_order") - order).abs() < 1e-3, "order {} vs {order}", p("belt_order"));
+        assert!(
+            (p("belt_order") - order).abs() < 1e-3,
+            "order {} vs {order}",
+            p("belt_order")
+        );
         assert!((p("belt_amplitude_deg") / truth(&t, "belt_amplitude_deg") - 1.0).abs() < 0.05);
         let dphi = (p("belt_phase_rad_at_log_start") - truth(&t, "belt_phase_rad") + PI).rem_euclid(2.0 * PI) - PI;
         assert!(dphi.abs() < 0.1, "phase off by {dphi}");
@@ -829,10 +964,17 @@ mod tests {
                 *v = "30".into();
             }
         }
-        assert!(matches!(Data::from_log(&wrong, 2.0, 0.5).unwrap().drive, Drive::OpenLoop { .. }));
+        assert!(matches!(
+            Data::from_log(&wrong, 2.0, 0.5).unwrap().drive,
+            Drive::OpenLoop { .. }
+        ));
         let fit = EvvtFamily::default().fit(None, &est, &val).unwrap();
         let a = truth(&t, "alpha_at_nominal_deg_per_s2_rpm");
-        assert!((fit.params[0].1 / a - 1.0).abs() < 0.2, "alpha {} vs {a}", fit.params[0].1);
+        assert!(
+            (fit.params[0].1 / a - 1.0).abs() < 0.2,
+            "alpha {} vs {a}",
+            fit.params[0].1
+        );
         assert!(fit.rmse < 1.0, "rmse {}", fit.rmse);
     }
 }

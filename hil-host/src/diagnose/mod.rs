@@ -39,9 +39,25 @@ pub struct Fit {
 }
 
 impl Fit {
-    pub fn new(effect: &str, params: Vec<(String, f64)>, ci95: Vec<Option<f64>>, measured: Vec<f64>, predicted: Vec<f64>, iterations: usize) -> Self {
+    pub fn new(
+        effect: &str,
+        params: Vec<(String, f64)>,
+        ci95: Vec<Option<f64>>,
+        measured: Vec<f64>,
+        predicted: Vec<f64>,
+        iterations: usize,
+    ) -> Self {
         let e: Vec<f64> = measured.iter().zip(&predicted).map(|(y, p)| y - p).collect();
-        Fit { effect: effect.to_string(), params, ci95, rmse: rmse(&e), fit_pct: fit_pct(&measured, &predicted), measured, predicted, iterations }
+        Fit {
+            effect: effect.to_string(),
+            params,
+            ci95,
+            rmse: rmse(&e),
+            fit_pct: fit_pct(&measured, &predicted),
+            measured,
+            predicted,
+            iterations,
+        }
     }
     pub fn residual(&self) -> Vec<f64> {
         self.measured.iter().zip(&self.predicted).map(|(y, p)| y - p).collect()
@@ -87,7 +103,12 @@ pub struct Rules {
 
 impl Default for Rules {
     fn default() -> Self {
-        Rules { min_gain_pct: 5.0, min_z: 4.0, penalty_per_param: 0.01, nested_margin_pct: 10.0 }
+        Rules {
+            min_gain_pct: 5.0,
+            min_z: 4.0,
+            penalty_per_param: 0.01,
+            nested_margin_pct: 10.0,
+        }
     }
 }
 
@@ -106,7 +127,12 @@ pub fn improvement_z(e_a: &[f64], e_b: &[f64]) -> f64 {
     }
     let size = n / blocks;
     let means: Vec<f64> = (0..blocks)
-        .map(|b| (b * size..(b + 1) * size).map(|t| e_a[t] * e_a[t] - e_b[t] * e_b[t]).sum::<f64>() / size as f64)
+        .map(|b| {
+            (b * size..(b + 1) * size)
+                .map(|t| e_a[t] * e_a[t] - e_b[t] * e_b[t])
+                .sum::<f64>()
+                / size as f64
+        })
         .collect();
     let m = means.iter().sum::<f64>() / blocks as f64;
     let var = means.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (blocks - 1) as f64;
@@ -123,7 +149,11 @@ pub fn improvement_z(e_a: &[f64], e_b: &[f64]) -> f64 {
     let wins = means.iter().filter(|&&d| d > 0.0).count() as f64;
     let ties = means.iter().filter(|&&d| d == 0.0).count() as f64;
     let decided = blocks as f64 - ties;
-    let sign = if decided > 0.0 { (wins - decided / 2.0) / (decided / 4.0).sqrt() } else { 0.0 };
+    let sign = if decided > 0.0 {
+        (wins - decided / 2.0) / (decided / 4.0).sqrt()
+    } else {
+        0.0
+    };
     t.max(sign)
 }
 
@@ -197,7 +227,14 @@ enum Tick {
 /// solver iteration of it (heard through [`crate::lsq::with_iteration_observer`], so the
 /// families need not report). It is called in order from a helper thread while the fits run
 /// on this one, and never after `diagnose` returns.
-pub fn diagnose(family: &dyn Family, est: &Log, val: &Log, validation_is_tail: bool, rules: &Rules, progress: &mut (dyn FnMut(&Progress) + Send)) -> Result<Diagnosis, String> {
+pub fn diagnose(
+    family: &dyn Family,
+    est: &Log,
+    val: &Log,
+    validation_is_tail: bool,
+    rules: &Rules,
+    progress: &mut (dyn FnMut(&Progress) + Send),
+) -> Result<Diagnosis, String> {
     let start = Instant::now();
     let total = 1 + family.effects().len();
     let (tx, rx) = mpsc::channel::<Tick>();
@@ -210,13 +247,24 @@ pub fn diagnose(family: &dyn Family, est: &Log, val: &Log, validation_is_tail: b
                     Tick::Fit { name: n, index: i } => (name, index, iteration) = (n, i, 0),
                     Tick::Iteration => iteration += 1,
                 }
-                progress(&Progress { fit: &name, index, total, iteration, elapsed_s: start.elapsed().as_secs_f64() });
+                progress(&Progress {
+                    fit: &name,
+                    index,
+                    total,
+                    iteration,
+                    elapsed_s: start.elapsed().as_secs_f64(),
+                });
             }
         });
         let fit = |effect: Option<&str>, index: usize| -> Result<Fit, String> {
-            let _ = tx.send(Tick::Fit { name: effect.unwrap_or("baseline").to_string(), index });
+            let _ = tx.send(Tick::Fit {
+                name: effect.unwrap_or("baseline").to_string(),
+                index,
+            });
             let iterations = tx.clone();
-            with_iteration_observer(Arc::new(move |_| drop(iterations.send(Tick::Iteration))), || family.fit(effect, est, val))
+            with_iteration_observer(Arc::new(move |_| drop(iterations.send(Tick::Iteration))), || {
+                family.fit(effect, est, val)
+            })
         };
         let result = diagnose_fits(family, est, val, validation_is_tail, rules, &fit);
         drop(tx);
@@ -241,7 +289,10 @@ fn diagnose_fits(
     let lags = (e0.len() / 20).clamp(5, 50);
     let white = whiteness(&e0, lags);
     let regressors = family.regressors(val);
-    let cross: Vec<CrossCheck> = regressors.iter().map(|(name, u)| cross_check(name, &e0, u, lags)).collect();
+    let cross: Vec<CrossCheck> = regressors
+        .iter()
+        .map(|(name, u)| cross_check(name, &e0, u, lags))
+        .collect();
     let grouped: Vec<GroupCheck> = regressors.iter().map(|(name, u)| group_check(name, &e0, u)).collect();
 
     let mut candidates = Vec::new();
@@ -255,18 +306,30 @@ fn diagnose_fits(
                 f.rmse = f64::INFINITY;
                 f.fit_pct = f64::NEG_INFINITY;
                 f.params = vec![(format!("error: {e}"), f64::NAN)];
-                candidates.push(Candidate { fit: f, gain_pct: f64::NEG_INFINITY, z: 0.0, eligible: false });
+                candidates.push(Candidate {
+                    fit: f,
+                    gain_pct: f64::NEG_INFINITY,
+                    z: 0.0,
+                    eligible: false,
+                });
                 continue;
             }
         };
         let gain_pct = 100.0 * (baseline.rmse - fit.rmse) / baseline.rmse;
         let z = improvement_z(&e0, &fit.residual());
         let eligible = gain_pct >= rules.min_gain_pct && z >= rules.min_z;
-        candidates.push(Candidate { fit, gain_pct, z, eligible });
+        candidates.push(Candidate {
+            fit,
+            gain_pct,
+            z,
+            eligible,
+        });
     }
 
     // Rank by penalised validation error.
-    let score = |c: &Candidate| c.fit.rmse * (1.0 + rules.penalty_per_param * c.fit.n_params().saturating_sub(baseline.n_params()) as f64);
+    let score = |c: &Candidate| {
+        c.fit.rmse * (1.0 + rules.penalty_per_param * c.fit.n_params().saturating_sub(baseline.n_params()) as f64)
+    };
     let mut best: Option<usize> = None;
     for (i, c) in candidates.iter().enumerate() {
         if c.eligible && best.is_none_or(|b| score(c) < score(&candidates[b])) {
@@ -299,7 +362,10 @@ fn diagnose_fits(
     }
 
     if white.pass {
-        evidence.push(format!("baseline residual is white (Ljung-Box Q = {:.1} < {:.1})", white.ljung_box_q, white.ljung_box_limit));
+        evidence.push(format!(
+            "baseline residual is white (Ljung-Box Q = {:.1} < {:.1})",
+            white.ljung_box_q, white.ljung_box_limit
+        ));
     } else {
         evidence.push(format!(
             "baseline residual is not white: Ljung-Box Q = {:.1} > {:.1}, largest autocorrelation {:.2} at lag {} (band ±{:.3})",
@@ -307,11 +373,23 @@ fn diagnose_fits(
         ));
     }
     for c in cross.iter().filter(|c| !c.pass) {
-        evidence.push(format!("residual correlates with {} ({:.2} at lag {}, band ±{:.3})", c.name, c.max_abs, c.at_lag, c.band));
+        evidence.push(format!(
+            "residual correlates with {} ({:.2} at lag {}, band ±{:.3})",
+            c.name, c.max_abs, c.at_lag, c.band
+        ));
     }
     for g in grouped.iter().filter(|g| !g.pass) {
-        let means: Vec<String> = g.groups.iter().map(|m| format!("{} {:+.4} (RMSE {:.4}, {} samples)", m.label, m.mean, m.rmse, m.samples)).collect();
-        evidence.push(format!("residual mean differs by {} (z = {:.1}): {}", g.name, g.z, means.join("; ")));
+        let means: Vec<String> = g
+            .groups
+            .iter()
+            .map(|m| format!("{} {:+.4} (RMSE {:.4}, {} samples)", m.label, m.mean, m.rmse, m.samples))
+            .collect();
+        evidence.push(format!(
+            "residual mean differs by {} (z = {:.1}): {}",
+            g.name,
+            g.z,
+            means.join("; ")
+        ));
     }
     let (cause, extended, gain_pct) = match best {
         Some(b) => {
@@ -382,7 +460,10 @@ mod tests {
         }
         fn fit(&self, effect: Option<&str>, _est: &Log, _val: &Log) -> Result<Fit, String> {
             let u: Vec<f64> = (0..200).map(|k| k as f64 / 100.0).collect();
-            let y: Vec<f64> = u.iter().map(|u| 2.0 * u + 0.5 * u * u + 0.01 * (u * 977.0).sin()).collect();
+            let y: Vec<f64> = u
+                .iter()
+                .map(|u| 2.0 * u + 0.5 * u * u + 0.01 * (u * 977.0).sin())
+                .collect();
             let with_b = effect.is_some();
             let model = |x: &[f64], u: f64| x[0] * u + if with_b { x[1] * u * u } else { 0.0 };
             let r = crate::lsq::solve(
@@ -402,7 +483,14 @@ mod tests {
             .map_err(|e| e.to_string())?;
             let x = [r.x[0].exp(), r.x[1].exp()];
             let predicted = u.iter().map(|&u| model(&x, u)).collect();
-            Ok(Fit::new(effect.unwrap_or("baseline"), vec![("a".into(), x[0]), ("b".into(), x[1])], vec![None, None], y, predicted, r.iterations))
+            Ok(Fit::new(
+                effect.unwrap_or("baseline"),
+                vec![("a".into(), x[0]), ("b".into(), x[1])],
+                vec![None, None],
+                y,
+                predicted,
+                r.iterations,
+            ))
         }
         fn regressors(&self, _val: &Log) -> Vec<(String, Vec<f64>)> {
             Vec::new()
@@ -411,14 +499,23 @@ mod tests {
 
     #[test]
     fn progress_reports_every_fit_and_each_solver_iteration() {
-        let log = crate::log::parse_log("p.csv", "# plant: positioner\nt_s,force_N,pos_m\n0,0,0\n0.001,1,0\n", None).unwrap();
+        let log = crate::log::parse_log(
+            "p.csv",
+            "# plant: positioner\nt_s,force_N,pos_m\n0,0,0\n0.001,1,0\n",
+            None,
+        )
+        .unwrap();
         let mut seen: Vec<(String, usize, usize, usize, f64)> = Vec::new();
         let d = diagnose(&Quadratic, &log, &log, false, &Rules::default(), &mut |p: &Progress| {
             seen.push((p.fit.to_string(), p.index, p.total, p.iteration, p.elapsed_s))
         })
         .unwrap();
         assert_eq!(d.cause, "square");
-        let fits = [("baseline", &d.baseline), ("square", &d.candidates[0].fit), ("square-again", &d.candidates[1].fit)];
+        let fits = [
+            ("baseline", &d.baseline),
+            ("square", &d.candidates[0].fit),
+            ("square-again", &d.candidates[1].fit),
+        ];
         for (i, (name, fit)) in fits.iter().enumerate() {
             let reports: Vec<usize> = seen.iter().filter(|s| s.1 == i + 1).map(|s| s.3).collect();
             assert!(seen.iter().filter(|s| s.1 == i + 1).all(|s| s.0 == *name && s.2 == 3));

@@ -31,7 +31,11 @@ pub struct PositionerFamily {
 
 impl Default for PositionerFamily {
     fn default() -> Self {
-        Self { position_cutoff_hz: 80.0, decimation: 20, v_still_m_s: 1e-4 }
+        Self {
+            position_cutoff_hz: 80.0,
+            decimation: 20,
+            v_still_m_s: 1e-4,
+        }
     }
 }
 
@@ -52,7 +56,12 @@ impl PositionerFamily {
         let qf = q_filter.filtfilt(q);
         let vel = derivative(&qf, log.dt_s);
         let acc = derivative(&vel, log.dt_s);
-        Ok(Motion { acc, vel, force: f.to_vec(), pos: qf })
+        Ok(Motion {
+            acc,
+            vel,
+            force: f.to_vec(),
+            pos: qf,
+        })
     }
 
     /// The decimate process applied to one column. The parallel low-pass keeps 80 % of the
@@ -63,13 +72,26 @@ impl PositionerFamily {
     fn decimate(&self, x: &[f64], fs: f64) -> Result<Vec<f64>, String> {
         let nd = self.decimation.max(1);
         let lp = Butterworth::lowpass(8, 0.8 * 0.5 * fs / nd as f64, fs)?;
-        let v = if nd == 1 { lp.filtfilt(x) } else { downsample(&lp.filtfilt(x), nd) };
+        let v = if nd == 1 {
+            lp.filtfilt(x)
+        } else {
+            downsample(&lp.filtfilt(x), nd)
+        };
         let trim = lp.settling_samples().div_ceil(nd);
-        Ok(if v.len() > 4 * trim { v[trim..v.len() - trim].to_vec() } else { v })
+        Ok(if v.len() > 4 * trim {
+            v[trim..v.len() - trim].to_vec()
+        } else {
+            v
+        })
     }
 
     /// The regressor columns of a model, already decimated, and their parameter names.
-    fn columns(&self, m: &Motion, effect: Option<&str>, fs: f64) -> Result<(Vec<Vec<f64>>, Vec<String>, Vec<f64>), String> {
+    fn columns(
+        &self,
+        m: &Motion,
+        effect: Option<&str>,
+        fs: f64,
+    ) -> Result<(Vec<Vec<f64>>, Vec<String>, Vec<f64>), String> {
         let still = self.v_still_m_s;
         let pos = |v: f64| if v > still { 1.0 } else { 0.0 };
         let neg = |v: f64| if v < -still { 1.0 } else { 0.0 };
@@ -96,7 +118,10 @@ impl PositionerFamily {
             }
         }
         let names = cols.iter().map(|(n, _)| n.clone()).collect();
-        let data = cols.iter().map(|(_, c)| self.decimate(c, fs)).collect::<Result<_, _>>()?;
+        let data = cols
+            .iter()
+            .map(|(_, c)| self.decimate(c, fs))
+            .collect::<Result<_, _>>()?;
         Ok((data, names, self.decimate(&m.force, fs)?))
     }
 }
@@ -120,11 +145,14 @@ impl Family for PositionerFamily {
 
     fn fit(&self, effect: Option<&str>, est: &Log, val: &Log) -> Result<Fit, String> {
         let (cols, names, y) = self.columns(&self.motion(est)?, effect, 1.0 / est.dt_s)?;
-        let theta = linear_lsq(&cols, &y).ok_or("the regressors are linearly dependent (no motion in the estimation data?)")?;
+        let theta =
+            linear_lsq(&cols, &y).ok_or("the regressors are linearly dependent (no motion in the estimation data?)")?;
         // Confidence intervals: s² (ΦᵀΦ)⁻¹ on the decimated estimation data.
         let p = cols.len();
         let n = y.len();
-        let resid: Vec<f64> = (0..n).map(|i| y[i] - (0..p).map(|j| cols[j][i] * theta[j]).sum::<f64>()).collect();
+        let resid: Vec<f64> = (0..n)
+            .map(|i| y[i] - (0..p).map(|j| cols[j][i] * theta[j]).sum::<f64>())
+            .collect();
         let s2 = resid.iter().map(|r| r * r).sum::<f64>() / (n.saturating_sub(p).max(1)) as f64;
         let mut ata = vec![0.0; p * p];
         for a in 0..p {
@@ -133,9 +161,13 @@ impl Family for PositionerFamily {
             }
         }
         let inv = invert_spd(&ata, p);
-        let ci95 = (0..p).map(|j| inv.as_ref().map(|m| 1.96 * (s2 * m[j * p + j]).sqrt())).collect();
+        let ci95 = (0..p)
+            .map(|j| inv.as_ref().map(|m| 1.96 * (s2 * m[j * p + j]).sqrt()))
+            .collect();
         let (vcols, _, vy) = self.columns(&self.motion(val)?, effect, 1.0 / val.dt_s)?;
-        let pred: Vec<f64> = (0..vy.len()).map(|i| (0..p).map(|j| vcols[j][i] * theta[j]).sum()).collect();
+        let pred: Vec<f64> = (0..vy.len())
+            .map(|i| (0..p).map(|j| vcols[j][i] * theta[j]).sum())
+            .collect();
         Ok(Fit::new(
             effect.unwrap_or("baseline"),
             names.into_iter().zip(theta).collect(),
@@ -150,7 +182,19 @@ impl Family for PositionerFamily {
         let Ok(m) = self.motion(val) else { return Vec::new() };
         let fs = 1.0 / val.dt_s;
         let still = self.v_still_m_s;
-        let sign: Vec<f64> = m.vel.iter().map(|&v| if v > still { 1.0 } else if v < -still { -1.0 } else { 0.0 }).collect();
+        let sign: Vec<f64> = m
+            .vel
+            .iter()
+            .map(|&v| {
+                if v > still {
+                    1.0
+                } else if v < -still {
+                    -1.0
+                } else {
+                    0.0
+                }
+            })
+            .collect();
         let dir_pos: Vec<f64> = m.vel.iter().map(|&v| if v > still { 1.0 } else { 0.0 }).collect();
         [
             ("velocity sign", sign),

@@ -26,7 +26,14 @@ pub struct ProgressLine {
 impl ProgressLine {
     /// `terminal`: redraw one line in place; otherwise plain lines.
     pub fn new(terminal: bool) -> Self {
-        Self { terminal, shown_index: 0, last_draw_s: f64::NEG_INFINITY, width: 0, elapsed_s: 0.0, total: 0 }
+        Self {
+            terminal,
+            shown_index: 0,
+            last_draw_s: f64::NEG_INFINITY,
+            width: 0,
+            elapsed_s: 0.0,
+            total: 0,
+        }
     }
 
     /// For stderr as it is: a terminal or not.
@@ -51,7 +58,10 @@ impl ProgressLine {
         // Fits done so far, as a bar.
         let done = p.index.saturating_sub(1).min(p.total);
         let bar: String = "#".repeat(done) + &"-".repeat(p.total - done);
-        let line = format!("diagnose [{bar}] {}/{} {:<20} solver iteration {:>3}  {:6.1} s", p.index, p.total, p.fit, p.iteration, p.elapsed_s);
+        let line = format!(
+            "diagnose [{bar}] {}/{} {:<20} solver iteration {:>3}  {:6.1} s",
+            p.index, p.total, p.fit, p.iteration, p.elapsed_s
+        );
         Some(self.redraw(line))
     }
 
@@ -80,7 +90,13 @@ mod tests {
     use super::*;
 
     fn at<'a>(fit: &'a str, index: usize, iteration: usize, elapsed_s: f64) -> Progress<'a> {
-        Progress { fit, index, total: 5, iteration, elapsed_s }
+        Progress {
+            fit,
+            index,
+            total: 5,
+            iteration,
+            elapsed_s,
+        }
     }
 
     #[test]
@@ -88,19 +104,31 @@ mod tests {
         let mut line = ProgressLine::new(true);
         let first = line.render(&at("baseline", 1, 0, 0.0)).unwrap();
         assert!(first.starts_with('\r') && !first.contains('\n'), "{first:?}");
-        assert!(first.contains("[-----] 1/5 baseline") && first.contains("solver iteration   0"), "{first:?}");
+        assert!(
+            first.contains("[-----] 1/5 baseline") && first.contains("solver iteration   0"),
+            "{first:?}"
+        );
         // Iterations closer than the redraw interval are skipped, later ones shown.
         assert_eq!(line.render(&at("baseline", 1, 1, 0.05)), None);
         let later = line.render(&at("baseline", 1, 7, 0.35)).unwrap();
-        assert!(later.contains("solver iteration   7") && later.contains("0.3 s"), "{later:?}");
+        assert!(
+            later.contains("solver iteration   7") && later.contains("0.3 s"),
+            "{later:?}"
+        );
         // A new fit always draws, the bar advances, and a longer line is fully blanked after.
         let long = line.render(&at("pressure-direction", 3, 0, 0.36)).unwrap();
         assert!(long.contains("[##---] 3/5 pressure-direction"), "{long:?}");
         let width = long.chars().count();
         let short = line.render(&at("x", 4, 0, 0.37)).unwrap();
-        assert!(short.chars().count() >= width, "{short:?} leaves characters of {long:?}");
+        assert!(
+            short.chars().count() >= width,
+            "{short:?} leaves characters of {long:?}"
+        );
         let end = line.finish().unwrap();
-        assert!(end.starts_with('\r') && end.ends_with('\n') && end.contains("5 fits in 0.4 s"), "{end:?}");
+        assert!(
+            end.starts_with('\r') && end.ends_with('\n') && end.contains("5 fits in 0.4 s"),
+            "{end:?}"
+        );
         assert_eq!(line.finish(), None);
     }
 
@@ -113,7 +141,10 @@ mod tests {
                 text.extend(line.render(&at(fit, index, iteration, iteration as f64)));
             }
         }
-        assert_eq!(text, "fitting baseline (1/5) ...\nfitting a (2/5) ...\nfitting b (3/5) ...\n");
+        assert_eq!(
+            text,
+            "fitting baseline (1/5) ...\nfitting a (2/5) ...\nfitting b (3/5) ...\n"
+        );
         assert!(!text.contains('\r'));
         assert_eq!(line.finish(), None);
     }

@@ -104,7 +104,10 @@ pub fn summary(d: &Diagnosis) -> String {
         "plant {} — output {} — {}\nestimation: {} ({} samples)\nvalidation: {} ({} samples)\n\n",
         d.plant, d.output, d.formulation, d.estimation.0, d.estimation.1, d.validation.0, d.validation.1
     ));
-    s.push_str(&format!("baseline: RMSE {:.5}, fit {:.1} %\n", d.baseline.rmse, d.baseline.fit_pct));
+    s.push_str(&format!(
+        "baseline: RMSE {:.5}, fit {:.1} %\n",
+        d.baseline.rmse, d.baseline.fit_pct
+    ));
     s.push_str("what the baseline gets wrong:\n");
     for e in &d.evidence {
         s.push_str(&format!("  - {e}\n"));

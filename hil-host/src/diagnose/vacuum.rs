@@ -58,7 +58,9 @@
 use std::ops::Range;
 use std::sync::Mutex;
 
-use model_core::vacuum::{PositionMap, StaticPressureMap, VacuumEffects, VacuumInputs, VacuumParams, VacuumValveActuator};
+use model_core::vacuum::{
+    PositionMap, StaticPressureMap, VacuumEffects, VacuumInputs, VacuumParams, VacuumValveActuator,
+};
 
 use super::{Family, Fit};
 use crate::log::{Log, Plant};
@@ -121,13 +123,25 @@ impl VacuumModel {
     pub fn from_params(p: &VacuumParams) -> Self {
         let mut m = Self::baseline_guess(ValveMap::PiecewiseLinear, RodMap::Linear);
         match p.static_map {
-            StaticPressureMap::PiecewiseLinear { k1_kpa_per_pct, p01_kpa, k2_kpa_per_pct, p02_kpa } => {
+            StaticPressureMap::PiecewiseLinear {
+                k1_kpa_per_pct,
+                p01_kpa,
+                k2_kpa_per_pct,
+                p02_kpa,
+            } => {
                 m.valve_map = ValveMap::PiecewiseLinear;
-                (m.k1_kpa_per_pct, m.p01_kpa, m.k2_kpa_per_pct, m.p02_kpa) = (k1_kpa_per_pct, p01_kpa, k2_kpa_per_pct, p02_kpa);
+                (m.k1_kpa_per_pct, m.p01_kpa, m.k2_kpa_per_pct, m.p02_kpa) =
+                    (k1_kpa_per_pct, p01_kpa, k2_kpa_per_pct, p02_kpa);
             }
-            StaticPressureMap::Cubic { k1_kpa_per_pct, p01_kpa, k2_kpa_per_pct3, u0_pct } => {
+            StaticPressureMap::Cubic {
+                k1_kpa_per_pct,
+                p01_kpa,
+                k2_kpa_per_pct3,
+                u0_pct,
+            } => {
                 m.valve_map = ValveMap::Cubic;
-                (m.k1_kpa_per_pct, m.p01_kpa, m.k3_kpa_per_pct3, m.u0_pct) = (k1_kpa_per_pct, p01_kpa, k2_kpa_per_pct3, u0_pct);
+                (m.k1_kpa_per_pct, m.p01_kpa, m.k3_kpa_per_pct3, m.u0_pct) =
+                    (k1_kpa_per_pct, p01_kpa, k2_kpa_per_pct3, u0_pct);
             }
         }
         match p.position_map {
@@ -135,7 +149,12 @@ impl VacuumModel {
                 m.rod_map = RodMap::Linear;
                 (m.lin_k_pct_per_kpa, m.lin_x0_pct) = (k_pct_per_kpa, x0_pct);
             }
-            PositionMap::Arctan { a1_pct, a2_pct_per_rad, a3_kpa, a4_kpa } => {
+            PositionMap::Arctan {
+                a1_pct,
+                a2_pct_per_rad,
+                a3_kpa,
+                a4_kpa,
+            } => {
                 m.rod_map = RodMap::Arctan;
                 (m.a1_pct, m.a2_pct_per_rad, m.a3_kpa, m.a4_kpa) = (a1_pct, a2_pct_per_rad, a3_kpa, a4_kpa);
             }
@@ -147,7 +166,11 @@ impl VacuumModel {
         m.damping_retract_kpa_s_per_pct = p.damping_retract_kpa_s_per_pct;
         m.voltage_gain = 1.0;
         m.fc_kpa = p.fc_kpa;
-        m.dahl_x_pct = if p.dahl_sigma_kpa_per_pct > 0.0 { p.fc_kpa / p.dahl_sigma_kpa_per_pct } else { 0.5 };
+        m.dahl_x_pct = if p.dahl_sigma_kpa_per_pct > 0.0 {
+            p.fc_kpa / p.dahl_sigma_kpa_per_pct
+        } else {
+            0.5
+        };
         m.backlash_pct = p.backlash_pct;
         m.u_ref_v = p.u_ref_v;
         m.p_amb_ref_kpa = p.p_amb_ref_kpa;
@@ -211,15 +234,27 @@ impl VacuumModel {
             tau_rise_s: self.tau_rise_s,
             tau_fall_s: self.tau_fall_s,
             position_map: match self.rod_map {
-                RodMap::Linear => PositionMap::Linear { k_pct_per_kpa: self.lin_k_pct_per_kpa, x0_pct: self.lin_x0_pct },
-                RodMap::Arctan => PositionMap::Arctan { a1_pct: self.a1_pct, a2_pct_per_rad: self.a2_pct_per_rad, a3_kpa: self.a3_kpa, a4_kpa: self.a4_kpa },
+                RodMap::Linear => PositionMap::Linear {
+                    k_pct_per_kpa: self.lin_k_pct_per_kpa,
+                    x0_pct: self.lin_x0_pct,
+                },
+                RodMap::Arctan => PositionMap::Arctan {
+                    a1_pct: self.a1_pct,
+                    a2_pct_per_rad: self.a2_pct_per_rad,
+                    a3_kpa: self.a3_kpa,
+                    a4_kpa: self.a4_kpa,
+                },
             },
             p_amb_ref_kpa: self.p_amb_ref_kpa,
             mass_kpa_s2_per_pct: self.mass_kpa_s2_per_pct,
             damping_extend_kpa_s_per_pct: self.damping_extend_kpa_s_per_pct,
             damping_retract_kpa_s_per_pct: self.damping_retract_kpa_s_per_pct,
             fc_kpa: self.fc_kpa,
-            dahl_sigma_kpa_per_pct: if self.fc_kpa > 0.0 { self.fc_kpa / self.dahl_x_pct.max(1e-9) } else { 1.0 },
+            dahl_sigma_kpa_per_pct: if self.fc_kpa > 0.0 {
+                self.fc_kpa / self.dahl_x_pct.max(1e-9)
+            } else {
+                1.0
+            },
             backlash_pct: self.backlash_pct,
             effects: self.effects,
             ..VacuumParams::lpt()
@@ -230,7 +265,9 @@ impl VacuumModel {
     /// `rod_step_s`; an error names the parameter model-core rejects.
     pub fn actuator(&self, rod_step_s: f64) -> Result<VacuumValveActuator<f64>, String> {
         let invalid = |e: model_core::vacuum::VacuumParamError| format!("vacuum model: {e:?}");
-        VacuumValveActuator::new(&self.to_params()).and_then(|a| a.with_rod_step_s(rod_step_s)).map_err(invalid)
+        VacuumValveActuator::new(&self.to_params())
+            .and_then(|a| a.with_rod_step_s(rod_step_s))
+            .map_err(invalid)
     }
 
     /// The actuator's inputs at sample `k`. With `supply-voltage`, model-core's valve sees
@@ -238,8 +275,17 @@ impl VacuumModel {
     /// κ = 0 the baseline) is the voltage the valve sees moved κ times as far from U_ref:
     /// U_ref + κ(U − U_ref).
     pub fn inputs_at(&self, io: &Inputs, k: usize) -> VacuumInputs<f64> {
-        let u_batt_v = if self.effects.supply_voltage { self.u_ref_v + self.voltage_gain * (io.u_batt[k] - self.u_ref_v) } else { io.u_batt[k] };
-        VacuumInputs { duty_pct: io.duty[k], u_batt_v, p_amb_kpa: io.p_amb[k], p_tank_kpa: io.p_tank[k] }
+        let u_batt_v = if self.effects.supply_voltage {
+            self.u_ref_v + self.voltage_gain * (io.u_batt[k] - self.u_ref_v)
+        } else {
+            io.u_batt[k]
+        };
+        VacuumInputs {
+            duty_pct: io.duty[k],
+            u_batt_v,
+            p_amb_kpa: io.p_amb[k],
+            p_tank_kpa: io.p_tank[k],
+        }
     }
 
     /// The parameters a fit of this model's shapes and `effect` adjusts.
@@ -250,7 +296,11 @@ impl VacuumModel {
         };
         names.push("tau_rise_s");
         names.extend(self.rod_names().into_iter().filter(|n| !n.is_empty()));
-        names.extend(["mass_kPa_s2_per_pct", "damping_extend_kPa_s_per_pct", "damping_retract_kPa_s_per_pct"]);
+        names.extend([
+            "mass_kPa_s2_per_pct",
+            "damping_extend_kPa_s_per_pct",
+            "damping_retract_kPa_s_per_pct",
+        ]);
         if let Some(e) = effect {
             names.extend(effect_names(e)?);
         }
@@ -332,7 +382,15 @@ impl VacuumModel {
     /// rod integrated in steps of at most `h_max_s`. Sample k holds the state before the step
     /// with inputs k (a bench samples the sensors as it applies the new command).
     /// With `mechanics` false only the pressure is simulated (x stays at its settled value).
-    pub fn simulate(&self, io: &Inputs, range: Range<usize>, h_max_s: f64, mechanics: bool, x_out: &mut [f64], p_out: &mut [f64]) -> Result<(), String> {
+    pub fn simulate(
+        &self,
+        io: &Inputs,
+        range: Range<usize>,
+        h_max_s: f64,
+        mechanics: bool,
+        x_out: &mut [f64],
+        p_out: &mut [f64],
+    ) -> Result<(), String> {
         let Some(k0) = range.clone().next() else { return Ok(()) };
         let mut a = self.actuator(h_max_s)?;
         a.settle(&self.inputs_at(io, k0));
@@ -410,10 +468,12 @@ pub fn moving_average(y: &[f64], seconds: f64, dt_s: f64) -> Vec<f64> {
     for v in y {
         prefix.push(prefix.last().copied().unwrap_or(0.0) + v);
     }
-    (0..y.len()).map(|k| {
-        let (a, b) = (k.saturating_sub(half), (k + half + 1).min(y.len()));
-        (prefix[b] - prefix[a]) / (b - a) as f64
-    }).collect()
+    (0..y.len())
+        .map(|k| {
+            let (a, b) = (k.saturating_sub(half), (k + half + 1).min(y.len()));
+            (prefix[b] - prefix[a]) / (b - a) as f64
+        })
+        .collect()
 }
 
 impl<'a> Inputs<'a> {
@@ -481,7 +541,12 @@ impl Default for VacuumFamily {
         Self {
             h_max_s: 0.001,
             max_fit_samples: 16_000,
-            lsq: LsqOptions { max_iterations: 20, cost_tolerance: 1e-5, step_tolerance: 1e-7, ..LsqOptions::default() },
+            lsq: LsqOptions {
+                max_iterations: 20,
+                cost_tolerance: 1e-5,
+                step_tolerance: 1e-7,
+                ..LsqOptions::default()
+            },
             cache: Mutex::new(None),
             baseline_cache: Mutex::new(None),
         }
@@ -507,26 +572,48 @@ fn fingerprint(log: &Log) -> u64 {
 impl VacuumFamily {
     fn est_data<'a>(&self, log: &'a Log) -> Result<EstData<'a>, String> {
         let io = Inputs::from_log(log)?;
-        let x = log.col("x_pct").ok_or_else(|| format!("{}: no `x_pct` column", log.file))?;
+        let x = log
+            .col("x_pct")
+            .ok_or_else(|| format!("{}: no `x_pct` column", log.file))?;
         let n = io.len();
         let burn = |seconds: f64| ((seconds / log.dt_s).round() as usize).min(n / 4);
         let windows = if n <= self.max_fit_samples {
-            vec![Window { range: 0..n, score_from: burn(0.5) }]
+            vec![Window {
+                range: 0..n,
+                score_from: burn(0.5),
+            }]
         } else {
             // Four evenly spread windows; each starts from its settled inputs, unscored for 2 s.
             let count = 4;
             let len = self.max_fit_samples / count;
             let stride = (n - len) / (count - 1);
-            (0..count).map(|i| Window { range: i * stride..i * stride + len, score_from: i * stride + burn(2.0) }).collect()
+            (0..count)
+                .map(|i| Window {
+                    range: i * stride..i * stride + len,
+                    score_from: i * stride + burn(2.0),
+                })
+                .collect()
         };
         if n < 50 {
             return Err(format!("{}: {n} samples are too few to fit a dynamic model", log.file));
         }
-        Ok(EstData { io, x, p: log.col("p_act_kPa"), windows })
+        Ok(EstData {
+            io,
+            x,
+            p: log.col("p_act_kPa"),
+            windows,
+        })
     }
 
     /// Fits `names` of `start` on `data` with the given residuals.
-    fn fit_stage(&self, start: &VacuumModel, names: &[&'static str], data: &EstData, which: Residuals, opts: &LsqOptions) -> Result<(VacuumModel, crate::lsq::LsqResult), String> {
+    fn fit_stage(
+        &self,
+        start: &VacuumModel,
+        names: &[&'static str],
+        data: &EstData,
+        which: Residuals,
+        opts: &LsqOptions,
+    ) -> Result<(VacuumModel, crate::lsq::LsqResult), String> {
         let use_p = data.p.is_some() && which == Residuals::Pressure;
         let use_x = which == Residuals::Position;
         let per_window: usize = data.windows.iter().map(|w| w.range.len()).sum();
@@ -605,7 +692,8 @@ impl VacuumFamily {
             let mut best: Option<(f64, VacuumModel)> = None;
             for start in valve_starts() {
                 let names = start.parameter_names(None)?;
-                let pressure_names: Vec<&'static str> = names.iter().copied().filter(|n| is_pressure_param(n)).collect();
+                let pressure_names: Vec<&'static str> =
+                    names.iter().copied().filter(|n| is_pressure_param(n)).collect();
                 if let Ok((m, r)) = self.fit_stage(&start, &pressure_names, data, Residuals::Pressure, &self.lsq) {
                     iterations += r.iterations;
                     if best.as_ref().is_none_or(|(c, _)| r.cost < *c) {
@@ -666,7 +754,10 @@ impl VacuumFamily {
             r.ci95
         } else {
             // Confidence of the shared pressure stage at its solution (no iterations, cheap).
-            let opts = LsqOptions { max_iterations: 0, ..self.lsq.clone() };
+            let opts = LsqOptions {
+                max_iterations: 0,
+                ..self.lsq.clone()
+            };
             self.fit_stage(&model, &pn, &data, Residuals::Pressure, &opts)?.1.ci95
         };
         let (m, r) = self.fit_stage(&model, &rn, &data, Residuals::Position, &self.lsq)?;
@@ -680,7 +771,11 @@ impl VacuumFamily {
         let ci = names
             .iter()
             .map(|n| {
-                let from = |list: &[&'static str], ci: &[Option<f64>]| list.iter().position(|m| m == n).and_then(|i| ci.get(i).copied().flatten());
+                let from = |list: &[&'static str], ci: &[Option<f64>]| {
+                    list.iter()
+                        .position(|m| m == n)
+                        .and_then(|i| ci.get(i).copied().flatten())
+                };
                 from(&pn, &ci_p).or_else(|| from(&rn, &r.ci95))
             })
             .collect();
@@ -706,13 +801,19 @@ impl VacuumFamily {
         let mut pts: Vec<(f64, f64)> = Vec::new();
         for limit_kpa in [3.0, 8.0, f64::INFINITY] {
             let slow = |k: usize| (p[(k + w).min(n - 1)] - p[k.saturating_sub(w)]).abs() < limit_kpa;
-            let mut raw: Vec<(f64, f64)> = (0..n).filter(|&k| x[k] > 1.0 && x[k] < 99.0 && slow(k)).map(|k| (model.p_amb_ref_kpa - (io.p_amb[k] - p[k]), x[k])).collect();
+            let mut raw: Vec<(f64, f64)> = (0..n)
+                .filter(|&k| x[k] > 1.0 && x[k] < 99.0 && slow(k))
+                .map(|k| (model.p_amb_ref_kpa - (io.p_amb[k] - p[k]), x[k]))
+                .collect();
             raw.sort_by(|a, b| a.0.total_cmp(&b.0));
             pts.clear();
             let mut i = 0;
             while i < raw.len() {
                 let bin = raw[i].0.floor();
-                let j = raw[i..].iter().position(|q| q.0.floor() != bin).map_or(raw.len(), |o| i + o);
+                let j = raw[i..]
+                    .iter()
+                    .position(|q| q.0.floor() != bin)
+                    .map_or(raw.len(), |o| i + o);
                 if j - i >= 5 {
                     let mut xs: Vec<f64> = raw[i..j].iter().map(|q| q.1).collect();
                     xs.sort_by(f64::total_cmp);
@@ -733,7 +834,10 @@ impl VacuumFamily {
             return Ok((*model, 0));
         }
         let n = pts.len() as f64;
-        let (mp, mx) = (pts.iter().map(|q| q.0).sum::<f64>() / n, pts.iter().map(|q| q.1).sum::<f64>() / n);
+        let (mp, mx) = (
+            pts.iter().map(|q| q.0).sum::<f64>() / n,
+            pts.iter().map(|q| q.1).sum::<f64>() / n,
+        );
         let spp: f64 = pts.iter().map(|q| (q.0 - mp).powi(2)).sum();
         let spx: f64 = pts.iter().map(|q| (q.0 - mp) * (q.1 - mx)).sum();
         let k = if spp > 0.0 { (spx / spp).min(-0.05) } else { -2.0 };
@@ -744,7 +848,9 @@ impl VacuumFamily {
         // The map at the reference ambient pressure: the map pressure is the chamber pressure.
         let sse_lin = {
             let a = lin.actuator(self.h_max_s)?;
-            pts.iter().map(|&(pm, xm)| (a.static_position_pct(pm, lin.p_amb_ref_kpa) - xm).powi(2)).sum::<f64>()
+            pts.iter()
+                .map(|&(pm, xm)| (a.static_position_pct(pm, lin.p_amb_ref_kpa) - xm).powi(2))
+                .sum::<f64>()
         };
         // Arctan from the line: same slope and centre at mid-stroke.
         let mut at = *model;
@@ -773,7 +879,10 @@ impl VacuumFamily {
             &lo,
             &hi,
             pts.len(),
-            &LsqOptions { threads: 1, ..self.lsq.clone() },
+            &LsqOptions {
+                threads: 1,
+                ..self.lsq.clone()
+            },
         );
         if let Ok(r) = res {
             for (nm, v) in names.iter().zip(&r.x) {
@@ -798,7 +907,10 @@ impl VacuumFamily {
 }
 
 fn is_pressure_param(name: &str) -> bool {
-    matches!(name, "k1_kPa_per_pct" | "p01_kPa" | "k2_kPa_per_pct" | "p02_kPa" | "k3_kPa_per_pct3" | "u0_pct" | "tau_rise_s")
+    matches!(
+        name,
+        "k1_kPa_per_pct" | "p01_kPa" | "k2_kPa_per_pct" | "p02_kPa" | "k3_kPa_per_pct3" | "u0_pct" | "tau_rise_s"
+    )
 }
 
 /// Starting models: the paper's LPT (eq. (2) + linear eq. (8)), HPT (eq. (2) + arctan eq. (9))
@@ -824,17 +936,32 @@ impl Family for VacuumFamily {
     fn fit(&self, effect: Option<&str>, est: &Log, val: &Log) -> Result<Fit, String> {
         let (model, names, ci95, iterations) = self.calibrate(est, effect)?;
         let (x, _) = self.predict(&model, val)?;
-        let measured = val.col("x_pct").ok_or_else(|| format!("{}: no `x_pct` column", val.file))?.to_vec();
-        Ok(Fit::new(effect.unwrap_or("baseline"), model.named(&names), ci95, measured, x, iterations))
+        let measured = val
+            .col("x_pct")
+            .ok_or_else(|| format!("{}: no `x_pct` column", val.file))?
+            .to_vec();
+        Ok(Fit::new(
+            effect.unwrap_or("baseline"),
+            model.named(&names),
+            ci95,
+            measured,
+            x,
+            iterations,
+        ))
     }
 
     fn regressors(&self, val: &Log) -> Vec<(String, Vec<f64>)> {
-        let Ok(io) = Inputs::from_log(val) else { return Vec::new() };
+        let Ok(io) = Inputs::from_log(val) else {
+            return Vec::new();
+        };
         let n = io.len();
         let mut out = vec![
             ("supply voltage".to_string(), io.u_batt.to_vec()),
             ("duty".to_string(), io.duty.to_vec()),
-            ("duty x voltage".to_string(), io.duty.iter().zip(io.u_batt).map(|(d, u)| d * u).collect()),
+            (
+                "duty x voltage".to_string(),
+                io.duty.iter().zip(io.u_batt).map(|(d, u)| d * u).collect(),
+            ),
             // The other inputs: the vacuum supply and the ambient pressure (smoothed as simulated).
             ("tank pressure (vacuum supply)".to_string(), io.p_tank.clone()),
             ("ambient pressure".to_string(), io.p_amb.clone()),
@@ -842,10 +969,18 @@ impl Family for VacuumFamily {
         // Direction of motion from a smoothed difference (±1, 0 when still).
         let direction = |y: &[f64], still: f64| -> Vec<f64> {
             let w = ((0.05 / val.dt_s).round() as usize).max(1);
-            (0..n).map(|k| {
-                let d = y[(k + w).min(n - 1)] - y[k.saturating_sub(w)];
-                if d > still { 1.0 } else if d < -still { -1.0 } else { 0.0 }
-            }).collect()
+            (0..n)
+                .map(|k| {
+                    let d = y[(k + w).min(n - 1)] - y[k.saturating_sub(w)];
+                    if d > still {
+                        1.0
+                    } else if d < -still {
+                        -1.0
+                    } else {
+                        0.0
+                    }
+                })
+                .collect()
         };
         if let Some(p) = val.col("p_act_kPa") {
             let now = direction(p, 1.0);
@@ -858,12 +993,23 @@ impl Family for VacuumFamily {
                     held[k] = held[k - 1];
                 }
             }
-            let baseline = self.baseline_cache.lock().ok().and_then(|g| g.as_ref().and_then(|(_, m)| m.actuator(self.h_max_s).ok()));
+            let baseline = self
+                .baseline_cache
+                .lock()
+                .ok()
+                .and_then(|g| g.as_ref().and_then(|(_, m)| m.actuator(self.h_max_s).ok()));
             if let Some(a) = baseline {
                 let slope: Vec<f64> = (0..n)
-                    .map(|k| (a.static_position_pct(p[k] + 0.5, io.p_amb[k]) - a.static_position_pct(p[k] - 0.5, io.p_amb[k])).abs())
+                    .map(|k| {
+                        (a.static_position_pct(p[k] + 0.5, io.p_amb[k])
+                            - a.static_position_pct(p[k] - 0.5, io.p_amb[k]))
+                        .abs()
+                    })
                     .collect();
-                out.push(("last pressure direction x map slope (friction)".into(), held.iter().zip(&slope).map(|(d, s)| d * s).collect()));
+                out.push((
+                    "last pressure direction x map slope (friction)".into(),
+                    held.iter().zip(&slope).map(|(d, s)| d * s).collect(),
+                ));
             }
             out.push(("last pressure direction (friction, clearance)".into(), held));
             out.push(("pressure rate sign".into(), now));
@@ -883,17 +1029,34 @@ mod tests {
 
     /// Bench-like inputs: steps and ramps at changing voltage.
     fn inputs(n: usize) -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>) {
-        let duty: Vec<f64> = (0..n).map(|k| {
-            let t = k as f64 * 0.01;
-            if (t as usize / 2).is_multiple_of(2) { 20.0 + 30.0 * (t * 0.7).sin().abs() } else { 90.0 - (t * 13.0) % 60.0 }
-        }).map(|d: f64| (d * 10.0).round() / 10.0).collect();
+        let duty: Vec<f64> = (0..n)
+            .map(|k| {
+                let t = k as f64 * 0.01;
+                if (t as usize / 2).is_multiple_of(2) {
+                    20.0 + 30.0 * (t * 0.7).sin().abs()
+                } else {
+                    90.0 - (t * 13.0) % 60.0
+                }
+            })
+            .map(|d: f64| (d * 10.0).round() / 10.0)
+            .collect();
         let u: Vec<f64> = (0..n).map(|k| 12.0 + 1.5 * ((k / 300) % 3) as f64 - 1.5).collect();
-        (duty, u, vec![99.0; n], (0..n).map(|k| 25.0 + 5.0 * (k as f64 * 0.001).sin()).collect())
+        (
+            duty,
+            u,
+            vec![99.0; n],
+            (0..n).map(|k| 25.0 + 5.0 * (k as f64 * 0.001).sin()).collect(),
+        )
     }
 
     fn reference(p: &VacuumParams, io: &Inputs, dt: f64) -> (Vec<f64>, Vec<f64>) {
         let mut a = VacuumValveActuator::<f64>::new(p).unwrap();
-        let inp = |k: usize| VacuumInputs { duty_pct: io.duty[k], u_batt_v: io.u_batt[k], p_amb_kpa: io.p_amb[k], p_tank_kpa: io.p_tank[k] };
+        let inp = |k: usize| VacuumInputs {
+            duty_pct: io.duty[k],
+            u_batt_v: io.u_batt[k],
+            p_amb_kpa: io.p_amb[k],
+            p_tank_kpa: io.p_tank[k],
+        };
         a.settle(&inp(0));
         let (mut xs, mut ps) = (Vec::new(), Vec::new());
         for k in 0..io.len() {
@@ -905,7 +1068,12 @@ mod tests {
     }
 
     fn all_effects() -> VacuumEffects {
-        VacuumEffects { supply_voltage: true, pressure_direction: true, coulomb_friction: true, backlash: true }
+        VacuumEffects {
+            supply_voltage: true,
+            pressure_direction: true,
+            coulomb_friction: true,
+            backlash: true,
+        }
     }
 
     /// The family's parameter vector carries a model-core parameter set through unchanged: the
@@ -915,7 +1083,13 @@ mod tests {
     fn parameters_round_trip_to_the_generators_plant() {
         let n = 3000;
         let (d, u, pa, pt) = inputs(n);
-        let io = Inputs { duty: &d, u_batt: &u, p_amb: pa.clone(), p_tank: pt.clone(), dt_s: 0.01 };
+        let io = Inputs {
+            duty: &d,
+            u_batt: &u,
+            p_amb: pa.clone(),
+            p_tank: pt.clone(),
+            dt_s: 0.01,
+        };
         for p in [VacuumParams::lpt(), VacuumParams::hpt(), VacuumParams::hpc()] {
             for effects in [VacuumEffects::NONE, all_effects()] {
                 let p = p.with_effects(effects);
@@ -935,14 +1109,25 @@ mod tests {
                 assert_eq!(p2, ps);
             }
             // κ = 0 with the supply-voltage effect on is the baseline, whatever the voltage.
-            let blind = VacuumModel { voltage_gain: 0.0, ..VacuumModel::from_params(&p.with_effects(VacuumEffects { supply_voltage: true, ..VacuumEffects::NONE })) };
+            let blind = VacuumModel {
+                voltage_gain: 0.0,
+                ..VacuumModel::from_params(&p.with_effects(VacuumEffects {
+                    supply_voltage: true,
+                    ..VacuumEffects::NONE
+                }))
+            };
             let base = VacuumModel::from_params(&p.baseline());
             let (mut xa, mut pa_) = (vec![0.0; n], vec![0.0; n]);
             let (mut xb, mut pb) = (vec![0.0; n], vec![0.0; n]);
             blind.simulate(&io, 0..n, 0.001, true, &mut xa, &mut pa_).unwrap();
             base.simulate(&io, 0..n, 0.001, true, &mut xb, &mut pb).unwrap();
             // (duty·U_ref/U_ref rounds differently from the duty: equal to rounding.)
-            let dev = xa.iter().zip(&xb).chain(pa_.iter().zip(&pb)).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+            let dev = xa
+                .iter()
+                .zip(&xb)
+                .chain(pa_.iter().zip(&pb))
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max);
             assert!(dev < 1e-9, "κ = 0 differs from the baseline by {dev}");
         }
         // A parameter set model-core rejects is an error naming it, not a panic.
@@ -957,7 +1142,13 @@ mod tests {
     fn coarse_rod_step_stays_far_below_sensor_noise() {
         let n = 6000;
         let (d, u, pa, pt) = inputs(n);
-        let io = Inputs { duty: &d, u_batt: &u, p_amb: pa.clone(), p_tank: pt.clone(), dt_s: 0.01 };
+        let io = Inputs {
+            duty: &d,
+            u_batt: &u,
+            p_amb: pa.clone(),
+            p_tank: pt.clone(),
+            dt_s: 0.01,
+        };
         let fam = VacuumFamily::default();
         for p in [VacuumParams::lpt(), VacuumParams::hpt(), VacuumParams::hpc()] {
             for effects in [VacuumEffects::NONE, all_effects()] {
@@ -978,7 +1169,13 @@ mod tests {
         for valve in [ValveMap::PiecewiseLinear, ValveMap::Cubic] {
             for rod in [RodMap::Linear, RodMap::Arctan] {
                 let m = VacuumModel::baseline_guess(valve, rod);
-                for e in [None, Some("supply-voltage"), Some("pressure-direction"), Some("coulomb-friction"), Some("backlash")] {
+                for e in [
+                    None,
+                    Some("supply-voltage"),
+                    Some("pressure-direction"),
+                    Some("coulomb-friction"),
+                    Some("backlash"),
+                ] {
                     let mut names = m.parameter_names(e).unwrap();
                     names.retain(|n| !n.is_empty());
                     for (i, n) in names.iter().enumerate() {
@@ -996,7 +1193,9 @@ mod tests {
     }
 
     fn m_err() -> String {
-        VacuumModel::baseline_guess(ValveMap::Cubic, RodMap::Linear).with_effect("friction").unwrap_err()
+        VacuumModel::baseline_guess(ValveMap::Cubic, RodMap::Linear)
+            .with_effect("friction")
+            .unwrap_err()
     }
 
     fn case_logs(effect: &str, seed: u64) -> (crate::generate::Case, Log, Log) {
@@ -1043,7 +1242,12 @@ mod tests {
             let (m, _, ci, _) = fam.calibrate(&est, Some(effect)).unwrap();
             let names = m.parameter_names(Some(effect)).unwrap();
             let i = names.iter().position(|n| *n == name).unwrap();
-            eprintln!("{effect} seed {seed}: {name} {:.4} ± {:?}, truth {:.4}", m.get(name), ci[i], truth(&case, name));
+            eprintln!(
+                "{effect} seed {seed}: {name} {:.4} ± {:?}, truth {:.4}",
+                m.get(name),
+                ci[i],
+                truth(&case, name)
+            );
             (m, case)
         };
         let (m, case) = got("coulomb-friction", 77_001, "fc_kPa");
@@ -1064,7 +1268,15 @@ mod tests {
         let (_, mut est, mut val) = case_logs("coulomb-friction", 77_001);
         est.columns.remove("p_act_kPa");
         val.columns.remove("p_act_kPa");
-        let d = diagnose(&VacuumFamily::default(), &est, &val, false, &Rules::default(), &mut |_| {}).unwrap();
+        let d = diagnose(
+            &VacuumFamily::default(),
+            &est,
+            &val,
+            false,
+            &Rules::default(),
+            &mut |_| {},
+        )
+        .unwrap();
         assert_eq!(d.cause, "coulomb-friction");
         assert!(d.gain_pct > 50.0, "{}", d.gain_pct);
     }
@@ -1077,10 +1289,23 @@ mod tests {
         use crate::diagnose::{diagnose, Rules};
         use crate::residuals::group_check;
         let (_, est, val) = case_logs("supply-voltage", 2024);
-        let d = diagnose(&VacuumFamily::default(), &est, &val, false, &Rules::default(), &mut |_| {}).unwrap();
+        let d = diagnose(
+            &VacuumFamily::default(),
+            &est,
+            &val,
+            false,
+            &Rules::default(),
+            &mut |_| {},
+        )
+        .unwrap();
         assert_eq!(d.cause, "supply-voltage");
         let names: Vec<&str> = d.cross.iter().map(|c| c.name.as_str()).collect();
-        for input in ["supply voltage", "duty", "tank pressure (vacuum supply)", "ambient pressure"] {
+        for input in [
+            "supply voltage",
+            "duty",
+            "tank pressure (vacuum supply)",
+            "ambient pressure",
+        ] {
             assert!(names.contains(&input), "{input} missing from {names:?}");
         }
         let by_voltage = d.grouped.iter().find(|g| g.name == "supply voltage").unwrap();
@@ -1088,10 +1313,19 @@ mod tests {
         // Eq. (1): a low voltage weakens the valve (less vacuum, x lower than the baseline says).
         let (low, high) = (&by_voltage.groups[0], &by_voltage.groups[2]);
         assert!(low.mean < high.mean, "{by_voltage:?}");
-        assert!(d.evidence.iter().any(|e| e.contains("residual mean differs by supply voltage")), "{:?}", d.evidence);
+        assert!(
+            d.evidence
+                .iter()
+                .any(|e| e.contains("residual mean differs by supply voltage")),
+            "{:?}",
+            d.evidence
+        );
         let volts = val.col("u_batt_V").unwrap();
         let after = group_check("supply voltage", &d.extended.residual(), volts);
-        assert!(after.z < by_voltage.z / 4.0, "extended {after:?} vs baseline {by_voltage:?}");
+        assert!(
+            after.z < by_voltage.z / 4.0,
+            "extended {after:?} vs baseline {by_voltage:?}"
+        );
     }
 
     #[test]

@@ -48,14 +48,27 @@ pub struct Test {
 /// Draws the plant and the truth.
 pub fn draw_params(effect: &str, rng: &mut Rng) -> Result<(EhvvaParams, Vec<(String, f64)>), String> {
     let (td0, cd0, tau0) = reference_values();
-    let x = [td0 * rng.uniform(0.85, 1.15), cd0 * rng.uniform(0.85, 1.15), tau0 * rng.uniform(0.8, 1.25), rng.uniform(0.165, 0.2)];
+    let x = [
+        td0 * rng.uniform(0.85, 1.15),
+        cd0 * rng.uniform(0.85, 1.15),
+        tau0 * rng.uniform(0.8, 1.25),
+        rng.uniform(0.165, 0.2),
+    ];
     let mut p = apply_knobs(&EhvvaParams::baseline(), &BASELINE_KNOBS, &x);
-    let mut truth: Vec<(String, f64)> = BASELINE_KNOBS.iter().zip(x).map(|(k, v)| (k.name.to_string(), v)).collect();
+    let mut truth: Vec<(String, f64)> = BASELINE_KNOBS
+        .iter()
+        .zip(x)
+        .map(|(k, v)| (k.name.to_string(), v))
+        .collect();
     if effect != "none" {
         let knob = effect_knob(effect)?;
         // The snubber shows only in the last half millimetre of each closing: drawn from the
         // paper's zone up to the model's largest (1-2), the others around the paper's 0.6-1.5.
-        let gain = if effect == "snubber" { rng.uniform(1.0, 2.0) } else { rng.uniform(0.6, 1.5) };
+        let gain = if effect == "snubber" {
+            rng.uniform(1.0, 2.0)
+        } else {
+            rng.uniform(0.6, 1.5)
+        };
         (knob.apply)(&mut p, gain);
         truth.push((knob.name.to_string(), gain));
     }
@@ -73,8 +86,14 @@ const STOP_MARGIN_N: f64 = 25.0;
 fn reaching_the_stop(mut t: Test) -> Test {
     let p = EhvvaParams::baseline();
     let margin = |t: &Test| {
-        let s = if t.inputs.lift_high { p.lift_high_mm } else { p.lift_low_mm };
-        p.area_top_mm2 * t.inputs.p_supply_mpa - p.area_bottom_mm2 * t.inputs.p_back_mpa - p.spring_n_per_mm * (p.spring_preload_mm + s)
+        let s = if t.inputs.lift_high {
+            p.lift_high_mm
+        } else {
+            p.lift_low_mm
+        };
+        p.area_top_mm2 * t.inputs.p_supply_mpa
+            - p.area_bottom_mm2 * t.inputs.p_back_mpa
+            - p.spring_n_per_mm * (p.spring_preload_mm + s)
     };
     if margin(&t) < STOP_MARGIN_N {
         t.inputs.lift_high = false;
@@ -94,9 +113,19 @@ pub fn estimation_tests(rng: &mut Rng) -> Vec<Test> {
     let mut tests = Vec::new();
     for ph in [5.0, 6.0, 7.0, 8.0] {
         for t in [-20.0, 0.0, 22.0, 60.0, 100.0] {
-            let pl = if rng.unit() < 0.25 { [2.0, 3.0, 4.0][(rng.next_u64() % 3) as usize] } else { 1.0 };
+            let pl = if rng.unit() < 0.25 {
+                [2.0, 3.0, 4.0][(rng.next_u64() % 3) as usize]
+            } else {
+                1.0
+            };
             tests.push(reaching_the_stop(Test {
-                inputs: EhvvaInputs { p_supply_mpa: ph + rng.uniform(-0.1, 0.1), p_back_mpa: pl, temp_c: t + rng.uniform(-2.0, 2.0), lift_high: rng.coin(), snubber_on: rng.coin() },
+                inputs: EhvvaInputs {
+                    p_supply_mpa: ph + rng.uniform(-0.1, 0.1),
+                    p_back_mpa: pl,
+                    temp_c: t + rng.uniform(-2.0, 2.0),
+                    lift_high: rng.coin(),
+                    snubber_on: rng.coin(),
+                },
                 dwell_ms: if rng.coin() { 8.0 } else { 20.0 },
             }));
         }
@@ -166,7 +195,13 @@ pub struct Sensors {
 
 /// Runs `tests` one after another, each on a fresh plant from `make` (at rest at its
 /// set-points), and logs them at `dt_ms` with `sensors`.
-pub fn run_bench<P: BenchPlant>(tests: &[Test], dt_ms: f64, sensors: &Sensors, rng: &mut Rng, mut make: impl FnMut(&EhvvaInputs<f64>) -> Result<P, String>) -> Result<Columns, String> {
+pub fn run_bench<P: BenchPlant>(
+    tests: &[Test],
+    dt_ms: f64,
+    sensors: &Sensors,
+    rng: &mut Rng,
+    mut make: impl FnMut(&EhvvaInputs<f64>) -> Result<P, String>,
+) -> Result<Columns, String> {
     let mut c = Columns::default();
     let noisy = |rng: &mut Rng, x: f64, sigma: f64, lsb: f64| {
         let v = x + sigma * rng.normal();
@@ -188,7 +223,8 @@ pub fn run_bench<P: BenchPlant>(tests: &[Test], dt_ms: f64, sensors: &Sensors, r
             c.u.push(if u { 1.0 } else { 0.0 });
             c.ph.push(noisy(rng, ph, sensors.p_sigma_mpa, sensors.p_lsb_mpa).max(0.0));
             c.pl.push(noisy(rng, pl, sensors.p_sigma_mpa, sensors.p_lsb_mpa).max(0.0));
-            c.temp.push(noisy(rng, t.inputs.temp_c, sensors.temp_sigma_c, sensors.temp_lsb_c));
+            c.temp
+                .push(noisy(rng, t.inputs.temp_c, sensors.temp_sigma_c, sensors.temp_lsb_c));
             c.high.push(if t.inputs.lift_high { 1.0 } else { 0.0 });
             c.snub.push(if t.inputs.snubber_on { 1.0 } else { 0.0 });
             c.lift.push(noisy(rng, y, sensors.lift_sigma_mm, sensors.lift_lsb_mm));
@@ -199,7 +235,9 @@ pub fn run_bench<P: BenchPlant>(tests: &[Test], dt_ms: f64, sensors: &Sensors, r
 
 /// The log text of a bench run.
 pub fn log_text(source: &str, dt_ms: f64, c: &Columns) -> String {
-    let t: Vec<f64> = (0..c.lift.len()).map(|k| (k as f64 * dt_ms * 1e4).round() / 1e7).collect();
+    let t: Vec<f64> = (0..c.lift.len())
+        .map(|k| (k as f64 * dt_ms * 1e4).round() / 1e7)
+        .collect();
     let meta = vec![
         ("plant".to_string(), "ehvva".to_string()),
         ("source".into(), source.to_string()),
@@ -241,8 +279,18 @@ pub fn generate(effect: &str, seed: u64) -> Result<Case, String> {
         seed,
         effect: effect.to_string(),
         truth,
-        estimation_csv: log_text(&format!("hil-host generate, estimation experiment (simulated valve bench, Table 1-like matrix, seed {seed})"), DT_MS, &est),
-        validation_csv: log_text(&format!("hil-host generate, validation experiment (simulated valve bench, seed {seed})"), DT_MS, &val),
+        estimation_csv: log_text(
+            &format!(
+                "hil-host generate, estimation experiment (simulated valve bench, Table 1-like matrix, seed {seed})"
+            ),
+            DT_MS,
+            &est,
+        ),
+        validation_csv: log_text(
+            &format!("hil-host generate, validation experiment (simulated valve bench, seed {seed})"),
+            DT_MS,
+            &val,
+        ),
     })
 }
 
@@ -261,7 +309,9 @@ mod tests {
         let ph: Vec<f64> = ev.events.iter().map(|e| e.inputs.p_supply_mpa).collect();
         let t: Vec<f64> = ev.events.iter().map(|e| e.inputs.temp_c).collect();
         // The set-points are read back from the rest samples within the sensor's noise.
-        assert!(ph.iter().all(|&p| (4.85..8.15).contains(&p)) && ph.iter().any(|&p| p < 5.2) && ph.iter().any(|&p| p > 7.8));
+        assert!(
+            ph.iter().all(|&p| (4.85..8.15).contains(&p)) && ph.iter().any(|&p| p < 5.2) && ph.iter().any(|&p| p > 7.8)
+        );
         assert!(t.iter().any(|&x| x < -15.0) && t.iter().any(|&x| x > 95.0));
         // Every event opens and seats again.
         for e in &ev.events {

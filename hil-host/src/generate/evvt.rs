@@ -29,7 +29,9 @@
 //!   The validation run starts at another crank angle: its disturbance phase differs.
 
 use model_core::control::evvt_phase::{EvvtFault, EvvtPhaseConfig, EvvtPhaseController, EvvtPhaseInputs};
-use model_core::evvt::{quantize_phase_deg, EvvtLpvTable, EvvtParams, EvvtPlant, PAPER_DESIGN_KP_RPM_PER_DEG, PHASE_RESOLUTION_DEG};
+use model_core::evvt::{
+    quantize_phase_deg, EvvtLpvTable, EvvtParams, EvvtPlant, PAPER_DESIGN_KP_RPM_PER_DEG, PHASE_RESOLUTION_DEG,
+};
 use model_core::prbs::InversePrbs;
 
 use super::{Case, Rng};
@@ -54,7 +56,12 @@ pub struct Sizes {
 impl Default for Sizes {
     /// 9 × 25 s estimation (22 500 samples), 6 × 17 s validation (10 200 samples).
     fn default() -> Self {
-        Sizes { estimation_points: 9, estimation_point_s: 25.0, validation_points: 6, validation_point_s: 17.0 }
+        Sizes {
+            estimation_points: 9,
+            estimation_point_s: 25.0,
+            validation_points: 6,
+            validation_point_s: 17.0,
+        }
     }
 }
 
@@ -87,7 +94,10 @@ fn draw_params(effect: &str, rng: &mut Rng) -> (EvvtParams, EvvtParams, Vec<(Str
         belt_vibration_amplitude_deg: 0.0,
         ..EvvtParams::default()
     };
-    let mut truth = vec![("alpha_scale_of_design".to_string(), alpha_scale), ("beta_scale_of_design".into(), beta_scale)];
+    let mut truth = vec![
+        ("alpha_scale_of_design".to_string(), alpha_scale),
+        ("beta_scale_of_design".into(), beta_scale),
+    ];
     let mut belt_phase_validation = 0.0;
     match effect {
         "supply-voltage" => {
@@ -122,17 +132,24 @@ fn draw_params(effect: &str, rng: &mut Rng) -> (EvvtParams, EvvtParams, Vec<(Str
     // the nominal point, written as a uniform table (what the baseline model assumes).
     if p.voltage_effect_scale == 0.0 && p.engine_speed_effect_scale == 0.0 {
         let plant = EvvtPlant::<f64>::new(&p).ok();
-        let (a, b) = plant.map_or((0.5, 6.0), |pl| pl.alpha_beta(p.nominal_engine_rpm, p.nominal_voltage_v));
+        let (a, b) = plant.map_or((0.5, 6.0), |pl| {
+            pl.alpha_beta(p.nominal_engine_rpm, p.nominal_voltage_v)
+        });
         p.lpv = EvvtLpvTable::uniform(a, b);
     }
-    let (a, b) = EvvtPlant::<f64>::new(&p).map_or((f64::NAN, f64::NAN), |pl| pl.alpha_beta(p.nominal_engine_rpm, p.nominal_voltage_v));
+    let (a, b) = EvvtPlant::<f64>::new(&p).map_or((f64::NAN, f64::NAN), |pl| {
+        pl.alpha_beta(p.nominal_engine_rpm, p.nominal_voltage_v)
+    });
     truth.extend([
         ("alpha_at_nominal_deg_per_s2_rpm".into(), a),
         ("beta_at_nominal_per_s".into(), b),
         ("nominal_voltage_V".into(), p.nominal_voltage_v),
         ("nominal_engine_rpm".into(), p.nominal_engine_rpm),
     ]);
-    let validation = EvvtParams { belt_vibration_phase_rad: belt_phase_validation, ..p };
+    let validation = EvvtParams {
+        belt_vibration_phase_rad: belt_phase_validation,
+        ..p
+    };
     (p, validation, truth)
 }
 
@@ -146,7 +163,10 @@ fn estimation_points(rng: &mut Rng, count: usize) -> Vec<Point> {
         let mut grid: Vec<Point> = speeds
             .iter()
             .flat_map(|s| volts.iter().map(move |v| (*s, *v)))
-            .map(|((s0, s1), (v0, v1))| Point { engine_rpm: rng.uniform(s0, s1), u_batt_v: rng.uniform(v0, v1) })
+            .map(|((s0, s1), (v0, v1))| Point {
+                engine_rpm: rng.uniform(s0, s1),
+                u_batt_v: rng.uniform(v0, v1),
+            })
             .collect();
         for i in (1..grid.len()).rev() {
             let j = (rng.next_u64() % (i as u64 + 1)) as usize;
@@ -170,8 +190,16 @@ fn validation_points(rng: &mut Rng, count: usize) -> Vec<Point> {
             let v_high = (i + a) % 2 == 0;
             let n_high = (i / 2 + i + b) % 2 == 0;
             Point {
-                engine_rpm: if n_high { rng.uniform(1250.0, 1400.0) } else { rng.uniform(800.0, 950.0) },
-                u_batt_v: if v_high { rng.uniform(12.8, 14.0) } else { rng.uniform(9.5, 10.8) },
+                engine_rpm: if n_high {
+                    rng.uniform(1250.0, 1400.0)
+                } else {
+                    rng.uniform(800.0, 950.0)
+                },
+                u_batt_v: if v_high {
+                    rng.uniform(12.8, 14.0)
+                } else {
+                    rng.uniform(9.5, 10.8)
+                },
             }
         })
         .collect();
@@ -234,15 +262,42 @@ struct Run {
 /// motor; the plant moves for one period with that command.
 fn run_loop(p: &EvvtParams, points: &[Point], point_samples: usize, reference: &[f64]) -> Result<Run, String> {
     let n = reference.len();
-    let initial = reference.first().copied().unwrap_or(PRBS_CENTRE_DEG).round().clamp(p.phase_min_deg, p.phase_max_deg);
-    let mut plant = EvvtPlant::<f64>::new(&EvvtParams { initial_phase_deg: initial, ..*p }).map_err(|e| format!("{e:?}"))?;
-    let mut ctrl = EvvtPhaseController::<f64>::new(&EvvtPhaseConfig::paper_fixed_p(PAPER_DESIGN_KP_RPM_PER_DEG)).map_err(|e| format!("{e:?}"))?;
-    let mut run = Run { cmd: Vec::with_capacity(n), rpm: Vec::with_capacity(n), volt: Vec::with_capacity(n), reference: reference.to_vec(), phase: Vec::with_capacity(n) };
+    let initial = reference
+        .first()
+        .copied()
+        .unwrap_or(PRBS_CENTRE_DEG)
+        .round()
+        .clamp(p.phase_min_deg, p.phase_max_deg);
+    let mut plant = EvvtPlant::<f64>::new(&EvvtParams {
+        initial_phase_deg: initial,
+        ..*p
+    })
+    .map_err(|e| format!("{e:?}"))?;
+    let mut ctrl = EvvtPhaseController::<f64>::new(&EvvtPhaseConfig::paper_fixed_p(PAPER_DESIGN_KP_RPM_PER_DEG))
+        .map_err(|e| format!("{e:?}"))?;
+    let mut run = Run {
+        cmd: Vec::with_capacity(n),
+        rpm: Vec::with_capacity(n),
+        volt: Vec::with_capacity(n),
+        reference: reference.to_vec(),
+        phase: Vec::with_capacity(n),
+    };
     for (k, &r) in reference.iter().enumerate() {
-        let pt = points.get(k / point_samples.max(1)).or(points.last()).copied().ok_or("no operating points")?;
+        let pt = points
+            .get(k / point_samples.max(1))
+            .or(points.last())
+            .copied()
+            .ok_or("no operating points")?;
         let measured = plant.measured_phase_deg();
         let out = ctrl.update(
-            &EvvtPhaseInputs { setpoint_deg: r, measured_phase_deg: measured, engine_rpm: pt.engine_rpm, u_batt_v: pt.u_batt_v, cranking: false, fault: EvvtFault::None },
+            &EvvtPhaseInputs {
+                setpoint_deg: r,
+                measured_phase_deg: measured,
+                engine_rpm: pt.engine_rpm,
+                u_batt_v: pt.u_batt_v,
+                cranking: false,
+                fault: EvvtFault::None,
+            },
             DT_S,
         );
         run.cmd.push(out.motor_cmd_rpm);
@@ -256,7 +311,9 @@ fn run_loop(p: &EvvtParams, points: &[Point], point_samples: usize, reference: &
 
 fn log_text(kind: &str, seed: u64, run: &Run) -> String {
     let c = EvvtPhaseConfig::paper_fixed_p(PAPER_DESIGN_KP_RPM_PER_DEG);
-    let t: Vec<f64> = (0..run.phase.len()).map(|k| (k as f64 * DT_S * 1e6).round() / 1e6).collect();
+    let t: Vec<f64> = (0..run.phase.len())
+        .map(|k| (k as f64 * DT_S * 1e6).round() / 1e6)
+        .collect();
     let meta = vec![
         ("plant".to_string(), "evvt".to_string()),
         ("source".into(), format!("hil-host generate, {kind} experiment (simulated bench, seed {seed})")),
@@ -268,7 +325,14 @@ fn log_text(kind: &str, seed: u64, run: &Run) -> String {
     ];
     format_log(
         &meta,
-        &[("t_s", &t), ("motor_cmd_rpm", &run.cmd), ("engine_rpm", &run.rpm), ("u_batt_V", &run.volt), ("phase_ref_deg", &run.reference), ("phase_deg", &run.phase)],
+        &[
+            ("t_s", &t),
+            ("motor_cmd_rpm", &run.cmd),
+            ("engine_rpm", &run.rpm),
+            ("u_batt_V", &run.volt),
+            ("phase_ref_deg", &run.reference),
+            ("phase_deg", &run.phase),
+        ],
     )
 }
 
@@ -379,22 +443,42 @@ pub fn identification_log(x: &IdentificationExperiment) -> Result<String, String
             Some(120.0 / (x.engine_rpm * events_per_cycle as f64))
         }
     };
-    let mut plant = EvvtPlant::<f64>::new(&EvvtParams { initial_phase_deg: PRBS_CENTRE_DEG, ..x.params }).map_err(|e| format!("{e:?}"))?;
-    let mut ctrl = EvvtPhaseController::<f64>::new(&EvvtPhaseConfig::paper_fixed_p(x.kp_rpm_per_deg)).map_err(|e| format!("{e:?}"))?;
+    let mut plant = EvvtPlant::<f64>::new(&EvvtParams {
+        initial_phase_deg: PRBS_CENTRE_DEG,
+        ..x.params
+    })
+    .map_err(|e| format!("{e:?}"))?;
+    let mut ctrl = EvvtPhaseController::<f64>::new(&EvvtPhaseConfig::paper_fixed_p(x.kp_rpm_per_deg))
+        .map_err(|e| format!("{e:?}"))?;
     let noise_sd = x.phase_noise_deg.max(0.0);
-    let measure = |phase: f64, rng: &mut Rng| quantize_phase_deg(phase + noise_sd * rng.normal(), PHASE_RESOLUTION_DEG).clamp(-30.0, 90.0);
+    let measure = |phase: f64, rng: &mut Rng| {
+        quantize_phase_deg(phase + noise_sd * rng.normal(), PHASE_RESOLUTION_DEG).clamp(-30.0, 90.0)
+    };
     let mut held = measure(plant.phase_deg(), &mut rng);
     // First cam event at a random crank angle.
     let mut next_event_s = cam_period_s.map_or(f64::INFINITY, |tc| rng.uniform(0.0, tc));
     let n = reference.len();
-    let mut run = Run { cmd: Vec::with_capacity(n), rpm: Vec::with_capacity(n), volt: Vec::with_capacity(n), reference, phase: Vec::with_capacity(n) };
+    let mut run = Run {
+        cmd: Vec::with_capacity(n),
+        rpm: Vec::with_capacity(n),
+        volt: Vec::with_capacity(n),
+        reference,
+        phase: Vec::with_capacity(n),
+    };
     for k in 0..n {
         let t = k as f64 * dt;
         if cam_period_s.is_none() {
             held = measure(plant.phase_deg(), &mut rng);
         }
         let out = ctrl.update(
-            &EvvtPhaseInputs { setpoint_deg: run.reference[k], measured_phase_deg: held, engine_rpm: x.engine_rpm, u_batt_v: x.u_batt_v, cranking: false, fault: EvvtFault::None },
+            &EvvtPhaseInputs {
+                setpoint_deg: run.reference[k],
+                measured_phase_deg: held,
+                engine_rpm: x.engine_rpm,
+                u_batt_v: x.u_batt_v,
+                cranking: false,
+                fault: EvvtFault::None,
+            },
             dt,
         );
         run.cmd.push(out.motor_cmd_rpm);
@@ -428,7 +512,14 @@ pub fn identification_log(x: &IdentificationExperiment) -> Result<String, String
     }
     Ok(format_log(
         &meta,
-        &[("t_s", &t), ("motor_cmd_rpm", &run.cmd), ("engine_rpm", &run.rpm), ("u_batt_V", &run.volt), ("phase_ref_deg", &run.reference), ("phase_deg", &run.phase)],
+        &[
+            ("t_s", &t),
+            ("motor_cmd_rpm", &run.cmd),
+            ("engine_rpm", &run.rpm),
+            ("u_batt_V", &run.volt),
+            ("phase_ref_deg", &run.reference),
+            ("phase_deg", &run.phase),
+        ],
     ))
 }
 
@@ -439,7 +530,12 @@ pub fn identification_grid(seed: u64) -> Result<Vec<(String, String)>, String> {
     let mut logs = Vec::with_capacity(9);
     for (i, &n) in design.engine_speed_rpm.iter().enumerate() {
         for (j, &v) in design.battery_voltage_v.iter().enumerate() {
-            let x = IdentificationExperiment { engine_rpm: n, u_batt_v: v, seed: seed.wrapping_add(3 * i as u64 + j as u64), ..Default::default() };
+            let x = IdentificationExperiment {
+                engine_rpm: n,
+                u_batt_v: v,
+                seed: seed.wrapping_add(3 * i as u64 + j as u64),
+                ..Default::default()
+            };
             logs.push((format!("prbs-{n}rpm-{v}V.csv"), identification_log(&x)?));
         }
     }
@@ -459,7 +555,11 @@ mod tests {
         assert!((est.dt_s - DT_S).abs() < 1e-12);
         // The log obeys the controller law it states, from the quantized phase.
         let kp = est.meta_f64("kp").unwrap().unwrap();
-        let (c, r, y) = (est.col("motor_cmd_rpm").unwrap(), est.col("phase_ref_deg").unwrap(), est.col("phase_deg").unwrap());
+        let (c, r, y) = (
+            est.col("motor_cmd_rpm").unwrap(),
+            est.col("phase_ref_deg").unwrap(),
+            est.col("phase_deg").unwrap(),
+        );
         for k in 0..est.len() {
             assert_eq!(c[k], (kp * (r[k] - y[k])).clamp(-1000.0, 1000.0));
             assert_eq!(y[k], y[k].round(), "phase quantized to 1 deg");
@@ -476,7 +576,11 @@ mod tests {
         let corr = crate::residuals::cross_correlation(n, v, 0)[0];
         assert!(corr.abs() < 0.3, "speed-voltage correlation {corr}");
         // Validation is a different excitation: not the two PRBS levels.
-        assert!(val.col("phase_ref_deg").unwrap().iter().any(|&x| x != 17.5 && x != 32.5 && x != 20.0));
+        assert!(val
+            .col("phase_ref_deg")
+            .unwrap()
+            .iter()
+            .any(|&x| x != 17.5 && x != 32.5 && x != 20.0));
     }
 
     #[test]

@@ -79,7 +79,13 @@ pub fn effects(plant: Plant) -> &'static [&'static str] {
     match plant {
         Plant::Evvt => &["none", "supply-voltage", "engine-speed", "direction", "belt-vibration"],
         Plant::Positioner => &["none", "coulomb-friction", "asymmetric-friction"],
-        Plant::Vacuum => &["none", "supply-voltage", "pressure-direction", "coulomb-friction", "backlash"],
+        Plant::Vacuum => &[
+            "none",
+            "supply-voltage",
+            "pressure-direction",
+            "coulomb-friction",
+            "backlash",
+        ],
         Plant::Ehvva => &["none", "viscosity", "pressure-delay", "direction-delay", "snubber"],
     }
 }

@@ -22,11 +22,18 @@ fn draw_params(effect: &str, rng: &mut Rng) -> (PositionerParams, Vec<(String, f
     p.fv_n_s_per_m = rng.uniform(120.0, 300.0);
     p.offset_n = rng.uniform(-5.0, 5.0);
     p.fc_n = 0.0;
-    let mut truth = vec![("M_kg".to_string(), p.mass_kg), ("Fv_Ns_per_m".into(), p.fv_n_s_per_m), ("offset_N".into(), p.offset_n)];
+    let mut truth = vec![
+        ("M_kg".to_string(), p.mass_kg),
+        ("Fv_Ns_per_m".into(), p.fv_n_s_per_m),
+        ("offset_N".into(), p.offset_n),
+    ];
     match effect {
         "coulomb-friction" => {
             p.fc_n = rng.uniform(8.0, 35.0);
-            p.effects = PositionerEffects { coulomb_friction: true, asymmetric_friction: false };
+            p.effects = PositionerEffects {
+                coulomb_friction: true,
+                asymmetric_friction: false,
+            };
             truth.push(("Fc_N".into(), p.fc_n));
         }
         "asymmetric-friction" => {
@@ -41,7 +48,10 @@ fn draw_params(effect: &str, rng: &mut Rng) -> (PositionerParams, Vec<(String, f
             p.fv_neg_n_s_per_m = fv_neg;
             p.fc_pos_n = rng.uniform(4.0, 20.0);
             p.fc_neg_n = rng.uniform(4.0, 20.0);
-            p.effects = PositionerEffects { coulomb_friction: true, asymmetric_friction: true };
+            p.effects = PositionerEffects {
+                coulomb_friction: true,
+                asymmetric_friction: true,
+            };
             truth.extend([
                 ("Fv_pos_Ns_per_m".into(), fv_pos),
                 ("Fv_neg_Ns_per_m".into(), fv_neg),
@@ -69,7 +79,11 @@ fn estimation_reference(rng: &mut Rng, duration_s: f64) -> Vec<f64> {
         // Triangular profile when the move is too short to reach v_max.
         let v_peak = v_max.min((d * a_max).sqrt());
         let t_acc = v_peak / a_max;
-        let t_cruise = if v_peak > 0.0 { (d - v_peak * t_acc) / v_peak } else { 0.0 };
+        let t_cruise = if v_peak > 0.0 {
+            (d - v_peak * t_acc) / v_peak
+        } else {
+            0.0
+        };
         let t_move = 2.0 * t_acc + t_cruise.max(0.0);
         let steps = (t_move / DT_S).ceil() as usize;
         for k in 1..=steps {
@@ -114,7 +128,12 @@ fn validation_reference(rng: &mut Rng, duration_s: f64) -> Vec<f64> {
 }
 
 /// Runs the closed loop; returns (force logged, position logged).
-fn run_loop(p: &PositionerParams, reference: &[f64], pulses: &[f64], rng: &mut Rng) -> Result<(Vec<f64>, Vec<f64>), String> {
+fn run_loop(
+    p: &PositionerParams,
+    reference: &[f64],
+    pulses: &[f64],
+    rng: &mut Rng,
+) -> Result<(Vec<f64>, Vec<f64>), String> {
     let ctrl_p = EmpsControllerParams::emps();
     let mut plant = Positioner::<f64>::new(p).map_err(|e| format!("{e:?}"))?;
     let pos0 = reference.first().copied().unwrap_or(0.0);
@@ -124,7 +143,8 @@ fn run_loop(p: &PositionerParams, reference: &[f64], pulses: &[f64], rng: &mut R
     let mut pos_log = Vec::with_capacity(reference.len());
     for (k, &r) in reference.iter().enumerate() {
         let pos_meas = quantize(plant.pos_m(), POS_LSB_M);
-        let force = (ctrl.update(r, pos_meas) + pulses.get(k).copied().unwrap_or(0.0)).clamp(-ctrl_p.force_max_n, ctrl_p.force_max_n);
+        let force = (ctrl.update(r, pos_meas) + pulses.get(k).copied().unwrap_or(0.0))
+            .clamp(-ctrl_p.force_max_n, ctrl_p.force_max_n);
         force_log.push(force + FORCE_NOISE_N * rng.normal());
         pos_log.push(pos_meas);
         for _ in 0..SUBSTEPS {
@@ -136,19 +156,30 @@ fn run_loop(p: &PositionerParams, reference: &[f64], pulses: &[f64], rng: &mut R
 
 fn log_text(kind: &str, seed: u64, reference: &[f64], force: &[f64], pos: &[f64]) -> String {
     let c = EmpsControllerParams::emps();
-    let t: Vec<f64> = (0..reference.len()).map(|k| (k as f64 * DT_S * 1e6).round() / 1e6).collect();
+    let t: Vec<f64> = (0..reference.len())
+        .map(|k| (k as f64 * DT_S * 1e6).round() / 1e6)
+        .collect();
     let meta = vec![
         ("plant".to_string(), "positioner".to_string()),
-        ("source".into(), format!("hil-host generate, {kind} experiment (simulated bench, seed {seed})")),
+        (
+            "source".into(),
+            format!("hil-host generate, {kind} experiment (simulated bench, seed {seed})"),
+        ),
         ("sample_rate_hz".into(), format!("{}", 1.0 / DT_S)),
         ("gtau".into(), format!("{}", c.gtau_n_per_v)),
         ("kp".into(), format!("{}", c.kp_per_s)),
         ("kv".into(), format!("{}", c.kv_v_s_per_m)),
         ("control_period_s".into(), format!("{}", c.control_period_s)),
         ("force_max_N".into(), format!("{}", c.force_max_n)),
-        ("controller".into(), "EMPS PD: force = gtau (kp kv (ref - pos) - kv v), v from the 2-tap FIR position".into()),
+        (
+            "controller".into(),
+            "EMPS PD: force = gtau (kp kv (ref - pos) - kv v), v from the 2-tap FIR position".into(),
+        ),
     ];
-    format_log(&meta, &[("t_s", &t), ("force_N", force), ("ref_m", reference), ("pos_m", pos)])
+    format_log(
+        &meta,
+        &[("t_s", &t), ("force_N", force), ("ref_m", reference), ("pos_m", pos)],
+    )
 }
 
 pub fn generate(effect: &str, seed: u64) -> Result<Case, String> {

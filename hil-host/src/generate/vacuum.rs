@@ -21,8 +21,8 @@
 //! 1.5, HPT 4) with Dahl presliding 0.2..0.6 %; `backlash` 3..8 % (HPC: "sticks at 10 %").
 
 use model_core::vacuum::{
-    PositionMap, StaticPressureMap, VacuumEffects, VacuumInputs, VacuumParams, VacuumStaticModel, VacuumTank, VacuumTankParams,
-    VacuumValveActuator,
+    PositionMap, StaticPressureMap, VacuumEffects, VacuumInputs, VacuumParams, VacuumStaticModel, VacuumTank,
+    VacuumTankParams, VacuumValveActuator,
 };
 
 use super::{quantize, Case, Rng};
@@ -41,17 +41,31 @@ const DUTY_LSB_PCT: f64 = 0.1;
 /// The actuator: preset by the seed, parameters drawn around it, the hidden effect on top.
 fn draw_params(effect: &str, rng: &mut Rng) -> (VacuumParams, &'static str, VacuumParams) {
     let pick = ((rng.unit() * 3.0) as usize).min(2);
-    let (preset, name) = [(VacuumParams::lpt(), "LPT"), (VacuumParams::hpt(), "HPT"), (VacuumParams::hpc(), "HPC")][pick];
+    let (preset, name) = [
+        (VacuumParams::lpt(), "LPT"),
+        (VacuumParams::hpt(), "HPT"),
+        (VacuumParams::hpc(), "HPC"),
+    ][pick];
     let mut p = preset.baseline();
     let scale = |rng: &mut Rng, lo: f64, hi: f64| rng.uniform(lo, hi);
     p.static_map = match p.static_map {
-        StaticPressureMap::PiecewiseLinear { k1_kpa_per_pct, p01_kpa, k2_kpa_per_pct, p02_kpa } => StaticPressureMap::PiecewiseLinear {
+        StaticPressureMap::PiecewiseLinear {
+            k1_kpa_per_pct,
+            p01_kpa,
+            k2_kpa_per_pct,
+            p02_kpa,
+        } => StaticPressureMap::PiecewiseLinear {
             k1_kpa_per_pct: k1_kpa_per_pct * scale(rng, 0.85, 1.15),
             p01_kpa: p01_kpa + rng.uniform(-3.0, 3.0),
             k2_kpa_per_pct: k2_kpa_per_pct * scale(rng, 0.85, 1.15),
             p02_kpa: p02_kpa + rng.uniform(-3.0, 3.0),
         },
-        StaticPressureMap::Cubic { k1_kpa_per_pct, p01_kpa, k2_kpa_per_pct3, u0_pct } => StaticPressureMap::Cubic {
+        StaticPressureMap::Cubic {
+            k1_kpa_per_pct,
+            p01_kpa,
+            k2_kpa_per_pct3,
+            u0_pct,
+        } => StaticPressureMap::Cubic {
             k1_kpa_per_pct: k1_kpa_per_pct * scale(rng, 0.9, 1.1),
             p01_kpa: p01_kpa + rng.uniform(-10.0, 10.0),
             k2_kpa_per_pct3: k2_kpa_per_pct3 * scale(rng, 0.8, 1.2),
@@ -63,9 +77,17 @@ fn draw_params(effect: &str, rng: &mut Rng) -> (VacuumParams, &'static str, Vacu
             let k = k_pct_per_kpa * scale(rng, 0.85, 1.15);
             // Same map shifted by up to ±4 kPa: x0 moves with the new slope.
             let p_mid = (50.0 - x0_pct) / k_pct_per_kpa + rng.uniform(-4.0, 4.0);
-            PositionMap::Linear { k_pct_per_kpa: k, x0_pct: 50.0 - k * p_mid }
+            PositionMap::Linear {
+                k_pct_per_kpa: k,
+                x0_pct: 50.0 - k * p_mid,
+            }
         }
-        PositionMap::Arctan { a1_pct, a2_pct_per_rad, a3_kpa, a4_kpa } => PositionMap::Arctan {
+        PositionMap::Arctan {
+            a1_pct,
+            a2_pct_per_rad,
+            a3_kpa,
+            a4_kpa,
+        } => PositionMap::Arctan {
             a1_pct: a1_pct + rng.uniform(-4.0, 4.0),
             a2_pct_per_rad: a2_pct_per_rad * scale(rng, 0.97, 1.1),
             a3_kpa: a3_kpa + rng.uniform(-4.0, 4.0),
@@ -84,7 +106,11 @@ fn draw_params(effect: &str, rng: &mut Rng) -> (VacuumParams, &'static str, Vacu
         "pressure-direction" => {
             effects.pressure_direction = true;
             let ratio = rng.uniform(2.2, 3.5);
-            p.tau_fall_s = if rng.coin() { p.tau_rise_s * ratio } else { p.tau_rise_s / ratio };
+            p.tau_fall_s = if rng.coin() {
+                p.tau_rise_s * ratio
+            } else {
+                p.tau_rise_s / ratio
+            };
         }
         "coulomb-friction" => {
             effects.coulomb_friction = true;
@@ -104,7 +130,9 @@ fn draw_params(effect: &str, rng: &mut Rng) -> (VacuumParams, &'static str, Vacu
 /// nominal preset (not the drawn actuator), as the paper's feedforward does (Sec. 5.4), so that
 /// steps cover the stroke evenly even where the valve map is steep (HPC above 90 %).
 fn duty_for_position(nominal: &VacuumStaticModel<f64>, x_pct: f64, p_amb_kpa: f64) -> f64 {
-    nominal.duty_for_pressure_pct(nominal.pressure_for_position_kpa(x_pct, p_amb_kpa), p_amb_kpa).clamp(0.0, 100.0)
+    nominal
+        .duty_for_pressure_pct(nominal.pressure_for_position_kpa(x_pct, p_amb_kpa), p_amb_kpa)
+        .clamp(0.0, 100.0)
 }
 
 /// Inputs as applied to the plant (true values), one per sample.
@@ -213,7 +241,9 @@ fn validation_profile(rng: &mut Rng, dt: f64, p_amb0: f64, seconds: f64, nominal
                         // About a level, ± a duty giving 5..15 % of stroke.
                         let x = rng.uniform(20.0, 80.0);
                         let centre = duty_for_position(nominal, x, p_amb);
-                        let amp = (duty_for_position(nominal, x + rng.uniform(5.0, 15.0), p_amb) - centre).abs().max(1.0);
+                        let amp = (duty_for_position(nominal, x + rng.uniform(5.0, 15.0), p_amb) - centre)
+                            .abs()
+                            .max(1.0);
                         binary = Some((centre, amp, (rng.uniform(3.0, 6.0) / dt) as usize));
                         duty_left = 1;
                         continue;
@@ -234,11 +264,17 @@ fn run_bench(p: &VacuumParams, pr: &Profile, dt: f64, rng: &mut Rng, kind: &str,
     let mut act = VacuumValveActuator::<f64>::new(p).map_err(|e| format!("{e:?}"))?;
     let tank_hi = rng.uniform(30.0, 38.0);
     let tank_lo = tank_hi - rng.uniform(8.0, 12.0);
-    let mut tank = VacuumTank::<f64>::new(&VacuumTankParams::paper(), rng.uniform(tank_lo, tank_hi)).map_err(|e| format!("{e:?}"))?;
+    let mut tank = VacuumTank::<f64>::new(&VacuumTankParams::paper(), rng.uniform(tank_lo, tank_hi))
+        .map_err(|e| format!("{e:?}"))?;
     let mut pump_on = false;
     let n = pr.duty.len();
     let mut cols: [Vec<f64>; 7] = Default::default();
-    let input = |k: usize, p_tank: f64| VacuumInputs { duty_pct: pr.duty[k], u_batt_v: pr.u_batt[k], p_amb_kpa: pr.p_amb[k], p_tank_kpa: p_tank };
+    let input = |k: usize, p_tank: f64| VacuumInputs {
+        duty_pct: pr.duty[k],
+        u_batt_v: pr.u_batt[k],
+        p_amb_kpa: pr.p_amb[k],
+        p_tank_kpa: p_tank,
+    };
     act.settle(&input(0, tank.p_tank_kpa()));
     for k in 0..n {
         let p_tank = tank.p_tank_kpa();
@@ -255,10 +291,21 @@ fn run_bench(p: &VacuumParams, pr: &Profile, dt: f64, rng: &mut Rng, kind: &str,
     }
     let meta = vec![
         ("plant".to_string(), "vacuum".to_string()),
-        ("source".into(), format!("hil-host generate, {kind} experiment (simulated bench, seed {seed})")),
+        (
+            "source".into(),
+            format!("hil-host generate, {kind} experiment (simulated bench, seed {seed})"),
+        ),
         ("sample_rate_hz".into(), format!("{}", 1.0 / dt)),
     ];
-    let names = ["t_s", "duty_pct", "u_batt_V", "p_amb_kPa", "p_tank_kPa", "x_pct", "p_act_kPa"];
+    let names = [
+        "t_s",
+        "duty_pct",
+        "u_batt_V",
+        "p_amb_kPa",
+        "p_tank_kPa",
+        "x_pct",
+        "p_act_kPa",
+    ];
     let columns: Vec<(&str, &[f64])> = names.iter().zip(cols.iter()).map(|(n, c)| (*n, c.as_slice())).collect();
     Ok(format_log(&meta, &columns))
 }
@@ -291,7 +338,14 @@ pub fn generate_sized(effect: &str, seed: u64, estimation_repeats: usize, valida
     let val = validation_profile(&mut rng, dt, p_amb0, validation_s, &nominal);
     let estimation_csv = run_bench(&params, &est, dt, &mut rng, "estimation", seed)?;
     let validation_csv = run_bench(&params, &val, dt, &mut rng, "validation", seed)?;
-    Ok(Case { plant: Plant::Vacuum, seed, effect: effect.to_string(), truth: truth(&params, effect, preset), estimation_csv, validation_csv })
+    Ok(Case {
+        plant: Plant::Vacuum,
+        seed,
+        effect: effect.to_string(),
+        truth: truth(&params, effect, preset),
+        estimation_csv,
+        validation_csv,
+    })
 }
 
 pub fn generate(effect: &str, seed: u64) -> Result<Case, String> {
@@ -304,7 +358,16 @@ mod tests {
 
     #[test]
     fn logs_read_back_and_hide_the_truth() {
-        for (i, effect) in ["none", "supply-voltage", "pressure-direction", "coulomb-friction", "backlash"].iter().enumerate() {
+        for (i, effect) in [
+            "none",
+            "supply-voltage",
+            "pressure-direction",
+            "coulomb-friction",
+            "backlash",
+        ]
+        .iter()
+        .enumerate()
+        {
             let c = generate(effect, 100 + i as u64).unwrap();
             let (est, val) = c.logs().expect("generated logs read back");
             assert_eq!(est.plant, Plant::Vacuum);
@@ -315,7 +378,12 @@ mod tests {
                 let span = x.iter().cloned().fold(f64::MIN, f64::max) - x.iter().cloned().fold(f64::MAX, f64::min);
                 let pa = l.col("p_act_kPa").unwrap();
                 let pmin = pa.iter().cloned().fold(f64::MAX, f64::min);
-                assert!(span > 40.0, "{effect}: position span {span} {:?} pmin {pmin} {}", c.truth, l.file);
+                assert!(
+                    span > 40.0,
+                    "{effect}: position span {span} {:?} pmin {pmin} {}",
+                    c.truth,
+                    l.file
+                );
                 let u = l.col("u_batt_V").unwrap();
                 let u_span = u.iter().cloned().fold(f64::MIN, f64::max) - u.iter().cloned().fold(f64::MAX, f64::min);
                 assert!(u_span > 2.0, "{effect}: voltage span {u_span}");
@@ -333,7 +401,12 @@ mod tests {
             let (p, _, _) = draw_params(effect, &mut Rng::new(5));
             assert_eq!(p.static_map, none.static_map);
             assert_eq!(p.tau_rise_s, none.tau_rise_s);
-            let on = [p.effects.supply_voltage, p.effects.pressure_direction, p.effects.coulomb_friction, p.effects.backlash];
+            let on = [
+                p.effects.supply_voltage,
+                p.effects.pressure_direction,
+                p.effects.coulomb_friction,
+                p.effects.backlash,
+            ];
             assert_eq!(on.iter().filter(|&&b| b).count(), 1, "{effect}");
         }
         assert_eq!(none.effects, VacuumEffects::NONE);

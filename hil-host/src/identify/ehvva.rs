@@ -46,7 +46,12 @@ pub const CONDITION_KNOBS: [Knob; 2] = [
         hi: 1.0,
         apply: |p, v| p.tables.tau_ms = [[v; 3]; 2],
     },
-    Knob { name: "cd", lo: 0.05, hi: 0.95, apply: |p, v| p.tables.cd = [v; 4] },
+    Knob {
+        name: "cd",
+        lo: 0.05,
+        hi: 0.95,
+        apply: |p, v| p.tables.cd = [v; 4],
+    },
 ];
 
 /// Sets uniform td tables (VO and VC).
@@ -110,7 +115,13 @@ pub fn td_from_onset(p: &EhvvaParams, set: &Events) -> Result<(Option<f64>, Opti
     for ev in &set.events {
         let stroke = ev.stroke_mm(&p0);
         let (m_on, m_off) = edge_delays_ms(&ev.lift_mm, ev.on_index, ev.off_index, stroke, set.dt_ms);
-        let (s_on, s_off) = edge_delays_ms(&sim[ev.start..ev.start + ev.lift_mm.len()], ev.on_index, ev.off_index, stroke, set.dt_ms);
+        let (s_on, s_off) = edge_delays_ms(
+            &sim[ev.start..ev.start + ev.lift_mm.len()],
+            ev.on_index,
+            ev.off_index,
+            stroke,
+            set.dt_ms,
+        );
         if let (Some(m), Some(s)) = (m_on, s_on) {
             on.push(m - s + REFERENCE_TD_MS);
         }
@@ -125,7 +136,12 @@ pub fn td_from_onset(p: &EhvvaParams, set: &Events) -> Result<(Option<f64>, Opti
 /// Sets `p`'s td tables from the lift onset (VC = VO where no closing edge was logged).
 fn derive_td(p: &mut EhvvaParams, set: &Events) -> Result<(f64, f64), String> {
     let (on, off) = td_from_onset(p, set)?;
-    let on = on.ok_or_else(|| format!("{}: the valve never opens to 1 % of its stroke after a command at this condition", set.file))?;
+    let on = on.ok_or_else(|| {
+        format!(
+            "{}: the valve never opens to 1 % of its stroke after a command at this condition",
+            set.file
+        )
+    })?;
     let off = off.unwrap_or(on);
     set_td(p, on, off);
     Ok((on, off))
@@ -133,14 +149,29 @@ fn derive_td(p: &mut EhvvaParams, set: &Events) -> Result<(f64, f64), String> {
 
 /// The joint knobs of one condition: td VO, td VC, τp, Cd (uniform tables).
 pub const JOINT_KNOBS: [Knob; 4] = [
-    Knob { name: "td_open_ms", lo: 0.1, hi: 9.0, apply: |p, v| p.tables.td_open_ms = [[v; 5]; 4] },
-    Knob { name: "td_close_ms", lo: 0.1, hi: 9.0, apply: |p, v| p.tables.td_close_ms = [[v; 5]; 4] },
+    Knob {
+        name: "td_open_ms",
+        lo: 0.1,
+        hi: 9.0,
+        apply: |p, v| p.tables.td_open_ms = [[v; 5]; 4],
+    },
+    Knob {
+        name: "td_close_ms",
+        lo: 0.1,
+        hi: 9.0,
+        apply: |p, v| p.tables.td_close_ms = [[v; 5]; 4],
+    },
     CONDITION_KNOBS[0],
     CONDITION_KNOBS[1],
 ];
 /// As [`JOINT_KNOBS`] when no event shows a closing edge: one td for both edges.
 const JOINT_KNOBS_ONE_TD: [Knob; 3] = [
-    Knob { name: "td_ms", lo: 0.1, hi: 9.0, apply: |p, v| set_td(p, v, v) },
+    Knob {
+        name: "td_ms",
+        lo: 0.1,
+        hi: 9.0,
+        apply: |p, v| set_td(p, v, v),
+    },
     CONDITION_KNOBS[0],
     CONDITION_KNOBS[1],
 ];
@@ -149,7 +180,11 @@ const JOINT_KNOBS_ONE_TD: [Knob; 3] = [
 /// it takes those values at the condition (p_c, t_c): inside an event the supply pressure dips
 /// as the accumulator feeds the piston, and the plant reads td(Ph) and τp(Ph) at that pressure.
 pub fn shape_about(p: &mut EhvvaParams, shape: &EhvvaTableData, p_c: f64, t_c: f64) {
-    let (vo, vc, tau) = (p.tables.td_open_ms[0][0], p.tables.td_close_ms[0][0], p.tables.tau_ms[0][0]);
+    let (vo, vc, tau) = (
+        p.tables.td_open_ms[0][0],
+        p.tables.td_close_ms[0][0],
+        p.tables.tau_ms[0][0],
+    );
     let mut q = EhvvaParams::paper_default();
     q.tables = *shape;
     let Ok(t) = EhvvaTables::<f64>::new(&q) else { return };
@@ -172,7 +207,13 @@ pub fn shape_about(p: &mut EhvvaParams, shape: &EhvvaTableData, p_c: f64, t_c: f
 /// covariance (JᵀJ)⁻¹ of the lift residual, J by central differences (relative step 1e-4);
 /// `None` when JᵀJ is singular. The solver's CIs come from the same matrix; the correlation
 /// says which parameters trade off against each other.
-pub fn correlation(base: &EhvvaParams, knobs: &[Knob], x: &[f64], set: &Events, derive: &dyn Fn(&mut EhvvaParams) -> Result<(), String>) -> Result<Option<Vec<f64>>, String> {
+pub fn correlation(
+    base: &EhvvaParams,
+    knobs: &[Knob],
+    x: &[f64],
+    set: &Events,
+    derive: &dyn Fn(&mut EhvvaParams) -> Result<(), String>,
+) -> Result<Option<Vec<f64>>, String> {
     let params = |x: &[f64]| -> Result<EhvvaParams, String> {
         let mut p = apply_knobs(base, knobs, x);
         derive(&mut p)?;
@@ -213,7 +254,10 @@ pub fn correlation(base: &EhvvaParams, knobs: &[Knob], x: &[f64], set: &Events, 
 /// The condition's mean supply pressure and temperature.
 fn condition_point(set: &Events) -> (f64, f64) {
     let n = set.events.len() as f64;
-    (set.events.iter().map(|e| e.inputs.p_supply_mpa).sum::<f64>() / n, set.events.iter().map(|e| e.inputs.temp_c).sum::<f64>() / n)
+    (
+        set.events.iter().map(|e| e.inputs.p_supply_mpa).sum::<f64>() / n,
+        set.events.iter().map(|e| e.inputs.temp_c).sum::<f64>() / n,
+    )
 }
 
 /// First stage of a condition: τp and Cd by the solver with td read from the lift onset for
@@ -239,7 +283,9 @@ pub fn fit_onset(set: &Events, opts: &LsqOptions) -> Result<ConditionFit, String
             start = (cost, cd);
         }
     }
-    let r = calibrate_with(&base, &CONDITION_KNOBS, &[0.1, start.1], set, opts, &|p| derive_td(p, set).map(|_| ()))?;
+    let r = calibrate_with(&base, &CONDITION_KNOBS, &[0.1, start.1], set, opts, &|p| {
+        derive_td(p, set).map(|_| ())
+    })?;
     let mut p = apply_knobs(&base, &CONDITION_KNOBS, &r.x);
     let td = derive_td(&mut p, set)?;
     let (p_c, t_c) = condition_point(set);
@@ -272,12 +318,20 @@ pub fn fit_onset(set: &Events, opts: &LsqOptions) -> Result<ConditionFit, String
 /// all conditions) the model's td and τp tables keep that shape about the condition
 /// ([`shape_about`]): the plant reads them at the supply pressure of the moment, which dips
 /// during an event; without it they are uniform.
-pub fn fit_joint(set: &Events, start: &ConditionFit, shape: Option<&EhvvaTableData>, opts: &LsqOptions) -> Result<ConditionFit, String> {
+pub fn fit_joint(
+    set: &Events,
+    start: &ConditionFit,
+    shape: Option<&EhvvaTableData>,
+    opts: &LsqOptions,
+) -> Result<ConditionFit, String> {
     let base = EhvvaParams::paper_default();
     let has_close = set.events.iter().any(|e| e.off_index.is_some());
     let (p_c, t_c) = condition_point(set);
     let (knobs, x0): (&[Knob], Vec<f64>) = if has_close {
-        (&JOINT_KNOBS, vec![start.td_open_ms, start.td_close_ms, start.tau_p_ms, start.cd])
+        (
+            &JOINT_KNOBS,
+            vec![start.td_open_ms, start.td_close_ms, start.tau_p_ms, start.cd],
+        )
     } else {
         (&JOINT_KNOBS_ONE_TD, vec![start.td_open_ms, start.tau_p_ms, start.cd])
     };
@@ -327,7 +381,10 @@ pub fn conditions(sets: &[Events]) -> Vec<Events> {
         for (i, ev) in set.events.iter().enumerate() {
             let (p, t) = (ev.inputs.p_supply_mpa, ev.inputs.temp_c);
             let one = set.subset(|e| std::ptr::eq(e, &set.events[i]));
-            match groups.iter_mut().find(|(gp, gt, g)| (gp - p).abs() <= SAME_P_MPA && (gt - t).abs() <= SAME_T_C && g.dt_ms == set.dt_ms) {
+            match groups
+                .iter_mut()
+                .find(|(gp, gt, g)| (gp - p).abs() <= SAME_P_MPA && (gt - t).abs() <= SAME_T_C && g.dt_ms == set.dt_ms)
+            {
                 Some((_, _, g)) => {
                     let mut e = one.events[0].clone();
                     e.start = g.samples;
@@ -349,7 +406,11 @@ pub fn conditions(sets: &[Events]) -> Vec<Events> {
             let setpoints: Vec<f64> = g.events.iter().map(|e| e.inputs.p_supply_mpa).collect();
             for e in &mut g.events {
                 let own = e.inputs.p_supply_mpa;
-                let near: Vec<f64> = setpoints.iter().copied().filter(|p| (p - own).abs() <= SAME_SETPOINT_MPA).collect();
+                let near: Vec<f64> = setpoints
+                    .iter()
+                    .copied()
+                    .filter(|p| (p - own).abs() <= SAME_SETPOINT_MPA)
+                    .collect();
                 e.inputs.p_supply_mpa = near.iter().sum::<f64>() / near.len() as f64;
             }
             g
@@ -379,7 +440,12 @@ fn interpolate(points: &[(f64, f64, f64)], p: f64, t: f64) -> f64 {
     }
     ps.sort_by(f64::total_cmp);
     ts.sort_by(f64::total_cmp);
-    let at = |pp: f64, tt: f64| points.iter().find(|q| (q.0 - pp).abs() <= SAME_P_MPA && (q.1 - tt).abs() <= SAME_T_C).map(|q| q.2);
+    let at = |pp: f64, tt: f64| {
+        points
+            .iter()
+            .find(|q| (q.0 - pp).abs() <= SAME_P_MPA && (q.1 - tt).abs() <= SAME_T_C)
+            .map(|q| q.2)
+    };
     let complete = ps.iter().all(|&pp| ts.iter().all(|&tt| at(pp, tt).is_some()));
     if complete && !ps.is_empty() {
         let bracket = |g: &[f64], x: f64| -> (usize, usize, f64) {
@@ -414,7 +480,10 @@ fn interpolate(points: &[(f64, f64, f64)], p: f64, t: f64) -> f64 {
 
 impl Identified {
     fn points(&self, f: impl Fn(&ConditionFit) -> f64) -> Vec<(f64, f64, f64)> {
-        self.conditions.iter().map(|c| (c.p_supply_mpa, c.temp_c, f(c))).collect()
+        self.conditions
+            .iter()
+            .map(|c| (c.p_supply_mpa, c.temp_c, f(c)))
+            .collect()
     }
 
     /// Cd(T): the mean over the conditions at each temperature, interpolated linearly in T
@@ -460,7 +529,11 @@ impl Identified {
         self.tables_with_td(|c| c.td_open_onset_ms, |c| c.td_close_onset_ms)
     }
 
-    fn tables_with_td(&self, open: impl Fn(&ConditionFit) -> f64, close: impl Fn(&ConditionFit) -> f64) -> EhvvaTableData {
+    fn tables_with_td(
+        &self,
+        open: impl Fn(&ConditionFit) -> f64,
+        close: impl Fn(&ConditionFit) -> f64,
+    ) -> EhvvaTableData {
         let mut d = EhvvaTableData::paper_default();
         let vo = self.points(open);
         let vc = self.points(close);
@@ -531,11 +604,33 @@ impl Identified {
         };
         let o = self.table_data_onset_td();
         s.push_str("\ntd has two readings: onset (pass 1) = command edge to the lift onset (1 % / 99 % of the stroke) less the reduced model's own response time at pass 1's tau_p and Cd (Li 2018's td); joint (pass 2) = td fitted with tau_p and Cd, the set that best reproduces the whole lift in the reduced model (td and tau_p trade off along a ridge, r above). On reduced-model logs they agree; on another plant (ninth-order model) the onset td is its td, the joint set one consistent reduced-model calibration. The tau_p and Cd tables below are the joint fit's.\n");
-        s.push_str(&grid("td VO (ms) from the lift onset, on model-core's breakpoints", &o.td_p_supply_mpa, &o.td_temp_c, &|i, j| o.td_open_ms[i][j]));
-        s.push_str(&grid("td VC (ms) from the lift onset", &o.td_p_supply_mpa, &o.td_temp_c, &|i, j| o.td_close_ms[i][j]));
-        s.push_str(&grid("td VO (ms) joint fit with tau_p and Cd", &d.td_p_supply_mpa, &d.td_temp_c, &|i, j| d.td_open_ms[i][j]));
-        s.push_str(&grid("td VC (ms) joint fit", &d.td_p_supply_mpa, &d.td_temp_c, &|i, j| d.td_close_ms[i][j]));
-        s.push_str(&grid("tau_p (ms)", &d.tau_p_supply_mpa, &d.tau_temp_c, &|i, j| d.tau_ms[i][j]));
+        s.push_str(&grid(
+            "td VO (ms) from the lift onset, on model-core's breakpoints",
+            &o.td_p_supply_mpa,
+            &o.td_temp_c,
+            &|i, j| o.td_open_ms[i][j],
+        ));
+        s.push_str(&grid(
+            "td VC (ms) from the lift onset",
+            &o.td_p_supply_mpa,
+            &o.td_temp_c,
+            &|i, j| o.td_close_ms[i][j],
+        ));
+        s.push_str(&grid(
+            "td VO (ms) joint fit with tau_p and Cd",
+            &d.td_p_supply_mpa,
+            &d.td_temp_c,
+            &|i, j| d.td_open_ms[i][j],
+        ));
+        s.push_str(&grid(
+            "td VC (ms) joint fit",
+            &d.td_p_supply_mpa,
+            &d.td_temp_c,
+            &|i, j| d.td_close_ms[i][j],
+        ));
+        s.push_str(&grid("tau_p (ms)", &d.tau_p_supply_mpa, &d.tau_temp_c, &|i, j| {
+            d.tau_ms[i][j]
+        }));
         s.push_str("\nCd(T)\n  T °C    ");
         for t in d.cd_temp_c {
             s.push_str(&format!("{t:>9.0}"));
@@ -599,11 +694,21 @@ impl Identified {
 
 /// Solver settings of the per-condition fits.
 pub fn default_options() -> LsqOptions {
-    LsqOptions { max_iterations: 40, cost_tolerance: 1e-13, step_tolerance: 1e-12, fd_step: 1e-5, ..LsqOptions::default() }
+    LsqOptions {
+        max_iterations: 40,
+        cost_tolerance: 1e-13,
+        step_tolerance: 1e-12,
+        fd_step: 1e-5,
+        ..LsqOptions::default()
+    }
 }
 
 /// Identifies the tables from the events of several logs; `progress` is told each condition.
-pub fn identify(sets: &[Events], opts: &LsqOptions, progress: &mut dyn FnMut(usize, usize)) -> Result<Identified, String> {
+pub fn identify(
+    sets: &[Events],
+    opts: &LsqOptions,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<Identified, String> {
     let groups = conditions(sets);
     if groups.is_empty() {
         return Err("no valve events in the logs".into());
@@ -615,7 +720,10 @@ pub fn identify(sets: &[Events], opts: &LsqOptions, progress: &mut dyn FnMut(usi
         progress(k + 1, 2 * groups.len());
         first.push(fit_onset(g, opts)?);
     }
-    let shape = Identified { conditions: first.clone() }.table_data();
+    let shape = Identified {
+        conditions: first.clone(),
+    }
+    .table_data();
     let mut out = Vec::with_capacity(groups.len());
     for (k, (g, start)) in groups.iter().zip(&first).enumerate() {
         progress(groups.len() + k + 1, 2 * groups.len());
@@ -623,4 +731,3 @@ pub fn identify(sets: &[Events], opts: &LsqOptions, progress: &mut dyn FnMut(usi
     }
     Ok(Identified { conditions: out })
 }
-

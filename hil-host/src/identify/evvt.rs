@@ -76,7 +76,12 @@ pub struct EvvtIdentifyOptions {
 
 impl Default for EvvtIdentifyOptions {
     fn default() -> Self {
-        Self { markov_horizon_s: 6.0, hankel_rows: 40, max_order: 6, min_prbs_values: 300 }
+        Self {
+            markov_horizon_s: 6.0,
+            hankel_rows: 40,
+            max_order: 6,
+            min_prbs_values: 300,
+        }
     }
 }
 
@@ -192,7 +197,9 @@ fn char_poly(a: &[f64], n: usize) -> Vec<f64> {
 }
 
 fn poly_eval(c: &[f64], z: Cx) -> Cx {
-    c.iter().rev().fold(Cx(0.0, 0.0), |acc, &ci| acc.mul(z).add(Cx(ci, 0.0)))
+    c.iter()
+        .rev()
+        .fold(Cx(0.0, 0.0), |acc, &ci| acc.mul(z).add(Cx(ci, 0.0)))
 }
 
 fn poly_deriv(c: &[f64]) -> Vec<f64> {
@@ -295,12 +302,17 @@ fn solve_linear(a: &[f64], b: &[f64], n: usize) -> Option<Vec<f64>> {
 pub fn svd_jacobi(a: &[f64], m: usize, n: usize) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
     // Work on columns stored contiguously.
     let mut cols: Vec<Vec<f64>> = (0..n).map(|j| (0..m).map(|i| a[i * n + j]).collect()).collect();
-    let mut v: Vec<Vec<f64>> = (0..n).map(|j| (0..n).map(|i| if i == j { 1.0 } else { 0.0 }).collect()).collect();
+    let mut v: Vec<Vec<f64>> = (0..n)
+        .map(|j| (0..n).map(|i| if i == j { 1.0 } else { 0.0 }).collect())
+        .collect();
     for _sweep in 0..60 {
         let mut rotated = false;
         for p in 0..n {
             for q in p + 1..n {
-                let (alpha, beta, gamma) = cols[p].iter().zip(&cols[q]).fold((0.0, 0.0, 0.0), |(a, b, g), (x, y)| (a + x * x, b + y * y, g + x * y));
+                let (alpha, beta, gamma) = cols[p]
+                    .iter()
+                    .zip(&cols[q])
+                    .fold((0.0, 0.0, 0.0), |(a, b, g), (x, y)| (a + x * x, b + y * y, g + x * y));
                 if gamma == 0.0 || gamma.abs() <= 1e-13 * (alpha * beta).sqrt() {
                     continue;
                 }
@@ -328,7 +340,10 @@ pub fn svd_jacobi(a: &[f64], m: usize, n: usize) -> (Vec<f64>, Vec<f64>, Vec<f64
         }
     }
     let mut idx: Vec<usize> = (0..n).collect();
-    let norms: Vec<f64> = cols.iter().map(|c| c.iter().map(|x| x * x).sum::<f64>().sqrt()).collect();
+    let norms: Vec<f64> = cols
+        .iter()
+        .map(|c| c.iter().map(|x| x * x).sum::<f64>().sqrt())
+        .collect();
     idx.sort_by(|&i, &j| norms[j].total_cmp(&norms[i]));
     let mut u = vec![0.0; m * n];
     let mut vv = vec![0.0; n * n];
@@ -377,7 +392,9 @@ fn prbs_of(file: &str, reference: &[f64], min_values: usize) -> Result<PrbsData,
     if levels.len() < 2 {
         return Err(format!("{file}: column phase_ref_deg is constant: no PRBS excitation"));
     }
-    let switches: Vec<usize> = (1..reference.len()).filter(|&k| reference[k] != reference[k - 1]).collect();
+    let switches: Vec<usize> = (1..reference.len())
+        .filter(|&k| reference[k] != reference[k - 1])
+        .collect();
     let gcd = |mut a: usize, mut b: usize| {
         while b != 0 {
             (a, b) = (b, a % b);
@@ -386,7 +403,10 @@ fn prbs_of(file: &str, reference: &[f64], min_values: usize) -> Result<PrbsData,
     };
     let hold = switches.windows(2).fold(0, |g, w| gcd(g, w[1] - w[0]));
     if hold == 0 || switches.len() < 10 {
-        return Err(format!("{file}: phase_ref_deg switches only {} times: not a PRBS experiment", switches.len()));
+        return Err(format!(
+            "{file}: phase_ref_deg switches only {} times: not a PRBS experiment",
+            switches.len()
+        ));
     }
     let offset = switches[0] % hold;
     let count = (reference.len() - offset) / hold;
@@ -394,9 +414,17 @@ fn prbs_of(file: &str, reference: &[f64], min_values: usize) -> Result<PrbsData,
     let amplitude = 0.5 * (levels[0] - levels[1]).abs();
     let values: Vec<f64> = (0..count).map(|i| reference[offset + i * hold] - centre).collect();
     if count < min_values {
-        return Err(format!("{file}: only {count} PRBS values (clock {hold} samples); at least {min_values} are needed"));
+        return Err(format!(
+            "{file}: only {count} PRBS values (clock {hold} samples); at least {min_values} are needed"
+        ));
     }
-    Ok(PrbsData { hold, offset, values, centre, amplitude })
+    Ok(PrbsData {
+        hold,
+        offset,
+        values,
+        centre,
+        amplitude,
+    })
 }
 
 fn mean(x: &[f64]) -> f64 {
@@ -411,7 +439,9 @@ fn mean(x: &[f64]) -> f64 {
 fn pulse_response(prbs: &PrbsData, phase: &[f64], lags: usize) -> Result<Vec<f64>, String> {
     let p = prbs.hold;
     let r = &prbs.values;
-    let rows: Vec<usize> = (lags - 1..r.len()).filter(|&n| prbs.offset + n * p + p - 1 < phase.len()).collect();
+    let rows: Vec<usize> = (lags - 1..r.len())
+        .filter(|&n| prbs.offset + n * p + p - 1 < phase.len())
+        .collect();
     if rows.len() < 2 * (lags + 1) {
         return Err(format!("{} PRBS values are too few for {lags} lags", r.len()));
     }
@@ -517,8 +547,14 @@ fn realize(s: &[f64], hold: usize, rows: usize, max_order: usize) -> Result<(Sta
         return Err("zero Hankel singular value within the chosen order".into());
     }
     // O = Uh_n Σ^½ (rows × n), Ctrl = Σ^½ Vh_nᵀ (n × cols).
-    let obs: Vec<f64> = (0..rows).flat_map(|i| (0..n).map(move |k| (i, k))).map(|(i, k)| vt[i * rows + k] * sq[k]).collect();
-    let ctrl: Vec<f64> = (0..n).flat_map(|k| (0..cols).map(move |j| (k, j))).map(|(k, j)| ut[j * rows + k] * sq[k]).collect();
+    let obs: Vec<f64> = (0..rows)
+        .flat_map(|i| (0..n).map(move |k| (i, k)))
+        .map(|(i, k)| vt[i * rows + k] * sq[k])
+        .collect();
+    let ctrl: Vec<f64> = (0..n)
+        .flat_map(|k| (0..cols).map(move |j| (k, j)))
+        .map(|(k, j)| ut[j * rows + k] * sq[k])
+        .collect();
     // A = Σ^-½ Uhᵀ H1 Vh Σ^-½ with H1 the shifted Hankel.
     let mut a = vec![0.0; n * n];
     for k in 0..n {
@@ -547,7 +583,8 @@ fn realize(s: &[f64], hold: usize, rows: usize, max_order: usize) -> Result<(Sta
         sum.iter_mut().zip(&pow).for_each(|(s, p)| *s += p);
         pow = mat_mul(&pow, &a, n, n, n);
     }
-    let b = solve_linear(&sum, &b_tilde, n).ok_or("I + A + … + A^(p−1) is singular: the realization has a pole on the PRBS clock's aliasing circle")?;
+    let b = solve_linear(&sum, &b_tilde, n)
+        .ok_or("I + A + … + A^(p−1) is singular: the realization has a pole on the PRBS clock's aliasing circle")?;
     Ok((StateSpace { n, a, b, c }, sigma, order))
 }
 
@@ -576,7 +613,10 @@ fn model_response(alpha: f64, beta: f64, tau_s: f64, t_s: f64, w_rad_s: f64) -> 
     let g0 = zoh(alpha, beta, t_s - eps);
     let ge = zoh(alpha, beta, eps);
     let gamma0 = (g0.bd1_deg_per_rpm, g0.bd2_deg_per_s_rpm);
-    let gamma1 = (ge.bd1_deg_per_rpm + g0.ad12_s * ge.bd2_deg_per_s_rpm, g0.ad22 * ge.bd2_deg_per_s_rpm);
+    let gamma1 = (
+        ge.bd1_deg_per_rpm + g0.ad12_s * ge.bd2_deg_per_s_rpm,
+        g0.ad22 * ge.bd2_deg_per_s_rpm,
+    );
     let z = Cx::expj(w_rad_s * t_s);
     let zi = Cx::expj(-w_rad_s * t_s);
     let g1 = Cx(gamma0.0, 0.0).add(zi.scale(gamma1.0));
@@ -590,7 +630,10 @@ fn model_response(alpha: f64, beta: f64, tau_s: f64, t_s: f64, w_rad_s: f64) -> 
 pub fn identify_log(log: &Log, opts: &EvvtIdentifyOptions) -> Result<EvvtPointResult, String> {
     let file = log.file.as_str();
     if log.plant != Plant::Evvt {
-        return Err(format!("{file}: plant is `{}`, identify evvt needs an `evvt` log", log.plant));
+        return Err(format!(
+            "{file}: plant is `{}`, identify evvt needs an `evvt` log",
+            log.plant
+        ));
     }
     let reference = log.col("phase_ref_deg").ok_or_else(|| {
         format!("{file}: no phase_ref_deg column: this is an open-loop log; identify evvt needs the closed-loop PRBS experiment (phase_ref_deg and `# kp:`)")
@@ -609,12 +652,20 @@ pub fn identify_log(log: &Log, opts: &EvvtIdentifyOptions) -> Result<EvvtPointRe
         _ => log.dt_s,
     };
     let cam_events = log.meta_f64("cam_events_per_cycle").map_err(|e| e.to_string())?;
-    let (cmd, phase, rpm, volt) = match (log.col("motor_cmd_rpm"), log.col("phase_deg"), log.col("engine_rpm"), log.col("u_batt_V")) {
+    let (cmd, phase, rpm, volt) = match (
+        log.col("motor_cmd_rpm"),
+        log.col("phase_deg"),
+        log.col("engine_rpm"),
+        log.col("u_batt_V"),
+    ) {
         (Some(c), Some(p), Some(n), Some(v)) => (c, p, n, v),
         _ => return Err(format!("{file}: a required evvt column is missing")),
     };
     // The log must obey the law it states (otherwise K is not what the metadata says).
-    let cmd_max = log.meta_f64("motor_cmd_max_rpm").map_err(|e| e.to_string())?.unwrap_or(f64::INFINITY);
+    let cmd_max = log
+        .meta_f64("motor_cmd_max_rpm")
+        .map_err(|e| e.to_string())?
+        .unwrap_or(f64::INFINITY);
     let mut disobey = 0usize;
     let mut first_bad = None;
     let mut saturated = 0usize;
@@ -640,7 +691,11 @@ pub fn identify_log(log: &Log, opts: &EvvtIdentifyOptions) -> Result<EvvtPointRe
     let u_batt_v = mean(volt);
     let measurement_delay_s = match cam_events {
         Some(e) if e > 0.0 && engine_rpm > 0.0 => 0.5 * 120.0 / (engine_rpm * e),
-        Some(e) => return Err(format!("{file}: metadata cam_events_per_cycle {e} (or the engine speed {engine_rpm} rpm) is not positive")),
+        Some(e) => {
+            return Err(format!(
+                "{file}: metadata cam_events_per_cycle {e} (or the engine speed {engine_rpm} rpm) is not positive"
+            ))
+        }
         None => 0.0,
     };
     let prbs = prbs_of(file, reference, opts.min_prbs_values)?;
@@ -662,12 +717,21 @@ pub fn identify_log(log: &Log, opts: &EvvtIdentifyOptions) -> Result<EvvtPointRe
             a_ol[i * n + j] += cl.b[i] * cl.c[j];
         }
     }
-    let g = StateSpace { n, a: a_ol, b: cl.b.iter().map(|x| x / kp).collect(), c: cl.c.clone() };
+    let g = StateSpace {
+        n,
+        a: a_ol,
+        b: cl.b.iter().map(|x| x / kp).collect(),
+        c: cl.c.clone(),
+    };
     let (h_num, h_den) = cl.tf();
     let (g_num, g_den) = g.tf();
     let cl_poles = poly_roots(&h_den);
     let ol_poles = poly_roots(&g_den);
-    let integ = ol_poles.iter().copied().min_by(|x, y| x.sub(Cx(1.0, 0.0)).abs().total_cmp(&y.sub(Cx(1.0, 0.0)).abs())).ok_or("no poles")?;
+    let integ = ol_poles
+        .iter()
+        .copied()
+        .min_by(|x, y| x.sub(Cx(1.0, 0.0)).abs().total_cmp(&y.sub(Cx(1.0, 0.0)).abs()))
+        .ok_or("no poles")?;
     let s_poles: Vec<Cx> = ol_poles.iter().map(|z| z.ln().scale(1.0 / t_s)).collect();
     let integrator_pole_s = integ.ln().scale(1.0 / t_s).0;
     // Paper map: slowest other real (or nearly real) stable pole.
@@ -717,7 +781,10 @@ pub fn identify_log(log: &Log, opts: &EvvtIdentifyOptions) -> Result<EvvtPointRe
         .collect();
     let residual = |x: &[f64], out: &mut [f64]| -> Result<(), String> {
         for (i, (&w, (gid, wt))) in freqs.iter().zip(&targets).enumerate() {
-            let e = model_response(x[0], x[1], measurement_delay_s, t_s, w).div(*gid).sub(Cx(1.0, 0.0)).scale(*wt);
+            let e = model_response(x[0], x[1], measurement_delay_s, t_s, w)
+                .div(*gid)
+                .sub(Cx(1.0, 0.0))
+                .scale(*wt);
             out[2 * i] = e.0;
             out[2 * i + 1] = e.1;
         }
@@ -730,11 +797,25 @@ pub fn identify_log(log: &Log, opts: &EvvtIdentifyOptions) -> Result<EvvtPointRe
     } else {
         [wc * wc * std::f64::consts::SQRT_2 / kp, wc]
     };
-    let fit_res = lsq::solve(residual, &start, &[1e-5, 0.0], &[100.0, 500.0], 2 * freqs.len(), &LsqOptions { max_iterations: 100, ..Default::default() })
-        .map_err(|e| format!("{file}: continuous-time fit: {e}"))?;
+    let fit_res = lsq::solve(
+        residual,
+        &start,
+        &[1e-5, 0.0],
+        &[100.0, 500.0],
+        2 * freqs.len(),
+        &LsqOptions {
+            max_iterations: 100,
+            ..Default::default()
+        },
+    )
+    .map_err(|e| format!("{file}: continuous-time fit: {e}"))?;
 
     let mut rep = String::new();
-    let _ = writeln!(rep, "{file}: N = {engine_rpm:.1} rpm, V = {u_batt_v:.2} V, kp = {kp} rpm/deg, control period {t_s} s, {} rows", log.len());
+    let _ = writeln!(
+        rep,
+        "{file}: N = {engine_rpm:.1} rpm, V = {u_batt_v:.2} V, kp = {kp} rpm/deg, control period {t_s} s, {} rows",
+        log.len()
+    );
     let _ = writeln!(
         rep,
         "  PRBS: {} values of ±{:.3} deg around {:.3} deg, clock {} control periods ({:.3} s); command saturated in {:.2} % of rows",
@@ -750,17 +831,51 @@ pub fn identify_log(log: &Log, opts: &EvvtIdentifyOptions) -> Result<EvvtPointRe
             let _ = writeln!(rep, "  phase sampled per cam event ({e} per cycle: every {:.2} ms), held on the control grid: measurement delay τ = {:.2} ms", 2e3 * measurement_delay_s, 1e3 * measurement_delay_s);
         }
         None => {
-            let _ = writeln!(rep, "  no cam_events_per_cycle metadata: phase taken as sampled at every control instant (τ = 0)");
+            let _ = writeln!(
+                rep,
+                "  no cam_events_per_cycle metadata: phase taken as sampled at every control instant (τ = 0)"
+            );
         }
     }
-    let shown: Vec<String> = (0..s.len()).step_by((s.len() / 12).max(1)).map(|k| format!("s({k})={:.4}", s[k])).collect();
-    let _ = writeln!(rep, "  closed-loop held-pulse response from the PRBS correlation, {} Markov parameters at {} s: {}", s.len(), t_s, shown.join(" "));
+    let shown: Vec<String> = (0..s.len())
+        .step_by((s.len() / 12).max(1))
+        .map(|k| format!("s({k})={:.4}", s[k]))
+        .collect();
+    let _ = writeln!(
+        rep,
+        "  closed-loop held-pulse response from the PRBS correlation, {} Markov parameters at {} s: {}",
+        s.len(),
+        t_s,
+        shown.join(" ")
+    );
     let svs: Vec<String> = sigma.iter().take(10).map(|x| format!("{x:.4e}")).collect();
-    let _ = writeln!(rep, "  Hankel singular values ({}×{}): {}", opts.hankel_rows.min((s.len() - p) / 3), s.len() - p - opts.hankel_rows.min((s.len() - p) / 3) - 1, svs.join(" "));
+    let _ = writeln!(
+        rep,
+        "  Hankel singular values ({}×{}): {}",
+        opts.hankel_rows.min((s.len() - p) / 3),
+        s.len() - p - opts.hankel_rows.min((s.len() - p) / 3) - 1,
+        svs.join(" ")
+    );
     let _ = writeln!(rep, "  order {order} (largest gap σ{order}/σ{} = {:.1} over orders 2..={}); realization reproduces s(k) with VAF {vaf:.2} %", order + 1, sigma[order - 1] / sigma[order].max(1e-300), opts.max_order);
-    let fmt_z = |v: &[Cx]| v.iter().map(|z| if z.1.abs() < 1e-9 { format!("{:.5}", z.0) } else { format!("{:.5}{:+.5}i", z.0, z.1) }).collect::<Vec<_>>().join(", ");
+    let fmt_z = |v: &[Cx]| {
+        v.iter()
+            .map(|z| {
+                if z.1.abs() < 1e-9 {
+                    format!("{:.5}", z.0)
+                } else {
+                    format!("{:.5}{:+.5}i", z.0, z.1)
+                }
+            })
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
     let _ = writeln!(rep, "  closed-loop poles z: {}", fmt_z(&cl_poles));
-    let _ = writeln!(rep, "  open-loop G = H(I-H)^-1 K^-1 poles z: {}; s = ln(z)/T: {}", fmt_z(&ol_poles), fmt_z(&s_poles));
+    let _ = writeln!(
+        rep,
+        "  open-loop G = H(I-H)^-1 K^-1 poles z: {}; s = ln(z)/T: {}",
+        fmt_z(&ol_poles),
+        fmt_z(&s_poles)
+    );
     let _ = writeln!(rep, "  integrator pole s = {integrator_pole_s:.4} 1/s set to 0; velocity gain α/β = {velocity_gain:.5} deg/s per rpm");
     let _ = writeln!(rep, "  paper pole map: α = {alpha_map:.4}, β = {beta_map:.4}");
     let _ = writeln!(
@@ -769,7 +884,14 @@ pub fn identify_log(log: &Log, opts: &EvvtIdentifyOptions) -> Result<EvvtPointRe
         fit_res.iterations, fit_res.initial_cost, fit_res.cost
     );
     let ci = |c: Option<f64>| c.map_or("n/a".to_string(), |c| format!("{c:.2e}"));
-    let _ = writeln!(rep, "  α = {:.4} ± {} crank-deg/(s²·rpm), β = {:.4} ± {} 1/s (95 % CI)", fit_res.x[0], ci(fit_res.ci95[0]), fit_res.x[1], ci(fit_res.ci95[1]));
+    let _ = writeln!(
+        rep,
+        "  α = {:.4} ± {} crank-deg/(s²·rpm), β = {:.4} ± {} 1/s (95 % CI)",
+        fit_res.x[0],
+        ci(fit_res.ci95[0]),
+        fit_res.x[1],
+        ci(fit_res.ci95[1])
+    );
 
     Ok(EvvtPointResult {
         file: file.to_string(),
@@ -843,7 +965,11 @@ pub fn lpv_table(points: &[EvvtPointResult]) -> Result<EvvtLpvTable, String> {
             volts.len()
         ));
     }
-    let nearest = |v: &[f64], x: f64| (0..v.len()).min_by(|&i, &j| (v[i] - x).abs().total_cmp(&(v[j] - x).abs())).unwrap_or(0);
+    let nearest = |v: &[f64], x: f64| {
+        (0..v.len())
+            .min_by(|&i, &j| (v[i] - x).abs().total_cmp(&(v[j] - x).abs()))
+            .unwrap_or(0)
+    };
     let mut sum = [[(0.0, 0.0, 0usize); 3]; 3];
     for p in points {
         let (i, j) = (nearest(&speeds, p.engine_rpm), nearest(&volts, p.u_batt_v));
@@ -856,7 +982,10 @@ pub fn lpv_table(points: &[EvvtPointResult]) -> Result<EvvtLpvTable, String> {
         for j in 0..3 {
             let (a, b, c) = sum[i][j];
             if c == 0 {
-                return Err(format!("no point at {:.0} rpm, {:.2} V: the 3×3 grid is incomplete", speeds[i], volts[j]));
+                return Err(format!(
+                    "no point at {:.0} rpm, {:.2} V: the 3×3 grid is incomplete",
+                    speeds[i], volts[j]
+                ));
             }
             table.alpha_deg_per_s2_rpm[i][j] = a / c as f64;
             table.beta_per_s[i][j] = b / c as f64;
@@ -870,20 +999,49 @@ pub fn lpv_table(points: &[EvvtPointResult]) -> Result<EvvtLpvTable, String> {
 /// The points as a text table and, when they form a grid, the model-core table as Rust.
 pub fn tables_text(points: &[EvvtPointResult]) -> String {
     let mut s = String::new();
-    let _ = writeln!(s, "{:>10} {:>8} {:>6} {:>10} {:>9} {:>10} {:>9}", "N rpm", "V", "order", "alpha", "beta", "alpha map", "beta map");
+    let _ = writeln!(
+        s,
+        "{:>10} {:>8} {:>6} {:>10} {:>9} {:>10} {:>9}",
+        "N rpm", "V", "order", "alpha", "beta", "alpha map", "beta map"
+    );
     let mut sorted: Vec<&EvvtPointResult> = points.iter().collect();
     // By engine speed (to 50 rpm: the logged speed is noisy), then voltage.
-    sorted.sort_by(|a, b| (a.engine_rpm / 50.0).round().total_cmp(&(b.engine_rpm / 50.0).round()).then(a.u_batt_v.total_cmp(&b.u_batt_v)));
+    sorted.sort_by(|a, b| {
+        (a.engine_rpm / 50.0)
+            .round()
+            .total_cmp(&(b.engine_rpm / 50.0).round())
+            .then(a.u_batt_v.total_cmp(&b.u_batt_v))
+    });
     for p in sorted {
-        let _ = writeln!(s, "{:>10.1} {:>8.2} {:>6} {:>10.4} {:>9.4} {:>10.4} {:>9.4}", p.engine_rpm, p.u_batt_v, p.order, p.alpha, p.beta, p.alpha_map, p.beta_map);
+        let _ = writeln!(
+            s,
+            "{:>10.1} {:>8.2} {:>6} {:>10.4} {:>9.4} {:>10.4} {:>9.4}",
+            p.engine_rpm, p.u_batt_v, p.order, p.alpha, p.beta, p.alpha_map, p.beta_map
+        );
     }
     match lpv_table(points) {
         Ok(t) => {
-            let row = |m: &[[f64; 3]; 3]| m.iter().map(|r| format!("[{:.4}, {:.4}, {:.4}]", r[0], r[1], r[2])).collect::<Vec<_>>().join(", ");
-            let _ = writeln!(s, "LPV table for model_core::evvt::EvvtLpvTable (rows: engine speed, columns: battery voltage):");
+            let row = |m: &[[f64; 3]; 3]| {
+                m.iter()
+                    .map(|r| format!("[{:.4}, {:.4}, {:.4}]", r[0], r[1], r[2]))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            };
+            let _ = writeln!(
+                s,
+                "LPV table for model_core::evvt::EvvtLpvTable (rows: engine speed, columns: battery voltage):"
+            );
             let _ = writeln!(s, "EvvtLpvTable {{");
-            let _ = writeln!(s, "    engine_speed_rpm: [{:.1}, {:.1}, {:.1}],", t.engine_speed_rpm[0], t.engine_speed_rpm[1], t.engine_speed_rpm[2]);
-            let _ = writeln!(s, "    battery_voltage_v: [{:.2}, {:.2}, {:.2}],", t.battery_voltage_v[0], t.battery_voltage_v[1], t.battery_voltage_v[2]);
+            let _ = writeln!(
+                s,
+                "    engine_speed_rpm: [{:.1}, {:.1}, {:.1}],",
+                t.engine_speed_rpm[0], t.engine_speed_rpm[1], t.engine_speed_rpm[2]
+            );
+            let _ = writeln!(
+                s,
+                "    battery_voltage_v: [{:.2}, {:.2}, {:.2}],",
+                t.battery_voltage_v[0], t.battery_voltage_v[1], t.battery_voltage_v[2]
+            );
             let _ = writeln!(s, "    alpha_deg_per_s2_rpm: [{}],", row(&t.alpha_deg_per_s2_rpm));
             let _ = writeln!(s, "    beta_per_s: [{}],", row(&t.beta_per_s));
             let _ = writeln!(s, "}}");
@@ -952,7 +1110,9 @@ mod tests {
     #[test]
     fn poles_of_a_known_polynomial() {
         // (z − 1)(z − 0.9)(z² − z + 0.5)
-        let a = [0.9, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, -0.5, 0.0, 0.0, 1.0, 1.0];
+        let a = [
+            0.9, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, -0.5, 0.0, 0.0, 1.0, 1.0,
+        ];
         let c = char_poly(&a, 4);
         let mut roots = poly_roots(&c);
         roots.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.total_cmp(&y.1)));
@@ -969,7 +1129,10 @@ mod tests {
         for &w in &[0.3, 3.0, 30.0] {
             let g = model_response(alpha, beta, 0.0, t, w);
             let zz = Cx::expj(w * t);
-            let num = zz.sub(Cx(z.ad22, 0.0)).scale(z.bd1_deg_per_rpm).add(Cx(z.ad12_s * z.bd2_deg_per_s_rpm, 0.0));
+            let num = zz
+                .sub(Cx(z.ad22, 0.0))
+                .scale(z.bd1_deg_per_rpm)
+                .add(Cx(z.ad12_s * z.bd2_deg_per_s_rpm, 0.0));
             let den = zz.sub(Cx(1.0, 0.0)).mul(zz.sub(Cx(z.ad22, 0.0)));
             assert!(g.sub(num.div(den)).abs() < 1e-12 * g.abs());
             // A delay of one period is z^-1 exactly.

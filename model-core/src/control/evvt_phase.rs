@@ -186,8 +186,15 @@ pub struct EvvtPhaseOutput<R: Real> {
 
 #[derive(Clone, Copy, Debug)]
 enum Law<R: Real> {
-    FixedP { kp: R },
-    Scheduled { crossover: R, max_crossover_per_beta: R, integral_rate: R, integral_zone: R },
+    FixedP {
+        kp: R,
+    },
+    Scheduled {
+        crossover: R,
+        max_crossover_per_beta: R,
+        integral_rate: R,
+        integral_zone: R,
+    },
 }
 
 /// The controller state machine.
@@ -222,7 +229,12 @@ impl<R: Real> EvvtPhaseController<R> {
                 }
                 Law::FixedP { kp: f(kp_rpm_per_deg) }
             }
-            EvvtGains::Scheduled { crossover_rad_s, min_phase_margin_deg, integral_rate_per_s, integral_zone_deg } => {
+            EvvtGains::Scheduled {
+                crossover_rad_s,
+                min_phase_margin_deg,
+                integral_rate_per_s,
+                integral_zone_deg,
+            } => {
                 if !(crossover_rad_s > 0.0 && crossover_rad_s <= 100.0) {
                     return Err(E::CrossoverRadS);
                 }
@@ -244,7 +256,9 @@ impl<R: Real> EvvtPhaseController<R> {
                 }
             }
         };
-        if !(c.kp_min_rpm_per_deg > 0.0 && c.kp_max_rpm_per_deg >= c.kp_min_rpm_per_deg && c.kp_max_rpm_per_deg <= 1.0e4)
+        if !(c.kp_min_rpm_per_deg > 0.0
+            && c.kp_max_rpm_per_deg >= c.kp_min_rpm_per_deg
+            && c.kp_max_rpm_per_deg <= 1.0e4)
         {
             return Err(E::KpBounds);
         }
@@ -262,7 +276,10 @@ impl<R: Real> EvvtPhaseController<R> {
         if !(c.park_cmd_rpm <= 0.0 && c.park_cmd_rpm >= -c.motor_cmd_max_rpm) {
             return Err(E::ParkCmdRpm);
         }
-        if !(c.setpoint_min_deg.is_finite() && c.setpoint_max_deg.is_finite() && c.setpoint_max_deg > c.setpoint_min_deg) {
+        if !(c.setpoint_min_deg.is_finite()
+            && c.setpoint_max_deg.is_finite()
+            && c.setpoint_max_deg > c.setpoint_min_deg)
+        {
             return Err(E::SetpointRange);
         }
         Ok(Self {
@@ -287,7 +304,12 @@ impl<R: Real> EvvtPhaseController<R> {
     pub fn gains_at(&self, engine_rpm: R, u_batt_v: R) -> (R, R) {
         match self.law {
             Law::FixedP { kp } => (kp, R::ZERO),
-            Law::Scheduled { crossover, max_crossover_per_beta, integral_rate, .. } => {
+            Law::Scheduled {
+                crossover,
+                max_crossover_per_beta,
+                integral_rate,
+                ..
+            } => {
                 let alpha = self.alpha.eval(engine_rpm, u_batt_v);
                 let beta = self.beta.eval(engine_rpm, u_batt_v);
                 let wc = crossover.min(max_crossover_per_beta * beta);
@@ -324,11 +346,21 @@ impl<R: Real> EvvtPhaseController<R> {
         let dt = dt_s.max(R::ZERO);
         if inp.fault != EvvtFault::None {
             self.integral_rpm = R::ZERO;
-            return self.output(self.park_cmd, inp.engine_rpm, EvvtPhaseMode::Park(inp.fault), R::ZERO, false);
+            return self.output(
+                self.park_cmd,
+                inp.engine_rpm,
+                EvvtPhaseMode::Park(inp.fault),
+                R::ZERO,
+                false,
+            );
         }
         if inp.cranking || inp.engine_rpm < self.min_engine_rpm {
             self.integral_rpm = R::ZERO;
-            let mode = if inp.cranking { EvvtPhaseMode::HoldCranking } else { EvvtPhaseMode::HoldLowSpeed };
+            let mode = if inp.cranking {
+                EvvtPhaseMode::HoldCranking
+            } else {
+                EvvtPhaseMode::HoldLowSpeed
+            };
             return self.output(R::ZERO, inp.engine_rpm, mode, R::ZERO, false);
         }
 
@@ -339,7 +371,11 @@ impl<R: Real> EvvtPhaseController<R> {
             Law::Scheduled { integral_zone, .. } => error.abs() <= integral_zone,
             Law::FixedP { .. } => false,
         };
-        let integral_step = if in_zone { kp * integral_rate * error * dt } else { R::ZERO };
+        let integral_step = if in_zone {
+            kp * integral_rate * error * dt
+        } else {
+            R::ZERO
+        };
         let candidate_integral = (self.integral_rpm + integral_step).clamp(-self.cmd_max, self.cmd_max);
         let unlimited = kp * error + candidate_integral;
         let mut cmd = unlimited.clamp(-self.cmd_max, self.cmd_max);
@@ -393,12 +429,23 @@ mod tests {
         let mut i = inputs(30.0, 10.0);
         i.cranking = true;
         let out = c.update(&i, 0.01);
-        assert_eq!((out.mode, out.motor_cmd_rpm, out.motor_speed_rpm), (EvvtPhaseMode::HoldCranking, 0.0, 550.0));
+        assert_eq!(
+            (out.mode, out.motor_cmd_rpm, out.motor_speed_rpm),
+            (EvvtPhaseMode::HoldCranking, 0.0, 550.0)
+        );
         let mut i = inputs(30.0, 10.0);
         i.engine_rpm = 350.0;
         let out = c.update(&i, 0.01);
-        assert_eq!((out.mode, out.motor_cmd_rpm, out.motor_speed_rpm), (EvvtPhaseMode::HoldLowSpeed, 0.0, 175.0));
-        for fault in [EvvtFault::PhaseSensor, EvvtFault::EngineSpeedSensor, EvvtFault::BatteryVoltage, EvvtFault::MotorDriver] {
+        assert_eq!(
+            (out.mode, out.motor_cmd_rpm, out.motor_speed_rpm),
+            (EvvtPhaseMode::HoldLowSpeed, 0.0, 175.0)
+        );
+        for fault in [
+            EvvtFault::PhaseSensor,
+            EvvtFault::EngineSpeedSensor,
+            EvvtFault::BatteryVoltage,
+            EvvtFault::MotorDriver,
+        ] {
             let mut i = inputs(30.0, 10.0);
             i.fault = fault;
             let out = c.update(&i, 0.01);
@@ -411,7 +458,10 @@ mod tests {
         i.fault = EvvtFault::PhaseSensor;
         i.engine_rpm = -5.0;
         let out = c.update(&i, 0.01);
-        assert_eq!((out.mode, out.motor_speed_rpm), (EvvtPhaseMode::Park(EvvtFault::PhaseSensor), -100.0));
+        assert_eq!(
+            (out.mode, out.motor_speed_rpm),
+            (EvvtPhaseMode::Park(EvvtFault::PhaseSensor), -100.0)
+        );
     }
 
     #[test]
@@ -469,10 +519,25 @@ mod tests {
         use EvvtPhaseConfigError as E;
         let bad = |c: EvvtPhaseConfig| EvvtPhaseController::<f32>::new(&c).unwrap_err();
         assert_eq!(bad(EvvtPhaseConfig::paper_fixed_p(0.0)), E::KpRpmPerDeg);
-        assert_eq!(bad(EvvtPhaseConfig { park_cmd_rpm: 50.0, ..Default::default() }), E::ParkCmdRpm);
-        assert_eq!(bad(EvvtPhaseConfig { motor_cmd_max_rpm: f64::NAN, ..Default::default() }), E::MotorCmdMaxRpm);
         assert_eq!(
-            bad(EvvtPhaseConfig { motor_cmd_rate_max_rpm_per_s: Some(-1.0), ..Default::default() }),
+            bad(EvvtPhaseConfig {
+                park_cmd_rpm: 50.0,
+                ..Default::default()
+            }),
+            E::ParkCmdRpm
+        );
+        assert_eq!(
+            bad(EvvtPhaseConfig {
+                motor_cmd_max_rpm: f64::NAN,
+                ..Default::default()
+            }),
+            E::MotorCmdMaxRpm
+        );
+        assert_eq!(
+            bad(EvvtPhaseConfig {
+                motor_cmd_rate_max_rpm_per_s: Some(-1.0),
+                ..Default::default()
+            }),
             E::MotorCmdRateMaxRpmPerS
         );
         assert_eq!(
@@ -487,6 +552,12 @@ mod tests {
             }),
             E::MinPhaseMarginDeg
         );
-        assert_eq!(bad(EvvtPhaseConfig { setpoint_min_deg: 40.0, ..Default::default() }), E::SetpointRange);
+        assert_eq!(
+            bad(EvvtPhaseConfig {
+                setpoint_min_deg: 40.0,
+                ..Default::default()
+            }),
+            E::SetpointRange
+        );
     }
 }

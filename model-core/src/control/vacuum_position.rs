@@ -171,7 +171,8 @@ impl<R: Real> VacuumPositionController<R> {
     pub fn new(c: &VacuumPositionConfig) -> Result<Self, VacuumPositionConfigError> {
         use VacuumPositionConfigError as E;
         let model = VacuumStaticModel::new(&c.actuator).map_err(E::Actuator)?;
-        let comp = PwmCompensator::new(c.actuator.u_ref_v, c.u_min_v, c.duty_min_pct, c.duty_max_pct).map_err(E::Compensator)?;
+        let comp = PwmCompensator::new(c.actuator.u_ref_v, c.u_min_v, c.duty_min_pct, c.duty_max_pct)
+            .map_err(E::Compensator)?;
         let ok = |x: f64, hi: f64| x.is_finite() && (0.0..=hi).contains(&x);
         if !ok(c.kp_kpa_per_pct, 100.0) {
             return Err(E::KpKpaPerPct);
@@ -191,7 +192,8 @@ impl<R: Real> VacuumPositionController<R> {
         if !ok(c.pump_margin_kpa, 100.0) {
             return Err(E::PumpMarginKpa);
         }
-        if !(ok(c.setpoint_min_pct, 100.0) && ok(c.setpoint_max_pct, 100.0) && c.setpoint_min_pct <= c.setpoint_max_pct) {
+        if !(ok(c.setpoint_min_pct, 100.0) && ok(c.setpoint_max_pct, 100.0) && c.setpoint_min_pct <= c.setpoint_max_pct)
+        {
             return Err(E::SetpointRange);
         }
         let f = R::from_f64;
@@ -224,11 +226,14 @@ impl<R: Real> VacuumPositionController<R> {
 
     fn feedforward_pressure_kpa(&self, setpoint_pct: R, p_amb_kpa: R) -> R {
         let setpoint = setpoint_pct.clamp(self.setpoint_min, self.setpoint_max);
-        self.model.pressure_for_position_kpa(setpoint, p_amb_kpa).clamp(R::ZERO, p_amb_kpa)
+        self.model
+            .pressure_for_position_kpa(setpoint, p_amb_kpa)
+            .clamp(R::ZERO, p_amb_kpa)
     }
 
     fn duty_for_pressure(&self, p_kpa: R, p_amb_kpa: R, u_batt_v: R) -> Compensated<R> {
-        self.comp.apply(self.model.duty_for_pressure_pct(p_kpa, p_amb_kpa), u_batt_v)
+        self.comp
+            .apply(self.model.duty_for_pressure_pct(p_kpa, p_amb_kpa), u_batt_v)
     }
 
     /// One control period of length `dt_s`.
@@ -254,13 +259,17 @@ impl<R: Real> VacuumPositionController<R> {
         let lo = i.p_tank_kpa.min(i.p_amb_kpa);
         let hi = i.p_amb_kpa;
         // A NaN reading is a sensor fault whatever the caller says (it would poison the PI).
-        let sensor_bad = i.fault == VacuumPositionFault::PositionSensor || i.measured_x_pct.partial_cmp(&i.measured_x_pct).is_none();
+        let sensor_bad =
+            i.fault == VacuumPositionFault::PositionSensor || i.measured_x_pct.partial_cmp(&i.measured_x_pct).is_none();
         let (p_target, mode) = if sensor_bad {
             self.integral_kpa = R::ZERO;
             (p_ff, VacuumPositionMode::OpenLoop(VacuumPositionFault::PositionSensor))
         } else if supply_low {
             // Frozen, not cleared: neither wound by the supply's error nor lost.
-            (p_ff - self.integral_kpa, VacuumPositionMode::OpenLoop(VacuumPositionFault::SupplyLow))
+            (
+                p_ff - self.integral_kpa,
+                VacuumPositionMode::OpenLoop(VacuumPositionFault::SupplyLow),
+            )
         } else {
             let error = setpoint - i.measured_x_pct;
             // More position needs more vacuum: the correction lowers the pressure.
@@ -269,7 +278,8 @@ impl<R: Real> VacuumPositionController<R> {
             let pinned_ambient = unclamped >= hi && error < R::ZERO;
             let in_zone = error.abs() > self.deadband && error.abs() < self.zone;
             if in_zone && !pinned_vacuum && !pinned_ambient && dt_s > R::ZERO {
-                self.integral_kpa = (self.integral_kpa + self.ki * error * dt_s).clamp(-self.integral_limit, self.integral_limit);
+                self.integral_kpa =
+                    (self.integral_kpa + self.ki * error * dt_s).clamp(-self.integral_limit, self.integral_limit);
             }
             let p = p_ff - self.kp * error - self.integral_kpa;
             (p, VacuumPositionMode::Control)
@@ -307,13 +317,29 @@ mod tests {
     impl<R: Real> Loop<R> {
         fn new(params: VacuumParams) -> Self {
             let mut plant = VacuumValveActuator::new(&params).unwrap();
-            plant.settle(&VacuumInputs { duty_pct: R::ZERO, u_batt_v: R::from_f64(12.0), p_amb_kpa: R::from_f64(100.0), p_tank_kpa: R::from_f64(25.0) });
+            plant.settle(&VacuumInputs {
+                duty_pct: R::ZERO,
+                u_batt_v: R::from_f64(12.0),
+                p_amb_kpa: R::from_f64(100.0),
+                p_tank_kpa: R::from_f64(25.0),
+            });
             let ctrl = VacuumPositionController::new(&VacuumPositionConfig::for_actuator(params)).unwrap();
-            Self { plant, ctrl, duty: R::ZERO }
+            Self {
+                plant,
+                ctrl,
+                duty: R::ZERO,
+            }
         }
 
         /// Runs `seconds`; returns (max |x − setpoint| over the last `tail_s`, final x).
-        fn run(&mut self, setpoint: f64, u_batt: f64, fault: VacuumPositionFault, seconds: f64, tail_s: f64) -> (f64, f64) {
+        fn run(
+            &mut self,
+            setpoint: f64,
+            u_batt: f64,
+            fault: VacuumPositionFault,
+            seconds: f64,
+            tail_s: f64,
+        ) -> (f64, f64) {
             let n = (seconds / PERIOD_S).round() as usize;
             let tail = (tail_s / PERIOD_S).round() as usize;
             let mut worst: f64 = 0.0;
@@ -331,7 +357,12 @@ mod tests {
                     R::from_f64(PERIOD_S),
                 );
                 self.duty = o.duty_pct;
-                let inp = VacuumInputs { duty_pct: o.duty_pct, u_batt_v: R::from_f64(u_batt), p_amb_kpa: R::from_f64(100.0), p_tank_kpa: R::from_f64(25.0) };
+                let inp = VacuumInputs {
+                    duty_pct: o.duty_pct,
+                    u_batt_v: R::from_f64(u_batt),
+                    p_amb_kpa: R::from_f64(100.0),
+                    p_tank_kpa: R::from_f64(25.0),
+                };
                 self.plant.step(&inp, R::from_f64(PERIOD_S));
                 if k + tail >= n {
                     worst = worst.max((self.plant.x_pct().to_f64() - setpoint).abs());
@@ -348,9 +379,16 @@ mod tests {
             for setpoint in [20.0, 60.0, 35.0, 80.0] {
                 let (err, x) = l.run(setpoint, 12.0, VacuumPositionFault::None, 4.0, 1.0);
                 extern crate std;
-                std::println!("{:?} setpoint {setpoint}: x {x:.3}, worst error in the last second {err:.3}", params.position_map);
+                std::println!(
+                    "{:?} setpoint {setpoint}: x {x:.3}, worst error in the last second {err:.3}",
+                    params.position_map
+                );
                 // The integrator stops inside its 0.3 % deadband.
-                assert!(err < 0.5, "{:?}: setpoint {setpoint}: x {x}, error {err} over the last second", params.position_map);
+                assert!(
+                    err < 0.5,
+                    "{:?}: setpoint {setpoint}: x {x}, error {err} over the last second",
+                    params.position_map
+                );
             }
         }
     }
@@ -399,7 +437,10 @@ mod tests {
             fault: VacuumPositionFault::None,
         };
         let o = c.step(&i, PERIOD_S);
-        assert_eq!((o.duty_pct, o.mode, o.pump_request), (0.0, VacuumPositionMode::Off, false));
+        assert_eq!(
+            (o.duty_pct, o.mode, o.pump_request),
+            (0.0, VacuumPositionMode::Off, false)
+        );
         // Sec. 5.3: at the Fig. 16 point (HPT near 80 kPa, x ≈ 14 %) a 70 kPa tank suffices.
         i.enabled = true;
         let o = c.step(&i, PERIOD_S);
@@ -430,9 +471,16 @@ mod tests {
         for which in [1u8, 2] {
             let r = run(which);
             extern crate std;
-            std::println!("loop {which}: x {:.3e} %, duty {:.3e} %", (r[0] - reference[0]).abs(), (r[1] - reference[1]).abs());
+            std::println!(
+                "loop {which}: x {:.3e} %, duty {:.3e} %",
+                (r[0] - reference[0]).abs(),
+                (r[1] - reference[1]).abs()
+            );
             // Measured: f32 2.3e-4 % position / 9.3e-5 % duty, Q32.32 1.0e-5 % / 3.1e-6 %.
-            assert!((r[0] - reference[0]).abs() < 2e-3 && (r[1] - reference[1]).abs() < 2e-3, "{r:?} vs {reference:?}");
+            assert!(
+                (r[0] - reference[0]).abs() < 2e-3 && (r[1] - reference[1]).abs() < 2e-3,
+                "{r:?} vs {reference:?}"
+            );
         }
     }
 
@@ -440,10 +488,16 @@ mod tests {
     fn bad_configuration_is_named() {
         let mut c = VacuumPositionConfig::for_actuator(VacuumParams::lpt());
         c.kp_kpa_per_pct = -1.0;
-        assert_eq!(VacuumPositionController::<f32>::new(&c).err(), Some(VacuumPositionConfigError::KpKpaPerPct));
+        assert_eq!(
+            VacuumPositionController::<f32>::new(&c).err(),
+            Some(VacuumPositionConfigError::KpKpaPerPct)
+        );
         let mut c = VacuumPositionConfig::for_actuator(VacuumParams::lpt());
         c.setpoint_min_pct = 80.0;
         c.setpoint_max_pct = 20.0;
-        assert_eq!(VacuumPositionController::<f32>::new(&c).err(), Some(VacuumPositionConfigError::SetpointRange));
+        assert_eq!(
+            VacuumPositionController::<f32>::new(&c).err(),
+            Some(VacuumPositionConfigError::SetpointRange)
+        );
     }
 }

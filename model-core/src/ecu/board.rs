@@ -266,7 +266,10 @@ mod tests {
         let v = s.convert(s.counts_for(100.0)).unwrap();
         assert!((v - 100.0).abs() < 0.3, "{v}");
         // NaN calibration never passes as a value.
-        let bad = AnalogScale { gain_per_count: f32::NAN, ..s };
+        let bad = AnalogScale {
+            gain_per_count: f32::NAN,
+            ..s
+        };
         assert_eq!(bad.convert(2000), Err(AnalogFault::Implausible));
     }
 

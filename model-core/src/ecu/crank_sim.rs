@@ -26,7 +26,16 @@ impl CrankSignal {
     /// teeth when `crank_ok`, the cam edge at `cam_cycle_deg` when `cam_ok`. A tooth and the
     /// cam edge at the same angle come tooth first. Returns how many edges were crossed, which
     /// is more than `out.len()` when some did not fit.
-    pub fn advance(&mut self, rpm: f64, dt_us: u32, cam_cycle_deg: f64, crank_ok: bool, cam_ok: bool, t0_us: u32, out: &mut [Edge]) -> usize {
+    pub fn advance(
+        &mut self,
+        rpm: f64,
+        dt_us: u32,
+        cam_cycle_deg: f64,
+        crank_ok: bool,
+        cam_ok: bool,
+        t0_us: u32,
+        out: &mut [Edge],
+    ) -> usize {
         let theta0 = self.theta_deg;
         let theta1 = theta0 + rpm.max(0.0) * 6.0 * (f64::from(dt_us) * 1e-6);
         self.theta_deg = theta1;
@@ -41,7 +50,10 @@ impl CrankSignal {
         let mut emit = |angle: f64, source: EdgeSource, n: &mut usize| {
             if let Some(slot) = out.get_mut(*n) {
                 let dt = (angle - theta0) / (theta1 - theta0) * f64::from(dt_us);
-                *slot = Edge { source, t_us: t0_us.wrapping_add(dt as u32) };
+                *slot = Edge {
+                    source,
+                    t_us: t0_us.wrapping_add(dt as u32),
+                };
             }
             *n += 1;
         };
@@ -128,5 +140,4 @@ mod tests {
         assert_eq!(edges[0].source, EdgeSource::CamSync);
         assert_eq!(e.advance(6000.0, 20_000, 430.0, false, false, 21_000, &mut edges), 0);
     }
-
 }

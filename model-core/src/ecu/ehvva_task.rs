@@ -52,7 +52,12 @@ pub struct TriggerWheel {
 impl TriggerWheel {
     /// 60-2 wheel, first tooth after the gap at cycle angle 0.
     pub const fn sixty_minus_two() -> Self {
-        Self { teeth_total: 60, teeth_missing: 2, first_tooth_deg: 0.0, gap_ratio_min: 2.0 }
+        Self {
+            teeth_total: 60,
+            teeth_missing: 2,
+            first_tooth_deg: 0.0,
+            gap_ratio_min: 2.0,
+        }
     }
     pub fn tooth_deg(&self) -> f32 {
         360.0 / self.teeth_total.max(1) as f32
@@ -294,7 +299,11 @@ impl CrankDecoder {
         let base = self.wheel.first_tooth_deg
             + if self.second_rev { 360.0 } else { 0.0 }
             + self.tooth_index as f32 * self.tooth_deg;
-        let to_next_teeth = if self.tooth_index.saturating_add(1) >= self.wheel.teeth_present() { self.wheel.teeth_missing.saturating_add(1) } else { 1 };
+        let to_next_teeth = if self.tooth_index.saturating_add(1) >= self.wheel.teeth_present() {
+            self.wheel.teeth_missing.saturating_add(1)
+        } else {
+            1
+        };
         let advance = (elapsed_us(t_us, last) as f32 * self.deg_per_us).min(to_next_teeth as f32 * self.tooth_deg);
         Some(wrap_cycle_deg(base + advance))
     }
@@ -475,7 +484,10 @@ impl<D: ActuationDelay> EhvvaTask<D> {
         if !(cfg.min_rpm > 0.0 && cfg.max_rpm > cfg.min_rpm) {
             return Err("min_rpm/max_rpm");
         }
-        if cfg.wheel.teeth_total < 4 || cfg.wheel.teeth_missing == 0 || cfg.wheel.teeth_missing >= cfg.wheel.teeth_total / 2 {
+        if cfg.wheel.teeth_total < 4
+            || cfg.wheel.teeth_missing == 0
+            || cfg.wheel.teeth_missing >= cfg.wheel.teeth_total / 2
+        {
             return Err("wheel");
         }
         Ok(Self {
@@ -506,7 +518,10 @@ impl<D: ActuationDelay> EhvvaTask<D> {
     pub fn command_angles_deg(&self, req: &ValveRequest, p_supply_mpa: f32, temp_oil_c: f32) -> (f32, f32) {
         let (td_vo_ms, td_vc_ms) = self.delay.event_advances_ms(p_supply_mpa, temp_oil_c, self.lift_on);
         let deg_per_ms = self.decoder.deg_per_us() * 1000.0;
-        (wrap_cycle_deg(req.open_deg - deg_per_ms * td_vo_ms), wrap_cycle_deg(req.close_deg - deg_per_ms * td_vc_ms))
+        (
+            wrap_cycle_deg(req.open_deg - deg_per_ms * td_vo_ms),
+            wrap_cycle_deg(req.close_deg - deg_per_ms * td_vc_ms),
+        )
     }
 
     fn switch_pilot(&mut self, on: bool, u_batt_v: f32, now_us: u32, out: &mut EhvvaStepOutputs) {
@@ -603,7 +618,11 @@ impl<D: ActuationDelay> EhvvaTask<D> {
         if inp.force_safe {
             self.lift_on = false;
             self.snubber_on = false;
-        } else if !self.open_cmd && self.pilot_off_us.is_none_or(|t| elapsed_us(now_us, t) >= self.cfg.lift_switch_quiet_us) {
+        } else if !self.open_cmd
+            && self
+                .pilot_off_us
+                .is_none_or(|t| elapsed_us(now_us, t) >= self.cfg.lift_switch_quiet_us)
+        {
             self.lift_on = inp.request.high_lift;
             self.snubber_on = inp.request.soft_seat;
         }
@@ -663,7 +682,8 @@ mod tests {
         /// The next edge (time rounded to the capture's 1 µs).
         fn next_edge(&mut self) -> Edge {
             loop {
-                let tooth_in_rev = ((self.next_tooth_abs_deg - self.wheel.first_tooth_deg as f64) / 6.0).round() as i64 % 60;
+                let tooth_in_rev =
+                    ((self.next_tooth_abs_deg - self.wheel.first_tooth_deg as f64) / 6.0).round() as i64 % 60;
                 if tooth_in_rev >= 58 {
                     self.next_tooth_abs_deg += 6.0;
                     continue;
@@ -674,20 +694,38 @@ mod tests {
             let t_cam = self.time_of(self.next_cam_abs_deg);
             if t_cam < t_tooth {
                 self.next_cam_abs_deg += 720.0;
-                Edge { source: EdgeSource::CamSync, t_us: t_cam.round() as u32 }
+                Edge {
+                    source: EdgeSource::CamSync,
+                    t_us: t_cam.round() as u32,
+                }
             } else {
                 self.next_tooth_abs_deg += 6.0;
-                Edge { source: EdgeSource::CrankTooth, t_us: t_tooth.round() as u32 }
+                Edge {
+                    source: EdgeSource::CrankTooth,
+                    t_us: t_tooth.round() as u32,
+                }
             }
         }
     }
 
     fn request(open_deg: f32, close_deg: f32) -> ValveRequest {
-        ValveRequest { open_deg, close_deg, high_lift: true, soft_seat: false, enabled: true }
+        ValveRequest {
+            open_deg,
+            close_deg,
+            high_lift: true,
+            soft_seat: false,
+            enabled: true,
+        }
     }
 
     fn inputs(req: ValveRequest, p_supply_mpa: f32, temp_c: f32) -> EhvvaStepInputs {
-        EhvvaStepInputs { request: req, p_supply_mpa, temp_oil_c: temp_c, u_batt_v: 14.0, force_safe: false }
+        EhvvaStepInputs {
+            request: req,
+            p_supply_mpa,
+            temp_oil_c: temp_c,
+            u_batt_v: 14.0,
+            force_safe: false,
+        }
     }
 
     /// Runs the task on `engine` until `t_end_us`, stepping on every edge, at every requested
@@ -816,12 +854,20 @@ mod tests {
                 if let [(t_full, SolenoidCmd::Full), (t_hold, SolenoidCmd::Pwm(duty)), (t_off, SolenoidCmd::Off)] = *w {
                     events += 1;
                     let peak_us = (t_hold - t_full) as f32;
-                    assert!((peak_us - expected.t_peak_us).abs() <= 1.5, "{u_batt} V: peak {peak_us} µs vs {}", expected.t_peak_us);
+                    assert!(
+                        (peak_us - expected.t_peak_us).abs() <= 1.5,
+                        "{u_batt} V: peak {peak_us} µs vs {}",
+                        expected.t_peak_us
+                    );
                     assert!((duty - 2.0 / u_batt).abs() < 1e-4, "hold duty {duty}");
                     // The coil, driven like this, reaches the peak current at the switch-over.
                     let mut coil = RlCoil::<f64>::new(&SolenoidParams::pilot_default());
                     coil.step(u_batt as f64, peak_us as f64);
-                    assert!((coil.current_a - 3.0).abs() < 0.01, "{u_batt} V: {} A at peak end", coil.current_a);
+                    assert!(
+                        (coil.current_a - 3.0).abs() < 0.01,
+                        "{u_batt} V: {} A at peak end",
+                        coil.current_a
+                    );
                     // The pilot stays on for the requested 300 deg minus the td difference.
                     let dwell_deg = (t_off - t_full) as f64 * 1200.0 * 6.0 / 1e6;
                     assert!(dwell_deg > 250.0 && dwell_deg < 320.0, "dwell {dwell_deg} deg");
@@ -847,7 +893,10 @@ mod tests {
             // Cut the sensor once the pilot is on, 150 ms in.
             |now, _| cut_at.get().is_none_or(|c| now < c),
             |now, out| {
-                if now >= 150_000 && cut_at.get().is_none() && matches!(out.pilot, SolenoidCmd::Full | SolenoidCmd::Pwm(_)) {
+                if now >= 150_000
+                    && cut_at.get().is_none()
+                    && matches!(out.pilot, SolenoidCmd::Full | SolenoidCmd::Pwm(_))
+                {
                     cut_at.set(Some(now + 1));
                 }
                 if out.crank_lost_now {
@@ -855,10 +904,17 @@ mod tests {
                 }
             },
         );
-        let (cut, lost) = (cut_at.get().expect("pilot on after 150 ms"), lost_at.expect("crank loss detected"));
+        let (cut, lost) = (
+            cut_at.get().expect("pilot on after 150 ms"),
+            lost_at.expect("crank loss detected"),
+        );
         // 1500 rpm: gap interval 2 ms, lost after 3 gap intervals (6 ms) + the next step.
         assert!(lost - cut < 8_000, "lost after {} µs", lost - cut);
-        let off = log.log.iter().find(|(t, c)| *t >= cut && *c == SolenoidCmd::Off).expect("pilot off");
+        let off = log
+            .log
+            .iter()
+            .find(|(t, c)| *t >= cut && *c == SolenoidCmd::Off)
+            .expect("pilot off");
         assert!(off.0 <= lost);
         // No event after the loss.
         assert!(log.log.iter().all(|(t, c)| *t <= lost || *c == SolenoidCmd::Off));

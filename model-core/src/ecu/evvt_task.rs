@@ -140,7 +140,9 @@ impl EvvtTask {
         }
         let turning = e.sync != SyncState::None && e.rpm > 0.0;
         let cycle_us = if e.rpm > 1.0 { 1.2e8 / e.rpm } else { f32::INFINITY };
-        let stale = self.last_edge_us.is_none_or(|t| elapsed_us(now_us, t) as f32 > self.cfg.stale_cycles * cycle_us);
+        let stale = self
+            .last_edge_us
+            .is_none_or(|t| elapsed_us(now_us, t) as f32 > self.cfg.stale_cycles * cycle_us);
         let out_of_range = self
             .phase_deg
             .is_some_and(|p| !(self.cfg.phase_valid_min_deg..=self.cfg.phase_valid_max_deg).contains(&p));
@@ -192,7 +194,13 @@ mod tests {
     }
 
     fn inputs(e: EngineSnapshot, setpoint: f32, u: f32) -> EvvtTaskInputs {
-        EvvtTaskInputs { engine: e, setpoint_deg: setpoint, u_batt_v: u, faults: FaultSet::default(), motor_driver_fault: false }
+        EvvtTaskInputs {
+            engine: e,
+            setpoint_deg: setpoint,
+            u_batt_v: u,
+            faults: FaultSet::default(),
+            motor_driver_fault: false,
+        }
     }
 
     /// Closed loop on the LPV plant: the plant's phase moves the cam edge, the edge is seen
@@ -227,7 +235,11 @@ mod tests {
         for (rpm, u) in [(800.0, 14.0), (1400.0, 14.0), (800.0, 9.5), (1400.0, 11.5)] {
             let (_, plant, worst) = closed_loop(rpm, u, 25.0, 6.0);
             // Within the 1 degree measurement resolution plus half of it, from 3 s on.
-            assert!(worst < 1.5, "{rpm} rpm {u} V: phase {} worst error {worst}", plant.phase_deg());
+            assert!(
+                worst < 1.5,
+                "{rpm} rpm {u} V: phase {} worst error {worst}",
+                plant.phase_deg()
+            );
         }
     }
 
@@ -247,8 +259,14 @@ mod tests {
         let (kp_weak, cmd_weak) = run(1400.0, 9.5);
         // Measured: 24.4 rpm/deg at 14 V, 29.3 at 9.5 V (there the phase-margin cap lowers the
         // crossover, so kp rises less than α falls).
-        assert!(kp_strong > 0.0 && kp_weak > 1.15 * kp_strong, "kp 14 V: {kp_strong}, 9.5 V: {kp_weak}");
-        assert!((cmd_strong - 5.0 * kp_strong).abs() < 1e-3 * kp_strong, "P part: {cmd_strong}");
+        assert!(
+            kp_strong > 0.0 && kp_weak > 1.15 * kp_strong,
+            "kp 14 V: {kp_strong}, 9.5 V: {kp_weak}"
+        );
+        assert!(
+            (cmd_strong - 5.0 * kp_strong).abs() < 1e-3 * kp_strong,
+            "P part: {cmd_strong}"
+        );
         assert!((cmd_weak - 5.0 * kp_weak).abs() < 1e-3 * kp_weak, "P part: {cmd_weak}");
     }
 
@@ -309,7 +327,11 @@ mod tests {
         // With the park command the LPV plant goes back to its 0 deg stop.
         let (mut task, mut plant, _) = closed_loop(1100.0, 13.0, 30.0, 4.0);
         assert!(plant.phase_deg() > 28.0);
-        let mut i = inputs(engine(1100.0, Some(450.0 - plant.measured_phase_deg()), 1000), 30.0, 13.0);
+        let mut i = inputs(
+            engine(1100.0, Some(450.0 - plant.measured_phase_deg()), 1000),
+            30.0,
+            13.0,
+        );
         i.faults.insert(Fault::CrankLost);
         for k in 0..500 {
             let o = task.step(&i, 5_000_000 + k * 10_000);

@@ -97,7 +97,10 @@ pub struct SensorFrame {
 }
 
 impl SensorFrame {
-    pub const NO_EDGE: Edge = Edge { source: EdgeSource::CrankTooth, t_us: 0 };
+    pub const NO_EDGE: Edge = Edge {
+        source: EdgeSource::CrankTooth,
+        t_us: 0,
+    };
 
     /// The valid edges.
     pub fn edges(&self) -> &[Edge] {
@@ -149,7 +152,11 @@ pub fn crc16(bytes: &[u8]) -> u16 {
     for &b in bytes {
         crc ^= (b as u16) << 8;
         for _ in 0..8 {
-            crc = if crc & 0x8000 != 0 { (crc << 1) ^ 0x1021 } else { crc << 1 };
+            crc = if crc & 0x8000 != 0 {
+                (crc << 1) ^ 0x1021
+            } else {
+                crc << 1
+            };
         }
     }
     crc
@@ -281,7 +288,11 @@ fn payload_nack(w: &mut Writer, n: &Nack) {
 
 /// Encodes `frame` into `out`; returns the number of bytes written.
 pub fn encode(frame: &Frame, out: &mut [u8]) -> Result<usize, FrameError> {
-    let mut w = Writer { buf: out, at: 0, overflow: false };
+    let mut w = Writer {
+        buf: out,
+        at: 0,
+        overflow: false,
+    };
     w.bytes(&SYNC);
     w.u8(FRAME_VERSION);
     let kind = match frame {
@@ -328,7 +339,10 @@ pub fn decode(bytes: &[u8]) -> Result<Frame, FrameError> {
     if bytes[2] != FRAME_VERSION {
         return Err(FrameError::BadVersion);
     }
-    let mut r = Reader { buf: &bytes[HEADER_BYTES..end], at: 0 };
+    let mut r = Reader {
+        buf: &bytes[HEADER_BYTES..end],
+        at: 0,
+    };
     let frame = match bytes[3] {
         k if k == FrameKind::Sensor as u8 => Frame::Sensor(read_sensor(&mut r)?),
         k if k == FrameKind::Actuator as u8 => {
@@ -341,7 +355,11 @@ pub fn decode(bytes: &[u8]) -> Result<Frame, FrameError> {
             if payload_len != NACK_BYTES {
                 return Err(FrameError::BadLength);
             }
-            Frame::Nack(Nack { seq_expected: r.u32()?, bad_frames: r.u32()?, reason: r.u8()? })
+            Frame::Nack(Nack {
+                seq_expected: r.u32()?,
+                bad_frames: r.u32()?,
+                reason: r.u8()?,
+            })
         }
         _ => return Err(FrameError::BadKind),
     };
@@ -380,11 +398,27 @@ fn read_sensor(r: &mut Reader) -> Result<SensorFrame, FrameError> {
     let open_deg = r.f32()?;
     let close_deg = r.f32()?;
     let f = r.flags(0b111)?;
-    let valve = ValveRequest { open_deg, close_deg, high_lift: f & 1 != 0, soft_seat: f & 2 != 0, enabled: f & 4 != 0 };
+    let valve = ValveRequest {
+        open_deg,
+        close_deg,
+        high_lift: f & 1 != 0,
+        soft_seat: f & 2 != 0,
+        enabled: f & 4 != 0,
+    };
     let cam_phase_set_deg = r.f32()?;
     let vacuum_x_set_pct = [r.f32()?, r.f32()?, r.f32()?];
     let motor_driver_fault = r.flags(1)? != 0;
-    Ok(SensorFrame { seq, t_us, n_edges, edges, adc_counts, valve, cam_phase_set_deg, vacuum_x_set_pct, motor_driver_fault })
+    Ok(SensorFrame {
+        seq,
+        t_us,
+        n_edges,
+        edges,
+        adc_counts,
+        valve,
+        cam_phase_set_deg,
+        vacuum_x_set_pct,
+        motor_driver_fault,
+    })
 }
 
 fn read_actuator(r: &mut Reader) -> Result<ActuatorFrame, FrameError> {
@@ -437,7 +471,11 @@ impl Default for FrameDecoder {
 
 impl FrameDecoder {
     pub const fn new() -> Self {
-        Self { buf: [0; MAX_FRAME_BYTES], len: 0, junk_bytes: 0 }
+        Self {
+            buf: [0; MAX_FRAME_BYTES],
+            len: 0,
+            junk_bytes: 0,
+        }
     }
 
     /// Adds one byte; returns a result when a frame completed or was found bad. After a
@@ -504,7 +542,14 @@ mod tests {
     fn sensor(seq: u32, n_edges: u8) -> SensorFrame {
         let mut edges = [SensorFrame::NO_EDGE; MAX_EDGES];
         for (k, e) in edges.iter_mut().enumerate().take(n_edges as usize) {
-            *e = Edge { source: if k % 3 == 2 { EdgeSource::CamSync } else { EdgeSource::CrankTooth }, t_us: 1000 + 7 * k as u32 };
+            *e = Edge {
+                source: if k % 3 == 2 {
+                    EdgeSource::CamSync
+                } else {
+                    EdgeSource::CrankTooth
+                },
+                t_us: 1000 + 7 * k as u32,
+            };
         }
         SensorFrame {
             seq,
@@ -512,7 +557,13 @@ mod tests {
             n_edges,
             edges,
             adc_counts: [0, 1, 2048, 4095, 17, 300, 1000, 2000, 3000, 4000],
-            valve: ValveRequest { open_deg: 360.25, close_deg: 540.0, high_lift: true, soft_seat: false, enabled: true },
+            valve: ValveRequest {
+                open_deg: 360.25,
+                close_deg: 540.0,
+                high_lift: true,
+                soft_seat: false,
+                enabled: true,
+            },
             cam_phase_set_deg: 12.5,
             vacuum_x_set_pct: [20.0, -0.0, 1e-7],
             motor_driver_fault: true,
@@ -569,7 +620,10 @@ mod tests {
         let (_, n) = bytes_of(&Frame::Actuator(actuator(1)));
         assert_eq!(n, HEADER_BYTES + ACTUATOR_BYTES + CRC_BYTES);
         let mut small = [0u8; 20];
-        assert_eq!(encode(&Frame::Actuator(actuator(1)), &mut small), Err(FrameError::BufferTooSmall));
+        assert_eq!(
+            encode(&Frame::Actuator(actuator(1)), &mut small),
+            Err(FrameError::BufferTooSmall)
+        );
     }
 
     #[test]
@@ -578,8 +632,15 @@ mod tests {
             Frame::Sensor(sensor(5, 0)),
             Frame::Sensor(sensor(6, 3)),
             Frame::Actuator(actuator(9)),
-            Frame::Actuator(ActuatorFrame { pilot: SolenoidCmd::Full, ..actuator(10) }),
-            Frame::Nack(Nack { seq_expected: 11, bad_frames: 2, reason: FrameError::BadCrc as u8 }),
+            Frame::Actuator(ActuatorFrame {
+                pilot: SolenoidCmd::Full,
+                ..actuator(10)
+            }),
+            Frame::Nack(Nack {
+                seq_expected: 11,
+                bad_frames: 2,
+                reason: FrameError::BadCrc as u8,
+            }),
         ] {
             let (buf, n) = bytes_of(&f);
             let back = decode(&buf[..n]).unwrap();
@@ -601,7 +662,10 @@ mod tests {
                 let mut b = good;
                 b[i] ^= 1 << bit;
                 let e = decode(&b[..n]).unwrap_err();
-                assert!(matches!(e, FrameError::BadCrc | FrameError::BadLength), "byte {i} bit {bit}: {e:?}");
+                assert!(
+                    matches!(e, FrameError::BadCrc | FrameError::BadLength),
+                    "byte {i} bit {bit}: {e:?}"
+                );
             }
         }
         // Re-signed frames with bad content: each field check fires.
@@ -663,7 +727,11 @@ mod tests {
         assert_eq!(out[1], Some(Err(FrameError::BadCrc)));
         assert_eq!(out[2], Some(Ok(Frame::Sensor(sensor(2, 1)))));
         assert_eq!(dec.pending(), 0);
-        assert_eq!(dec.junk_bytes as usize, 4 + (na - 1), "junk before the first frame and the rest of the bad one");
+        assert_eq!(
+            dec.junk_bytes as usize,
+            4 + (na - 1),
+            "junk before the first frame and the rest of the bad one"
+        );
     }
 
     #[test]

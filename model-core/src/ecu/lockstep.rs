@@ -55,7 +55,10 @@ struct Period {
 
 impl Period {
     const fn new(period_us: u32) -> Self {
-        Self { period_us, next_us: None }
+        Self {
+            period_us,
+            next_us: None,
+        }
     }
     /// Due at the first call, then every period; a late call (a gap in the frames) does
     /// not make it run several times in a row, it restarts the grid.
@@ -64,7 +67,11 @@ impl Period {
             Some(next) if elapsed_us(now_us, next) > u32::MAX / 2 => false,
             Some(next) => {
                 let late = elapsed_us(now_us, next);
-                self.next_us = Some(if late >= self.period_us { now_us.wrapping_add(self.period_us) } else { next.wrapping_add(self.period_us) });
+                self.next_us = Some(if late >= self.period_us {
+                    now_us.wrapping_add(self.period_us)
+                } else {
+                    next.wrapping_add(self.period_us)
+                });
                 true
             }
             None => {
@@ -274,20 +281,33 @@ mod tests {
             let cfg = SupervisorConfig::default();
             let values = [13.8, 6.0, 2.0, 80.0, 40.0, 100.0, 20.0, 40.0, 60.0, 50.0];
             let engine = CrankSignal::new(TriggerWheel::sixty_minus_two(), 0.0);
-            Self { engine, counts: core::array::from_fn(|k| cfg.scales[k].counts_for(values[k])), crank: true }
+            Self {
+                engine,
+                counts: core::array::from_fn(|k| cfg.scales[k].counts_for(values[k])),
+                crank: true,
+            }
         }
         /// The frame of step `seq` (called for seq = 1, 2, 3, ...).
         fn frame(&mut self, seq: u32) -> SensorFrame {
             let t_us = seq * STEP_US;
             let mut edges = [SensorFrame::NO_EDGE; MAX_EDGES];
-            let n = self.engine.advance(RPM, STEP_US, 438.0, self.crank, self.crank, t_us - STEP_US, &mut edges).min(MAX_EDGES);
+            let n = self
+                .engine
+                .advance(RPM, STEP_US, 438.0, self.crank, self.crank, t_us - STEP_US, &mut edges)
+                .min(MAX_EDGES);
             SensorFrame {
                 seq,
                 t_us,
                 n_edges: n as u8,
                 edges,
                 adc_counts: self.counts,
-                valve: ValveRequest { open_deg: 100.0, close_deg: 400.0, high_lift: true, soft_seat: true, enabled: true },
+                valve: ValveRequest {
+                    open_deg: 100.0,
+                    close_deg: 400.0,
+                    high_lift: true,
+                    soft_seat: true,
+                    enabled: true,
+                },
                 cam_phase_set_deg: 20.0,
                 vacuum_x_set_pct: [20.0, 40.0, 60.0],
                 motor_driver_fault: false,
@@ -329,7 +349,10 @@ mod tests {
         assert!(pilot_full > 0, "no pilot peak in 0.6 s");
         assert_eq!(ecu.faults().0, 0);
         let e = ecu.evvt().unwrap();
-        assert!(e.phase_deg.is_some() && e.kp_rpm_per_deg > 0.0, "EVVT not controlling: {e:?}");
+        assert!(
+            e.phase_deg.is_some() && e.kp_rpm_per_deg > 0.0,
+            "EVVT not controlling: {e:?}"
+        );
         let v = ecu.vacuum().unwrap();
         assert!(v.duty.iter().all(|d| *d > 0.0), "vacuum valves idle: {v:?}");
         // Supply pressure sensor open: debounced fault, then the valves stay closed.

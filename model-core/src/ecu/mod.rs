@@ -67,10 +67,23 @@ mod fault_reactions {
         fn new() -> Self {
             let cfg = SupervisorConfig::default();
             let values = [13.8, 6.0, 2.0, 80.0, 40.0, 100.0, 20.0, 40.0, 60.0, 50.0];
-            let e = VacuumEffects { supply_voltage: true, ..VacuumEffects::NONE };
-            let actuators = [VacuumParams::lpt().with_effects(e), VacuumParams::hpt().with_effects(e), VacuumParams::hpc().with_effects(e)];
+            let e = VacuumEffects {
+                supply_voltage: true,
+                ..VacuumEffects::NONE
+            };
+            let actuators = [
+                VacuumParams::lpt().with_effects(e),
+                VacuumParams::hpt().with_effects(e),
+                VacuumParams::hpc().with_effects(e),
+            ];
             let tank = VacuumTankParams::paper();
-            let ecu_cfg = EcuCoreConfig { vacuum: VacuumTaskConfig { actuators, ..Default::default() }, ..Default::default() };
+            let ecu_cfg = EcuCoreConfig {
+                vacuum: VacuumTaskConfig {
+                    actuators,
+                    ..Default::default()
+                },
+                ..Default::default()
+            };
             Self {
                 counts: core::array::from_fn(|k| cfg.scales[k].counts_for(values[k])),
                 forced: [false; N_CHANNELS],
@@ -119,14 +132,22 @@ mod fault_reactions {
             let now = self.t_us;
             let mut edges = [SensorFrame::NO_EDGE; MAX_EDGES];
             let crank_ok = self.crank_signal;
-            let n = self.engine.advance(RPM, STEP_US, CAM_CYCLE_DEG, crank_ok, crank_ok, t0, &mut edges);
+            let n = self
+                .engine
+                .advance(RPM, STEP_US, CAM_CYCLE_DEG, crank_ok, crank_ok, t0, &mut edges);
             let frame = SensorFrame {
                 seq: now / STEP_US,
                 t_us: now,
                 n_edges: n.min(MAX_EDGES) as u8,
                 edges,
                 adc_counts: self.counts,
-                valve: ValveRequest { open_deg: 100.0, close_deg: 400.0, high_lift: true, soft_seat: true, enabled: true },
+                valve: ValveRequest {
+                    open_deg: 100.0,
+                    close_deg: 400.0,
+                    high_lift: true,
+                    soft_seat: true,
+                    enabled: true,
+                },
                 cam_phase_set_deg: 20.0,
                 vacuum_x_set_pct: [20.0, 40.0, 60.0],
                 motor_driver_fault: false,
@@ -146,7 +167,8 @@ mod fault_reactions {
             self.pump.set(out.pump_on);
             if now % 12_500 == 0 {
                 let duties = [0, 1, 2].map(|k| self.valves[k].duty * 100.0);
-                self.plant.step(duties, self.ecu.measurements().u_batt_v, 100.0, self.pump.on, 0.0125);
+                self.plant
+                    .step(duties, self.ecu.measurements().u_batt_v, 100.0, self.pump.on, 0.0125);
                 self.plant_readings();
             }
         }
@@ -164,9 +186,19 @@ mod fault_reactions {
     fn check(name: &str, inject: impl FnOnce(&mut Bench), expected_fault: Fault) {
         let mut b = Bench::new();
         b.run_ms(600);
-        assert!(b.ecu.faults().is_empty(), "{name}: healthy phase raised {:?}", b.ecu.faults());
-        assert!(b.pilot.log.iter().any(|(_, c)| *c == SolenoidCmd::Full), "{name}: no valve event before the fault");
-        assert!(b.valves.iter().all(|v| v.duty > 0.0), "{name}: vacuum valves idle before the fault");
+        assert!(
+            b.ecu.faults().is_empty(),
+            "{name}: healthy phase raised {:?}",
+            b.ecu.faults()
+        );
+        assert!(
+            b.pilot.log.iter().any(|(_, c)| *c == SolenoidCmd::Full),
+            "{name}: no valve event before the fault"
+        );
+        assert!(
+            b.valves.iter().all(|v| v.duty > 0.0),
+            "{name}: vacuum valves idle before the fault"
+        );
         inject(&mut b);
         b.run_ms(1200);
         let active = b.ecu.faults();
@@ -177,25 +209,40 @@ mod fault_reactions {
         let t_set = b.fault_set_at_us.unwrap();
         if safe.ehvva_closed {
             // No pilot drive after the fault was set (one EHVVA step later at most).
-            let late = b.pilot.log.iter().filter(|(t, c)| *t > t_set + STEP_US && *c != SolenoidCmd::Off).count();
+            let late = b
+                .pilot
+                .log
+                .iter()
+                .filter(|(t, c)| *t > t_set + STEP_US && *c != SolenoidCmd::Off)
+                .count();
             assert_eq!(late, 0, "{name}: pilot driven after the fault");
             assert_eq!(b.pilot.current(), SolenoidCmd::Off);
             assert!(!b.lift.on && !b.snubber.on, "{name}: slow valves on");
         } else {
-            assert!(b.pilot.log.iter().any(|(t, c)| *t > t_set && *c == SolenoidCmd::Full), "{name}: EHVVA stopped needlessly");
+            assert!(
+                b.pilot.log.iter().any(|(t, c)| *t > t_set && *c == SolenoidCmd::Full),
+                "{name}: EHVVA stopped needlessly"
+            );
         }
         // Park: ring speed (half the engine speed, 0 once the crank signal is gone) − 100 rpm.
         let rpm = b.ecu.engine().map_or(0.0, |e| e.rpm);
         let park_duty = ((rpm / 2.0 - 100.0) / 6000.0).max(0.0);
         if safe.evvt_parked {
-            assert!((b.motor.duty - park_duty).abs() < 1e-4, "{name}: motor duty {} (park {park_duty})", b.motor.duty);
+            assert!(
+                (b.motor.duty - park_duty).abs() < 1e-4,
+                "{name}: motor duty {} (park {park_duty})",
+                b.motor.duty
+            );
         } else {
             assert!((b.motor.duty - park_duty).abs() > 1e-3, "{name}: parked needlessly");
         }
         if safe.vacuum_spring_open {
             assert!(b.valves.iter().all(|v| v.duty == 0.0), "{name}: vacuum valves driven");
         } else {
-            assert!(b.valves.iter().all(|v| v.duty > 0.0), "{name}: vacuum valves released needlessly");
+            assert!(
+                b.valves.iter().all(|v| v.duty > 0.0),
+                "{name}: vacuum valves released needlessly"
+            );
         }
         if safe.pump_off {
             assert!(!b.pump.on, "{name}: pump on");
@@ -206,15 +253,51 @@ mod fault_reactions {
     fn each_fault_drives_its_safe_state_on_the_doubles() {
         let cfg = SupervisorConfig::default();
         let counts = |ch: Channel, v: f32| cfg.scales[ch as usize].counts_for(v);
-        check("battery low", |b| b.set_channel(Channel::BatteryV, counts(Channel::BatteryV, 6.0)), Fault::BatteryLow);
-        check("battery high", |b| b.set_channel(Channel::BatteryV, counts(Channel::BatteryV, 24.0)), Fault::BatteryHigh);
-        check("supply pressure open", |b| b.set_channel(Channel::SupplyPressureMpa, 0), Fault::SupplyPressureSensor);
-        check("back pressure short", |b| b.set_channel(Channel::BackPressureMpa, 4095), Fault::BackPressureSensor);
-        check("oil temperature open", |b| b.set_channel(Channel::OilTempC, 0), Fault::OilTempSensor);
-        check("tank pressure short", |b| b.set_channel(Channel::TankPressureKpa, 4095), Fault::TankPressureSensor);
-        check("ambient pressure open", |b| b.set_channel(Channel::AmbientPressureKpa, 0), Fault::AmbientPressureSensor);
-        check("position sensor open", |b| b.set_channel(Channel::HptPositionPct, 0), Fault::VacuumPositionSensor);
-        check("ECU over-temperature", |b| b.set_channel(Channel::EcuTempC, counts(Channel::EcuTempC, 125.0)), Fault::OverTemperature);
+        check(
+            "battery low",
+            |b| b.set_channel(Channel::BatteryV, counts(Channel::BatteryV, 6.0)),
+            Fault::BatteryLow,
+        );
+        check(
+            "battery high",
+            |b| b.set_channel(Channel::BatteryV, counts(Channel::BatteryV, 24.0)),
+            Fault::BatteryHigh,
+        );
+        check(
+            "supply pressure open",
+            |b| b.set_channel(Channel::SupplyPressureMpa, 0),
+            Fault::SupplyPressureSensor,
+        );
+        check(
+            "back pressure short",
+            |b| b.set_channel(Channel::BackPressureMpa, 4095),
+            Fault::BackPressureSensor,
+        );
+        check(
+            "oil temperature open",
+            |b| b.set_channel(Channel::OilTempC, 0),
+            Fault::OilTempSensor,
+        );
+        check(
+            "tank pressure short",
+            |b| b.set_channel(Channel::TankPressureKpa, 4095),
+            Fault::TankPressureSensor,
+        );
+        check(
+            "ambient pressure open",
+            |b| b.set_channel(Channel::AmbientPressureKpa, 0),
+            Fault::AmbientPressureSensor,
+        );
+        check(
+            "position sensor open",
+            |b| b.set_channel(Channel::HptPositionPct, 0),
+            Fault::VacuumPositionSensor,
+        );
+        check(
+            "ECU over-temperature",
+            |b| b.set_channel(Channel::EcuTempC, counts(Channel::EcuTempC, 125.0)),
+            Fault::OverTemperature,
+        );
         check("crank signal lost", |b| b.crank_signal = false, Fault::CrankLost);
     }
 }

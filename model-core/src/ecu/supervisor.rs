@@ -90,7 +90,12 @@ pub struct SafeState {
 }
 
 impl SafeState {
-    pub const ALL: Self = Self { ehvva_closed: true, evvt_parked: true, vacuum_spring_open: true, pump_off: true };
+    pub const ALL: Self = Self {
+        ehvva_closed: true,
+        evvt_parked: true,
+        vacuum_spring_open: true,
+        pump_off: true,
+    };
 
     fn union(self, o: Self) -> Self {
         Self {
@@ -148,21 +153,35 @@ impl Fault {
             // and the pump would load the battery further.
             Fault::BatteryLow | Fault::BatteryHigh => SafeState::ALL,
             // td(Ph, T) and the seating depend on these: no valve timing without them.
-            Fault::SupplyPressureSensor | Fault::BackPressureSensor | Fault::OilTempSensor => {
-                SafeState { ehvva_closed: true, ..none }
-            }
+            Fault::SupplyPressureSensor | Fault::BackPressureSensor | Fault::OilTempSensor => SafeState {
+                ehvva_closed: true,
+                ..none
+            },
             // No tank feedback: the pump cannot be switched on the need, valves cannot be fed.
-            Fault::TankPressureSensor => SafeState { vacuum_spring_open: true, pump_off: true, ..none },
+            Fault::TankPressureSensor => SafeState {
+                vacuum_spring_open: true,
+                pump_off: true,
+                ..none
+            },
             // The inverse model and the stuck check need these.
-            Fault::AmbientPressureSensor | Fault::VacuumPositionSensor | Fault::VacuumActuatorStuck => {
-                SafeState { vacuum_spring_open: true, ..none }
-            }
+            Fault::AmbientPressureSensor | Fault::VacuumPositionSensor | Fault::VacuumActuatorStuck => SafeState {
+                vacuum_spring_open: true,
+                ..none
+            },
             // Drivers cannot be protected without a temperature.
             Fault::EcuTempSensor | Fault::OverTemperature => SafeState::ALL,
             // No engine position: no valve events, no phase control.
-            Fault::CrankLost | Fault::CamLost => SafeState { ehvva_closed: true, evvt_parked: true, ..none },
+            Fault::CrankLost | Fault::CamLost => SafeState {
+                ehvva_closed: true,
+                evvt_parked: true,
+                ..none
+            },
             // Running the pump against a leak only wastes energy.
-            Fault::AbnormalLeak => SafeState { vacuum_spring_open: true, pump_off: true, ..none },
+            Fault::AbnormalLeak => SafeState {
+                vacuum_spring_open: true,
+                pump_off: true,
+                ..none
+            },
         }
     }
 
@@ -365,7 +384,12 @@ pub struct Supervisor {
 
 impl Supervisor {
     pub fn new(cfg: SupervisorConfig) -> Self {
-        Self { cfg, meas: Measurements::default(), active: FaultSet::default(), since_us: [None; N_FAULTS] }
+        Self {
+            cfg,
+            meas: Measurements::default(),
+            active: FaultSet::default(),
+            since_us: [None; N_FAULTS],
+        }
     }
 
     pub fn active(&self) -> FaultSet {
@@ -410,7 +434,9 @@ impl Supervisor {
         let mut channel_faults = [None; N_CHANNELS];
         let mut sensor_bad = FaultSet::default();
         for (k, ch) in Channel::ALL.into_iter().enumerate() {
-            let (Some(scale), Some(&c)) = (self.cfg.scales.get(k), counts.get(k)) else { continue };
+            let (Some(scale), Some(&c)) = (self.cfg.scales.get(k), counts.get(k)) else {
+                continue;
+            };
             match scale.convert(c) {
                 Ok(v) => self.meas.set(ch, v),
                 Err(e) => {
@@ -423,17 +449,39 @@ impl Supervisor {
         }
         let m = self.meas;
         let battery_bad = sensor_bad.contains(Fault::BatteryLow);
-        let hyst = if self.active.contains(Fault::OverTemperature) { self.cfg.temp_hysteresis_c } else { 0.0 };
+        let hyst = if self.active.contains(Fault::OverTemperature) {
+            self.cfg.temp_hysteresis_c
+        } else {
+            0.0
+        };
         let hot = m.temp_ecu_c > self.cfg.ecu_temp_max_c - hyst || m.temp_oil_c > self.cfg.oil_temp_max_c - hyst;
         let conditions = [
-            (Fault::BatteryLow, battery_bad || !(m.u_batt_v >= self.cfg.battery_low_v)),
+            (
+                Fault::BatteryLow,
+                battery_bad || !(m.u_batt_v >= self.cfg.battery_low_v),
+            ),
             (Fault::BatteryHigh, m.u_batt_v > self.cfg.battery_high_v),
-            (Fault::SupplyPressureSensor, sensor_bad.contains(Fault::SupplyPressureSensor)),
-            (Fault::BackPressureSensor, sensor_bad.contains(Fault::BackPressureSensor)),
+            (
+                Fault::SupplyPressureSensor,
+                sensor_bad.contains(Fault::SupplyPressureSensor),
+            ),
+            (
+                Fault::BackPressureSensor,
+                sensor_bad.contains(Fault::BackPressureSensor),
+            ),
             (Fault::OilTempSensor, sensor_bad.contains(Fault::OilTempSensor)),
-            (Fault::TankPressureSensor, sensor_bad.contains(Fault::TankPressureSensor)),
-            (Fault::AmbientPressureSensor, sensor_bad.contains(Fault::AmbientPressureSensor)),
-            (Fault::VacuumPositionSensor, sensor_bad.contains(Fault::VacuumPositionSensor)),
+            (
+                Fault::TankPressureSensor,
+                sensor_bad.contains(Fault::TankPressureSensor),
+            ),
+            (
+                Fault::AmbientPressureSensor,
+                sensor_bad.contains(Fault::AmbientPressureSensor),
+            ),
+            (
+                Fault::VacuumPositionSensor,
+                sensor_bad.contains(Fault::VacuumPositionSensor),
+            ),
             (Fault::EcuTempSensor, sensor_bad.contains(Fault::EcuTempSensor)),
             (Fault::OverTemperature, hot),
         ];
@@ -494,7 +542,11 @@ mod tests {
         let cfg = SupervisorConfig::default();
         let mut s = Supervisor::new(cfg);
         let out = run(&mut s, &healthy(&cfg), &TaskReports::default(), 0, 2000);
-        assert!(out.active.is_empty(), "{:?}", out.active.iter().map(Fault::name).collect::<heapless::Vec<_, 16>>());
+        assert!(
+            out.active.is_empty(),
+            "{:?}",
+            out.active.iter().map(Fault::name).collect::<heapless::Vec<_, 16>>()
+        );
         let m = out.measurements;
         assert!((m.u_batt_v - 13.8).abs() < 0.01 && (m.p_supply_mpa - 6.0).abs() < 0.01);
         assert!((m.p_tank_kpa - 40.0).abs() < 0.1 && (m.x_pct[2] - 60.0).abs() < 0.05);
@@ -548,7 +600,10 @@ mod tests {
     #[test]
     fn pressure_sensor_open_or_short_latches_and_closes_the_valves() {
         let cfg = SupervisorConfig::default();
-        for (bad_counts, kind) in [(0u16, AnalogFault::OpenOrShortToGround), (4095, AnalogFault::ShortToSupply)] {
+        for (bad_counts, kind) in [
+            (0u16, AnalogFault::OpenOrShortToGround),
+            (4095, AnalogFault::ShortToSupply),
+        ] {
             let mut s = Supervisor::new(cfg);
             let rep = TaskReports::default();
             let mut c = healthy(&cfg);
@@ -561,7 +616,13 @@ mod tests {
             assert!(out.active.contains(Fault::SupplyPressureSensor));
             // The last good value is kept for the users.
             assert!((out.measurements.p_supply_mpa - 6.0).abs() < 0.01);
-            assert_eq!(out.safe, SafeState { ehvva_closed: true, ..Default::default() });
+            assert_eq!(
+                out.safe,
+                SafeState {
+                    ehvva_closed: true,
+                    ..Default::default()
+                }
+            );
             // Latched: a healed reading does not clear it.
             let out = run(&mut s, &healthy(&cfg), &rep, 200, 2000);
             assert!(out.active.contains(Fault::SupplyPressureSensor));
@@ -580,7 +641,14 @@ mod tests {
         c[Channel::TankPressureKpa as usize] = cfg.scales[4].counts_for(150.0);
         let out = run(&mut s, &c, &TaskReports::default(), 0, 100);
         assert_eq!(out.channel_faults[4], Some(AnalogFault::Implausible));
-        assert_eq!(out.safe, SafeState { vacuum_spring_open: true, pump_off: true, ..Default::default() });
+        assert_eq!(
+            out.safe,
+            SafeState {
+                vacuum_spring_open: true,
+                pump_off: true,
+                ..Default::default()
+            }
+        );
     }
 
     #[test]
@@ -608,12 +676,48 @@ mod tests {
         let cfg = SupervisorConfig::default();
         let h = healthy(&cfg);
         for (rep, safe) in [
-            (TaskReports { crank_lost: true, ..Default::default() }, SafeState { ehvva_closed: true, evvt_parked: true, ..Default::default() }),
-            (TaskReports { cam_lost: true, ..Default::default() }, SafeState { ehvva_closed: true, evvt_parked: true, ..Default::default() }),
-            (TaskReports { vacuum_stuck: true, ..Default::default() }, SafeState { vacuum_spring_open: true, ..Default::default() }),
             (
-                TaskReports { abnormal_leak: true, ..Default::default() },
-                SafeState { vacuum_spring_open: true, pump_off: true, ..Default::default() },
+                TaskReports {
+                    crank_lost: true,
+                    ..Default::default()
+                },
+                SafeState {
+                    ehvva_closed: true,
+                    evvt_parked: true,
+                    ..Default::default()
+                },
+            ),
+            (
+                TaskReports {
+                    cam_lost: true,
+                    ..Default::default()
+                },
+                SafeState {
+                    ehvva_closed: true,
+                    evvt_parked: true,
+                    ..Default::default()
+                },
+            ),
+            (
+                TaskReports {
+                    vacuum_stuck: true,
+                    ..Default::default()
+                },
+                SafeState {
+                    vacuum_spring_open: true,
+                    ..Default::default()
+                },
+            ),
+            (
+                TaskReports {
+                    abnormal_leak: true,
+                    ..Default::default()
+                },
+                SafeState {
+                    vacuum_spring_open: true,
+                    pump_off: true,
+                    ..Default::default()
+                },
             ),
         ] {
             let mut s = Supervisor::new(cfg);

@@ -24,8 +24,8 @@
 use super::board::elapsed_us;
 use super::supervisor::SafeState;
 use crate::control::vacuum_position::{
-    VacuumPositionConfig, VacuumPositionConfigError, VacuumPositionController, VacuumPositionFault, VacuumPositionInputs,
-    VacuumPositionMode,
+    VacuumPositionConfig, VacuumPositionConfigError, VacuumPositionController, VacuumPositionFault,
+    VacuumPositionInputs, VacuumPositionMode,
 };
 use crate::vacuum::{VacuumInputs, VacuumParamError, VacuumParams, VacuumTank, VacuumTankParams, VacuumValveActuator};
 
@@ -180,9 +180,15 @@ impl VacuumTask {
     pub fn new(cfg: VacuumTaskConfig) -> Result<Self, VacuumTaskError> {
         let m = VacuumTaskError::Model;
         let [a, b, c] = &cfg.actuators;
-        let ctrl = |p: &VacuumParams| VacuumPositionController::new(&cfg.position_config(*p)).map_err(VacuumTaskError::Controller);
+        let ctrl = |p: &VacuumParams| {
+            VacuumPositionController::new(&cfg.position_config(*p)).map_err(VacuumTaskError::Controller)
+        };
         let control = [ctrl(a)?, ctrl(b)?, ctrl(c)?];
-        let observer = [VacuumValveActuator::new(a).map_err(m)?, VacuumValveActuator::new(b).map_err(m)?, VacuumValveActuator::new(c).map_err(m)?];
+        let observer = [
+            VacuumValveActuator::new(a).map_err(m)?,
+            VacuumValveActuator::new(b).map_err(m)?,
+            VacuumValveActuator::new(c).map_err(m)?,
+        ];
         if !(cfg.x_meas_min_pct < cfg.x_meas_max_pct && cfg.x_meas_min_pct <= 0.0 && cfg.x_meas_max_pct >= 100.0) {
             return Err(VacuumTaskError::Parameter("x_meas_min_pct/x_meas_max_pct"));
         }
@@ -190,7 +196,10 @@ impl VacuumTask {
         if !(cfg.leak_window_s > 0.05 && cfg.leak_window_s < 60.0) {
             return Err(VacuumTaskError::Parameter("leak_window_s"));
         }
-        if !(cfg.pump_hysteresis_kpa >= 0.0 && cfg.tank_target_min_kpa >= 1.0 && cfg.tank_reserve_kpa > cfg.tank_target_min_kpa) {
+        if !(cfg.pump_hysteresis_kpa >= 0.0
+            && cfg.tank_target_min_kpa >= 1.0
+            && cfg.tank_reserve_kpa > cfg.tank_target_min_kpa)
+        {
             return Err(VacuumTaskError::Parameter("tank pressure targets"));
         }
         Ok(Self {
@@ -215,7 +224,9 @@ impl VacuumTask {
     /// (no friction), and the compensated duty (%) that gives it at `u_batt_v`; 0 % at the
     /// rest position.
     pub fn feedforward(&self, i: usize, x_set_pct: f32, p_amb_kpa: f32, u_batt_v: f32) -> (Option<f32>, f32, bool) {
-        let Some(ctrl) = self.control.get(i) else { return (None, 0.0, false) };
+        let Some(ctrl) = self.control.get(i) else {
+            return (None, 0.0, false);
+        };
         if !(x_set_pct > self.cfg.x_rest_pct) {
             return (None, 0.0, false);
         }
@@ -230,7 +241,10 @@ impl VacuumTask {
 
     /// One step at `now_us` (nominally every 12.5 ms).
     pub fn step(&mut self, inp: &VacuumTaskInputs, now_us: u32) -> VacuumTaskOutputs {
-        let dt_s = self.last_step_us.map_or(0.0, |t| elapsed_us(now_us, t) as f32 * 1e-6).min(1.0);
+        let dt_s = self
+            .last_step_us
+            .map_or(0.0, |t| elapsed_us(now_us, t) as f32 * 1e-6)
+            .min(1.0);
         self.last_step_us = Some(now_us);
         let p_amb = inp.p_amb_kpa;
         let p_tank = inp.p_tank_kpa;
@@ -239,7 +253,15 @@ impl VacuumTask {
         let mut inflow_mg_s = 0.0;
         for (k, obs) in self.observer.iter_mut().enumerate() {
             let duty_pct = self.last_duty_pct.get(k).copied().unwrap_or(0.0);
-            let o = obs.step(&VacuumInputs { duty_pct, u_batt_v: inp.u_batt_v, p_amb_kpa: p_amb, p_tank_kpa: p_tank }, dt_s);
+            let o = obs.step(
+                &VacuumInputs {
+                    duty_pct,
+                    u_batt_v: inp.u_batt_v,
+                    p_amb_kpa: p_amb,
+                    p_tank_kpa: p_tank,
+                },
+                dt_s,
+            );
             inflow_mg_s += o.flow_to_tank_mg_s;
         }
         self.tank_model.step(self.pump_on, inflow_mg_s, p_amb, dt_s);
@@ -260,7 +282,8 @@ impl VacuumTask {
             let x_set = inp.x_set_pct.get(k).copied().unwrap_or(0.0);
             let x_meas = inp.x_meas_pct.get(k).copied().unwrap_or(f32::NAN);
             let at_rest = x_set.is_nan() || x_set <= self.cfg.x_rest_pct;
-            let plausible = x_meas.is_finite() && x_meas >= self.cfg.x_meas_min_pct && x_meas <= self.cfg.x_meas_max_pct;
+            let plausible =
+                x_meas.is_finite() && x_meas >= self.cfg.x_meas_min_pct && x_meas <= self.cfg.x_meas_max_pct;
             let o = ctrl.step(
                 &VacuumPositionInputs {
                     setpoint_pct: x_set,
@@ -269,7 +292,11 @@ impl VacuumTask {
                     p_tank_kpa: p_tank,
                     u_batt_v: inp.u_batt_v,
                     enabled: !(at_rest || vacuum_safe),
-                    fault: if plausible { VacuumPositionFault::None } else { VacuumPositionFault::PositionSensor },
+                    fault: if plausible {
+                        VacuumPositionFault::None
+                    } else {
+                        VacuumPositionFault::PositionSensor
+                    },
                 },
                 dt_s,
             );
@@ -353,9 +380,12 @@ impl VacuumTask {
             return;
         }
         for k in 0..3 {
-            let (Some(obs), Some(&x_meas), Some(since), Some(stuck)) =
-                (self.observer.get(k), inp.x_meas_pct.get(k), self.stuck_since_us.get_mut(k), self.stuck.get_mut(k))
-            else {
+            let (Some(obs), Some(&x_meas), Some(since), Some(stuck)) = (
+                self.observer.get(k),
+                inp.x_meas_pct.get(k),
+                self.stuck_since_us.get_mut(k),
+                self.stuck.get_mut(k),
+            ) else {
                 continue;
             };
             let off = !((x_meas - obs.x_pct()).abs() <= self.cfg.stuck_error_pct);
@@ -381,8 +411,15 @@ mod tests {
     /// The actuators without friction/backlash but with the supply-voltage effect (the
     /// feedforward has no friction compensation; the position controller is another module).
     fn frictionless() -> [VacuumParams; 3] {
-        let e = VacuumEffects { supply_voltage: true, ..VacuumEffects::NONE };
-        [VacuumParams::lpt().with_effects(e), VacuumParams::hpt().with_effects(e), VacuumParams::hpc().with_effects(e)]
+        let e = VacuumEffects {
+            supply_voltage: true,
+            ..VacuumEffects::NONE
+        };
+        [
+            VacuumParams::lpt().with_effects(e),
+            VacuumParams::hpt().with_effects(e),
+            VacuumParams::hpc().with_effects(e),
+        ]
     }
 
     struct Sim {
@@ -398,7 +435,13 @@ mod tests {
 
     impl Sim {
         fn new(params: [VacuumParams; 3], p_tank0: f64) -> Self {
-            Self::with_config(VacuumTaskConfig { actuators: params, ..Default::default() }, p_tank0)
+            Self::with_config(
+                VacuumTaskConfig {
+                    actuators: params,
+                    ..Default::default()
+                },
+                p_tank0,
+            )
         }
 
         fn with_config(cfg: VacuumTaskConfig, p_tank0: f64) -> Self {
@@ -438,7 +481,13 @@ mod tests {
                 let o = self.task.step(&inp, self.t_us);
                 self.pump_on_steps += u32::from(o.pump_on);
                 let duties = o.duty.map(|d| d * 100.0);
-                let r = self.plant.step(duties, u_batt, 100.0, o.pump_on && !self.pump_broken, DT_US as f32 * 1e-6);
+                let r = self.plant.step(
+                    duties,
+                    u_batt,
+                    100.0,
+                    o.pump_on && !self.pump_broken,
+                    DT_US as f32 * 1e-6,
+                );
                 x_meas = r.actuators.map(|a| a.x_pct);
                 self.t_us += DT_US;
                 out = Some(o);
@@ -458,19 +507,39 @@ mod tests {
             sim.run(x_set, u, 3.0);
             let x = [sim.plant.lpt.x_pct(), sim.plant.hpt.x_pct(), sim.plant.hpc.x_pct()];
             for k in 0..3 {
-                assert!((x[k] - x_set[k]).abs() < 1.0, "{u} V actuator {k}: {} vs {}", x[k], x_set[k]);
+                assert!(
+                    (x[k] - x_set[k]).abs() < 1.0,
+                    "{u} V actuator {k}: {} vs {}",
+                    x[k],
+                    x_set[k]
+                );
             }
         }
         // Without compensation (duty fixed at its 12 V value) the HPT at 14.5 V misses by far.
-        let task = VacuumTask::new(VacuumTaskConfig { actuators: frictionless(), ..Default::default() }).unwrap();
+        let task = VacuumTask::new(VacuumTaskConfig {
+            actuators: frictionless(),
+            ..Default::default()
+        })
+        .unwrap();
         let (_, duty_12v, _) = task.feedforward(1, 30.0, 100.0, 12.0);
         let (_, duty_14v, _) = task.feedforward(1, 30.0, 100.0, 14.5);
         assert!((duty_14v / duty_12v - 12.0 / 14.5).abs() < 1e-4);
-        let mut plant = VacuumSystem::<f32>::new(&frictionless()[0], &frictionless()[1], &frictionless()[2], &VacuumTankParams::paper(), 25.0).unwrap();
+        let mut plant = VacuumSystem::<f32>::new(
+            &frictionless()[0],
+            &frictionless()[1],
+            &frictionless()[2],
+            &VacuumTankParams::paper(),
+            25.0,
+        )
+        .unwrap();
         for _ in 0..240 {
             plant.step([0.0, duty_12v, 0.0], 14.5, 100.0, true, 0.0125);
         }
-        assert!((plant.hpt.x_pct() - 30.0).abs() > 10.0, "uncompensated HPT at {}", plant.hpt.x_pct());
+        assert!(
+            (plant.hpt.x_pct() - 30.0).abs() > 10.0,
+            "uncompensated HPT at {}",
+            plant.hpt.x_pct()
+        );
     }
 
     #[test]
@@ -479,13 +548,24 @@ mod tests {
         let x_set = [30.0, 30.0, 0.0];
         let mut sim = Sim::new(frictionless(), 100.0);
         let out = sim.run(x_set, 13.5, 60.0);
-        assert!((out.p_tank_target_kpa - 64.4).abs() < 0.5, "target {}", out.p_tank_target_kpa);
+        assert!(
+            (out.p_tank_target_kpa - 64.4).abs() < 0.5,
+            "target {}",
+            out.p_tank_target_kpa
+        );
         let p = sim.plant.tank.p_tank_kpa();
         assert!(p < 65.0 && p > 55.0, "tank {p}");
         assert!((sim.plant.lpt.x_pct() - 30.0).abs() < 1.0 && (sim.plant.hpt.x_pct() - 30.0).abs() < 1.0);
         let on_needed = sim.pump_on_steps;
         // The fixed rule (always below 35 kPa, 5 kPa hysteresis) on the same plant and setpoints.
-        let mut plant = VacuumSystem::<f32>::new(&frictionless()[0], &frictionless()[1], &frictionless()[2], &sim.tank_params, 100.0).unwrap();
+        let mut plant = VacuumSystem::<f32>::new(
+            &frictionless()[0],
+            &frictionless()[1],
+            &frictionless()[2],
+            &sim.tank_params,
+            100.0,
+        )
+        .unwrap();
         let duties = [0, 1, 2].map(|k| sim.task.feedforward(k, x_set[k], 100.0, 13.5).1);
         let (mut pump, mut on_fixed) = (false, 0u32);
         for _ in 0..(60_000_000 / DT_US) {
@@ -508,10 +588,19 @@ mod tests {
     #[test]
     fn healthy_system_raises_no_leak_and_no_stuck_flag() {
         let mut sim = Sim::new(VacuumTaskConfig::default().actuators, 60.0);
-        for x_set in [[20.0, 40.0, 60.0], [80.0, 10.0, 30.0], [0.0, 60.0, 90.0], [50.0, 50.0, 50.0]] {
+        for x_set in [
+            [20.0, 40.0, 60.0],
+            [80.0, 10.0, 30.0],
+            [0.0, 60.0, 90.0],
+            [50.0, 50.0, 50.0],
+        ] {
             let out = sim.run(x_set, 13.5, 10.0);
             assert!(!out.abnormal_leak, "residual {} kPa/s", out.residual_kpa_per_s);
-            assert!(out.residual_kpa_per_s.abs() < 0.2, "residual {}", out.residual_kpa_per_s);
+            assert!(
+                out.residual_kpa_per_s.abs() < 0.2,
+                "residual {}",
+                out.residual_kpa_per_s
+            );
             assert_eq!(out.stuck, [false; 3]);
         }
     }
@@ -522,7 +611,10 @@ mod tests {
         let x_set = [40.0, 30.0, 20.0];
         assert!(!sim.run(x_set, 13.5, 10.0).abnormal_leak);
         // A hose cracks: 0.5 mm² from ambient into the tank (25 times the base leak).
-        let cracked = VacuumTankParams { base_leak_area_mm2: 0.5, ..sim.tank_params };
+        let cracked = VacuumTankParams {
+            base_leak_area_mm2: 0.5,
+            ..sim.tank_params
+        };
         let p_now = sim.plant.tank.p_tank_kpa() as f64;
         sim.plant.tank = VacuumTank::new(&cracked, p_now).unwrap();
         let out = sim.run(x_set, 13.5, 6.5);
@@ -532,7 +624,12 @@ mod tests {
         assert!(!out.pump_on);
         // Spring position: all actuators back at 0 %.
         sim.run(x_set, 13.5, 2.0);
-        assert!(sim.plant.lpt.x_pct() < 0.5 && sim.plant.hpt.x_pct() < 0.5, "{} {}", sim.plant.lpt.x_pct(), sim.plant.hpt.x_pct());
+        assert!(
+            sim.plant.lpt.x_pct() < 0.5 && sim.plant.hpt.x_pct() < 0.5,
+            "{} {}",
+            sim.plant.lpt.x_pct(),
+            sim.plant.hpt.x_pct()
+        );
     }
 
     #[test]
@@ -560,12 +657,19 @@ mod tests {
     #[test]
     fn supervisor_safe_state_is_applied() {
         let mut sim = Sim::new(frictionless(), 90.0);
-        sim.safe = SafeState { vacuum_spring_open: true, pump_off: true, ..Default::default() };
+        sim.safe = SafeState {
+            vacuum_spring_open: true,
+            pump_off: true,
+            ..Default::default()
+        };
         let out = sim.run([40.0, 30.0, 20.0], 13.5, 1.0);
         assert_eq!(out.duty, [0.0; 3]);
         assert!(!out.pump_on);
         // Pump off only (battery low): duties still follow the setpoints.
-        sim.safe = SafeState { pump_off: true, ..Default::default() };
+        sim.safe = SafeState {
+            pump_off: true,
+            ..Default::default()
+        };
         let out = sim.run([40.0, 30.0, 20.0], 13.5, 0.1);
         assert!(out.duty[0] > 0.0 && !out.pump_on);
     }
@@ -594,7 +698,13 @@ mod tests {
             }
         }
         let end = x_now(sim);
-        let settled = [0, 1, 2].map(|k| if (end[k] - x_set[k]).abs() <= band_pct { last_out[k] } else { None });
+        let settled = [0, 1, 2].map(|k| {
+            if (end[k] - x_set[k]).abs() <= band_pct {
+                last_out[k]
+            } else {
+                None
+            }
+        });
         (settled, overshoot)
     }
 
@@ -605,7 +715,11 @@ mod tests {
     fn with_rod_friction_the_closed_loop_settles_within_1_pct_where_feedforward_alone_does_not() {
         // The paper's actuators with their Dahl/Coulomb friction (Figs. 9-10; Fc 1.5/4/5 kPa).
         let mut closed = Sim::new(VacuumTaskConfig::default().actuators, 40.0);
-        let ff_cfg = VacuumTaskConfig { kp_kpa_per_pct: 0.0, ki_kpa_per_pct_s: 0.0, ..Default::default() };
+        let ff_cfg = VacuumTaskConfig {
+            kp_kpa_per_pct: 0.0,
+            ki_kpa_per_pct_s: 0.0,
+            ..Default::default()
+        };
         let mut open = Sim::with_config(ff_cfg, 40.0);
         let mut ff_misses = 0;
         for x_set in PROFILE {
@@ -617,16 +731,30 @@ mod tests {
                 // Bound: into ±1 % within 3 s of the step and held to the end of the 4 s hold;
                 // overshoot below 2 % on the wastegate, 7 % on the bypasses (their friction,
                 // 4-5 kPa, is 8-25 % of stroke on their steep parts; measured 1.0 / 4.6 / 5.5 %).
-                assert!(settled[k].is_some_and(|t| t <= 3.0), "{x_set:?} valve {k}: {settled:?}, x {:?}", x_now(&closed));
-                assert!(overshoot[k] < [2.0, 7.0, 7.0][k], "{x_set:?} valve {k}: overshoot {} %", overshoot[k]);
+                assert!(
+                    settled[k].is_some_and(|t| t <= 3.0),
+                    "{x_set:?} valve {k}: {settled:?}, x {:?}",
+                    x_now(&closed)
+                );
+                assert!(
+                    overshoot[k] < [2.0, 7.0, 7.0][k],
+                    "{x_set:?} valve {k}: overshoot {} %",
+                    overshoot[k]
+                );
             }
             // Feedforward alone leaves the friction offset: (Fc on the rod)·slope, 1.5 kPa ≈ 3 %
             // on the wastegate.
             ff_misses += settled_count_missing(&ff_settled);
         }
-        assert!(ff_misses >= 3, "feedforward alone settled into ±1 % in all but {ff_misses} holds");
+        assert!(
+            ff_misses >= 3,
+            "feedforward alone settled into ±1 % in all but {ff_misses} holds"
+        );
         let integrals = [0, 1, 2].map(|k| closed.task.integral_kpa(k));
-        assert!(integrals.iter().any(|i| i.abs() > 0.5), "no friction offset learnt: {integrals:?}");
+        assert!(
+            integrals.iter().any(|i| i.abs() > 0.5),
+            "no friction offset learnt: {integrals:?}"
+        );
         assert_eq!(open.task.integral_kpa(0), 0.0);
     }
 
@@ -643,7 +771,10 @@ mod tests {
         // Spring-open safe state for 2 s (e.g. a battery-low phase) while the setpoints ask
         // for more: the valves vent, the rods fall to the spring and the integrators stay
         // cleared, so nothing is stored for the recovery.
-        sim.safe = SafeState { vacuum_spring_open: true, ..Default::default() };
+        sim.safe = SafeState {
+            vacuum_spring_open: true,
+            ..Default::default()
+        };
         let x_set = [60.0, 45.0, 50.0];
         let out = sim.run(x_set, 13.5, 2.0);
         assert_eq!(out.duty, [0.0; 3]);
@@ -655,7 +786,10 @@ mod tests {
         extern crate std;
         std::println!("after the safe state: into ±1 % after {settled:?} s, overshoot {overshoot:?} %");
         for k in 0..3 {
-            assert!(settled[k].is_some_and(|t| t <= 2.5) && overshoot[k] < 3.0, "valve {k}: {settled:?} {overshoot:?}");
+            assert!(
+                settled[k].is_some_and(|t| t <= 2.5) && overshoot[k] < 3.0,
+                "valve {k}: {settled:?} {overshoot:?}"
+            );
         }
 
         // The wastegate's reading freezes for 0.8 s (a binding rod or sensor, not yet the 1 s
@@ -670,7 +804,11 @@ mod tests {
             assert_eq!(out.stuck, [false; 3]);
             worst_integral = worst_integral.max(sim.task.integral_kpa(0).abs());
         }
-        assert!(worst_integral <= limit[0] + 1e-4, "integral {worst_integral} kPa beyond the limit {}", limit[0]);
+        assert!(
+            worst_integral <= limit[0] + 1e-4,
+            "integral {worst_integral} kPa beyond the limit {}",
+            limit[0]
+        );
         sim.x_override[0] = None;
         let (settled, overshoot) = hold(&mut sim, [70.0, 45.0, 50.0], 1.0, 4.0);
         std::println!("after the frozen reading: integral at most {worst_integral:.2} kPa, into ±1 % after {settled:?} s, overshoot {overshoot:?} %");
@@ -695,9 +833,17 @@ mod tests {
             sim.x_override[0] = Some(bad_reading);
             let out = sim.run(x_set, 12.5, 0.5);
             let (_, ff_duty, _) = sim.task.feedforward(0, 50.0, 100.0, 12.5);
-            assert_eq!(out.mode[0], VacuumPositionMode::OpenLoop(VacuumPositionFault::PositionSensor), "{bad_reading}");
+            assert_eq!(
+                out.mode[0],
+                VacuumPositionMode::OpenLoop(VacuumPositionFault::PositionSensor),
+                "{bad_reading}"
+            );
             assert_eq!(out.mode[1..], [VacuumPositionMode::Control; 2]);
-            assert!((out.duty[0] * 100.0 - ff_duty).abs() < 1e-5, "{bad_reading}: duty {} vs feedforward {ff_duty}", out.duty[0] * 100.0);
+            assert!(
+                (out.duty[0] * 100.0 - ff_duty).abs() < 1e-5,
+                "{bad_reading}: duty {} vs feedforward {ff_duty}",
+                out.duty[0] * 100.0
+            );
             assert_eq!(sim.task.integral_kpa(0), 0.0);
             // Open loop the wastegate stays within its friction band of the setpoint.
             let x = x_now(&sim)[0];
@@ -719,10 +865,20 @@ mod tests {
         // 5 V: below comp_u_min_v = 6 V; the valves cannot hold the rods, the errors are large.
         let out = sim.run(x_set, 5.0, 1.0);
         assert!(out.supply_low);
-        assert_eq!(out.mode, [VacuumPositionMode::OpenLoop(VacuumPositionFault::SupplyLow); 3]);
-        assert_eq!([0, 1, 2].map(|k| sim.task.integral_kpa(k)), before, "integrators moved below the range");
+        assert_eq!(
+            out.mode,
+            [VacuumPositionMode::OpenLoop(VacuumPositionFault::SupplyLow); 3]
+        );
+        assert_eq!(
+            [0, 1, 2].map(|k| sim.task.integral_kpa(k)),
+            before,
+            "integrators moved below the range"
+        );
         let x = x_now(&sim);
-        assert!((0..3).any(|k| (x[k] - x_set[k]).abs() > 1.0), "the sag did not move anything: {x:?}");
+        assert!(
+            (0..3).any(|k| (x[k] - x_set[k]).abs() > 1.0),
+            "the sag did not move anything: {x:?}"
+        );
         // Back in range the learnt offsets are still there and the loop settles again.
         let (settled, _) = hold(&mut sim, x_set, 1.0, 4.0);
         assert!(settled.iter().all(|t| t.is_some_and(|t| t <= 3.0)), "{settled:?}");

@@ -105,13 +105,7 @@ pub fn run_event<R: Real, P: EhvvaPlant<R>>(
     stroke_mm: f64,
     mut on_sample: impl FnMut(f64, f64),
 ) -> EventMetrics {
-    run_event_with(
-        plant,
-        event,
-        |_| *inputs,
-        stroke_mm,
-        |t, y, _| on_sample(t, y),
-    )
+    run_event_with(plant, event, |_| *inputs, stroke_mm, |t, y, _| on_sample(t, y))
 }
 
 /// Like [`run_event`] with inputs that vary with time (`inputs_at(t_ms)`, e.g. measured Ph

@@ -74,8 +74,7 @@ impl<R: Real> Spool<R> {
     fn step(&self, x: R, v: R, force: R, quad_gain: R, h: R) -> (R, R) {
         let f = force - self.spring * (x + self.preload);
         let damping = self.friction + quad_gain * v.abs();
-        let v =
-            (v + h * self.accel_per_newton * f) / (R::ONE + h * self.accel_per_newton * damping);
+        let v = (v + h * self.accel_per_newton * f) / (R::ONE + h * self.accel_per_newton * damping);
         let (x, v, _) = stops(x + h * v, v, self.stroke);
         (x, v)
     }
@@ -127,11 +126,7 @@ pub struct EhvvaFull<R: Real, const N: usize = DEFAULT_DELAY_SAMPLES> {
 impl<R: Real, const N: usize> EhvvaFull<R, N> {
     /// A model at rest (coil off, spools and valve on their seats, accumulators at their
     /// set-points) for `inputs`, stepped every `dt_ms` (≤ 0.1 ms).
-    pub fn new(
-        params: &EhvvaParams,
-        inputs: &EhvvaInputs<R>,
-        dt_ms: f64,
-    ) -> Result<Self, EhvvaError> {
+    pub fn new(params: &EhvvaParams, inputs: &EhvvaInputs<R>, dt_ms: f64) -> Result<Self, EhvvaError> {
         let substeps = check_step(params, dt_ms, N)?;
         let v = &params.valve;
         let positive: [(f64, &'static str); 9] = [
@@ -150,10 +145,7 @@ impl<R: Real, const N: usize> EhvvaFull<R, N> {
                 return Err(EhvvaError::InvalidParameter(name));
             }
         }
-        if !(v.main_overlap_mm.is_finite()
-            && v.main_overlap_mm >= 0.0
-            && v.main_overlap_mm < v.main_stroke_mm)
-        {
+        if !(v.main_overlap_mm.is_finite() && v.main_overlap_mm >= 0.0 && v.main_overlap_mm < v.main_stroke_mm) {
             return Err(EhvvaError::InvalidParameter("valve.main_overlap_mm"));
         }
         if !(v.pilot_delay_fraction.is_finite() && (0.0..=1.0).contains(&v.pilot_delay_fraction)) {
@@ -219,7 +211,13 @@ impl<R: Real, const N: usize> EhvvaFull<R, N> {
             vp: R::ZERO,
             xm: R::ZERO,
             vm: R::ZERO,
-            m: Moving { lift: R::ZERO, vel: R::ZERO, p_high: inputs.p_supply_mpa, p_low: inputs.p_back_mpa, seat_velocity: None },
+            m: Moving {
+                lift: R::ZERO,
+                vel: R::ZERO,
+                p_high: inputs.p_supply_mpa,
+                p_low: inputs.p_back_mpa,
+                seat_velocity: None,
+            },
             pilot_history: DelayLine::new(R::ZERO),
             main_p_history: DelayLine::new(inputs.p_back_mpa),
             main_s_history: DelayLine::new(R::ZERO),
@@ -304,8 +302,7 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaFull<R, N> {
             // Eq. (3): coil current (implicit Euler) and magnet force.
             let hl = self.h * self.inv_inductance;
             self.current = (self.current + hl * u_volts) / (R::ONE + hl * self.coil_resistance);
-            let f_mag = self.force_const * self.current * self.current
-                / (R::ONE + self.xp * self.inv_force_gap);
+            let f_mag = self.force_const * self.current * self.current / (R::ONE + self.xp * self.inv_force_gap);
             // Eq. (2): pilot spool.
             let (xp, vp) = self.pilot.step(self.xp, self.vp, f_mag, R::ZERO, self.h);
             self.xp = xp;
@@ -313,24 +310,26 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaFull<R, N> {
             // Eqs. (4), (9): main spool pushed by the delayed pilot pressure, damped by the
             // pilot orifice it fills and empties through.
             let quad = self.main_quad / cd2;
-            let (xm, vm) = self
-                .main
-                .step(self.xm, self.vm, self.main_area * p_pilot, quad, self.h);
+            let (xm, vm) = self.main.step(self.xm, self.vm, self.main_area * p_pilot, quad, self.h);
             self.xm = xm;
             self.vm = vm;
             // Eq. (9) line 5 with eq. (5): main valve metering in series with the top snubber.
             let closing = self.m.vel < R::ZERO;
             let frac = if closing { R::ONE - s_main } else { s_main }.max(s_min);
             let inv_a2_top = self.inv_a2_main_full / (frac * frac)
-                + self
-                    .piston
-                    .inv_a2_top_snubber(self.m.lift, closing, inputs.snubber_on);
-            let k = self
-                .piston
-                .quadratic_gain_with(cd, inv_a2_top, self.m.lift, stroke);
+                + self.piston.inv_a2_top_snubber(self.m.lift, closing, inputs.snubber_on);
+            let k = self.piston.quadratic_gain_with(cd, inv_a2_top, self.m.lift, stroke);
             let force = self.piston.static_force(p_main, self.m.p_low, self.m.lift);
             // Piston, end stops and eqs. (7)-(8).
-            self.piston.advance(&mut self.m, force, k, self.h, stroke, inputs.p_supply_mpa, inputs.p_back_mpa);
+            self.piston.advance(
+                &mut self.m,
+                force,
+                k,
+                self.h,
+                stroke,
+                inputs.p_supply_mpa,
+                inputs.p_back_mpa,
+            );
         }
         self.m.lift
     }

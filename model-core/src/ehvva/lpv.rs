@@ -124,11 +124,7 @@ pub struct EhvvaLpv<R: Real, const N: usize = DEFAULT_DELAY_SAMPLES> {
 impl<R: Real, const N: usize> EhvvaLpv<R, N> {
     /// A model at rest (valve seated, x1 = Pl) for the operating point `inputs` (measured Ph,
     /// Pl), stepped every `dt_ms` (≤ 0.1 ms).
-    pub fn new(
-        params: &EhvvaParams,
-        inputs: &EhvvaInputs<R>,
-        dt_ms: f64,
-    ) -> Result<Self, EhvvaError> {
+    pub fn new(params: &EhvvaParams, inputs: &EhvvaInputs<R>, dt_ms: f64) -> Result<Self, EhvvaError> {
         let substeps = check_step(params, dt_ms, N)?;
         let preload = R::from_f64(params.spring_preload_mm);
         Ok(Self {
@@ -179,26 +175,16 @@ impl<R: Real, const N: usize> EhvvaLpv<R, N> {
         let cd = self.tables.cd(temp_c);
         let lift = self.x[1] - self.preload;
         let vel = self.x[2];
-        let quad = self
-            .piston
-            .quadratic_gain(cd, lift, vel, stroke, snubber_on);
+        let quad = self.piston.quadratic_gain(cd, lift, vel, stroke, snubber_on);
         let k = -(self.piston.friction + quad * vel.abs()) * self.piston.accel_per_newton;
-        [
-            inv_tau,
-            k,
-            p_high_delayed * inv_tau,
-            p_low_delayed * inv_tau,
-            p_low,
-        ]
+        [inv_tau, k, p_high_delayed * inv_tau, p_low_delayed * inv_tau, p_low]
     }
 }
 
 impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaLpv<R, N> {
     fn step(&mut self, u_pilot: bool, inputs: &EhvvaInputs<R>) -> R {
         let stroke = self.piston.stroke(inputs.lift_high);
-        let (td_open, td_close) = self
-            .tables
-            .t_delay_pair_ms(inputs.p_supply_mpa, inputs.temp_c);
+        let (td_open, td_close) = self.tables.t_delay_pair_ms(inputs.p_supply_mpa, inputs.temp_c);
         let open_is_longer = td_open >= td_close;
         let d_open = td_open * self.inv_dt;
         let d_close = td_close * self.inv_dt;
@@ -280,11 +266,7 @@ mod tests {
             [0.0, 0.0, 1.0],
             [p.area_top_mm2 * per_n, -p.spring_n_per_mm * per_n, -3.0],
         ];
-        let expect_b = [
-            [60.0, 9.0],
-            [0.0, 0.0],
-            [-p.area_bottom_mm2 * per_n * 1.5; 2],
-        ];
+        let expect_b = [[60.0, 9.0], [0.0, 0.0], [-p.area_bottom_mm2 * per_n * 1.5; 2]];
         for i in 0..3 {
             for j in 0..3 {
                 assert!((a[i][j] - expect_a[i][j]).abs() < 1e-12, "A[{i}][{j}]");

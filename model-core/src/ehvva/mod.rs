@@ -100,15 +100,11 @@ mod piston;
 pub mod reduced;
 pub mod tables;
 
-pub use event::{
-    mean_relative_error_pct, run_event, run_event_with, EhvvaPlant, EventMetrics, ValveEvent,
-};
+pub use event::{mean_relative_error_pct, run_event, run_event_with, EhvvaPlant, EventMetrics, ValveEvent};
 #[cfg(feature = "std")]
 pub use event::{run_event_trace, EventTrace};
 pub use full::EhvvaFull;
 pub use lpv::{EhvvaLpv, LpvAffine, N_THETA};
-pub use params::{
-    EhvvaError, EhvvaInputs, EhvvaParams, EhvvaTableData, EhvvaValveParams, PaperTest, PAPER_TESTS,
-};
+pub use params::{EhvvaError, EhvvaInputs, EhvvaParams, EhvvaTableData, EhvvaValveParams, PaperTest, PAPER_TESTS};
 pub use reduced::EhvvaReduced;
 pub use tables::{t_delay_ms, EhvvaTables, ValveMotionData, VALVE_MOTION_P_BACK_MPA};

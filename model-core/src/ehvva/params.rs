@@ -321,15 +321,9 @@ impl EhvvaParams {
             (self.snub_bottom_len_mm, "snub_bottom_len_mm"),
             (self.cap_high_mm3_per_mpa, "cap_high_mm3_per_mpa"),
             (self.cap_low_mm3_per_mpa, "cap_low_mm3_per_mpa"),
-            (
-                self.relief_high_mm3_per_ms_mpa,
-                "relief_high_mm3_per_ms_mpa",
-            ),
+            (self.relief_high_mm3_per_ms_mpa, "relief_high_mm3_per_ms_mpa"),
             (self.relief_low_mm3_per_ms_mpa, "relief_low_mm3_per_ms_mpa"),
-            (
-                self.delay_nominal_p_supply_mpa,
-                "delay_nominal_p_supply_mpa",
-            ),
+            (self.delay_nominal_p_supply_mpa, "delay_nominal_p_supply_mpa"),
             (self.valve.coil_resistance_ohm, "valve.coil_resistance_ohm"),
             (self.valve.coil_inductance_mh, "valve.coil_inductance_mh"),
             (self.valve.force_gap_mm, "valve.force_gap_mm"),
@@ -342,10 +336,7 @@ impl EhvvaParams {
         let non_negative: [(f64, &'static str); 6] = [
             (self.spring_preload_mm, "spring_preload_mm"),
             (self.friction_n_per_m_s, "friction_n_per_m_s"),
-            (
-                self.area_top_switch_orifice_mm2,
-                "area_top_switch_orifice_mm2",
-            ),
+            (self.area_top_switch_orifice_mm2, "area_top_switch_orifice_mm2"),
             (self.area_bottom_notch_mm2, "area_bottom_notch_mm2"),
             (self.pump_flow_mm3_per_ms, "pump_flow_mm3_per_ms"),
             (self.valve.coil_voltage_v, "valve.coil_voltage_v"),
@@ -378,12 +369,7 @@ impl EhvvaParams {
                 }
             }
         }
-        for row in self
-            .tables
-            .td_open_ms
-            .iter()
-            .chain(self.tables.td_close_ms.iter())
-        {
+        for row in self.tables.td_open_ms.iter().chain(self.tables.td_close_ms.iter()) {
             for &t in row {
                 if !(t.is_finite() && t >= 0.0) {
                     return Err(EhvvaError::InvalidParameter("tables.td_ms"));

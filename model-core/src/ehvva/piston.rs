@@ -193,8 +193,7 @@ impl<R: Real> Piston<R> {
     /// opening; the top chamber returns (At − Ab)·|v| net while closing (volume balance of the
     /// two chambers); relief above and check-valve make-up below the set-point.
     pub fn p_low_rate(&self, p_low: R, p_set: R, vel: R) -> R {
-        let inflow = self.area_bottom * vel.max(R::ZERO)
-            + (self.area_top - self.area_bottom) * (-vel).max(R::ZERO);
+        let inflow = self.area_bottom * vel.max(R::ZERO) + (self.area_top - self.area_bottom) * (-vel).max(R::ZERO);
         (inflow - self.relief_low * (p_low - p_set)) * self.inv_cap_low
     }
 

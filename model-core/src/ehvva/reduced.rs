@@ -52,10 +52,7 @@ pub(crate) fn check_step(params: &EhvvaParams, dt_ms: f64, n: usize) -> Result<u
     let capacity_ms = (n.saturating_sub(1)) as f64 * dt_ms;
     // One extra step: the delayed value is interpolated up to one step ahead.
     if capacity_ms < needed_ms + dt_ms {
-        return Err(EhvvaError::DelayLineTooShort {
-            capacity_ms,
-            needed_ms,
-        });
+        return Err(EhvvaError::DelayLineTooShort { capacity_ms, needed_ms });
     }
     let sub = libm::ceil(dt_ms / MAX_SUBSTEP_MS) as usize;
     Ok(sub.clamp(1, MAX_SUBSTEPS))
@@ -89,11 +86,7 @@ pub struct EhvvaReduced<R: Real, const N: usize = DEFAULT_DELAY_SAMPLES> {
 impl<R: Real, const N: usize> EhvvaReduced<R, N> {
     /// A model at rest (valve seated, Pmo = Pl, accumulators at their set-points) for the
     /// operating point `inputs`, stepped every `dt_ms` (≤ 0.1 ms).
-    pub fn new(
-        params: &EhvvaParams,
-        inputs: &EhvvaInputs<R>,
-        dt_ms: f64,
-    ) -> Result<Self, EhvvaError> {
+    pub fn new(params: &EhvvaParams, inputs: &EhvvaInputs<R>, dt_ms: f64) -> Result<Self, EhvvaError> {
         let substeps = check_step(params, dt_ms, N)?;
         let piston = Piston::new(params)?;
         let tables = EhvvaTables::new(params)?;
@@ -105,7 +98,13 @@ impl<R: Real, const N: usize> EhvvaReduced<R, N> {
             h: R::from_f64(dt_ms / substeps as f64),
             substeps,
             p_mo: inputs.p_back_mpa,
-            m: Moving { lift: R::ZERO, vel: R::ZERO, p_high: inputs.p_supply_mpa, p_low: inputs.p_back_mpa, seat_velocity: None },
+            m: Moving {
+                lift: R::ZERO,
+                vel: R::ZERO,
+                p_high: inputs.p_supply_mpa,
+                p_low: inputs.p_back_mpa,
+                seat_velocity: None,
+            },
             pmo_history: DelayLine::new(inputs.p_back_mpa),
         })
     }
@@ -158,7 +157,15 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaReduced<R, N> {
                 .quadratic_gain(cd, self.m.lift, self.m.vel, stroke, inputs.snubber_on);
             let force = self.piston.static_force(p_top, self.m.p_low, self.m.lift);
             // Piston, end stops and eqs. (7)-(8).
-            self.piston.advance(&mut self.m, force, k, self.h, stroke, inputs.p_supply_mpa, inputs.p_back_mpa);
+            self.piston.advance(
+                &mut self.m,
+                force,
+                k,
+                self.h,
+                stroke,
+                inputs.p_supply_mpa,
+                inputs.p_back_mpa,
+            );
         }
         self.m.lift
     }
@@ -227,11 +234,7 @@ mod tests {
             for _ in 0..300 {
                 assert_eq!(m.step(false, &i), 0.0);
             }
-            let stroke = if lift_high {
-                p.lift_high_mm
-            } else {
-                p.lift_low_mm
-            };
+            let stroke = if lift_high { p.lift_high_mm } else { p.lift_low_mm };
             let mut max: f64 = 0.0;
             for _ in 0..600 {
                 let y = m.step(true, &i);
@@ -250,9 +253,7 @@ mod tests {
         // Eq. (11): the piston sees Pmo only td after the command.
         let p = EhvvaParams::paper_default();
         let i = inputs(7.0, true);
-        let td = EhvvaTables::<f64>::new(&p)
-            .unwrap()
-            .t_delay_ms(7.0, 22.0, true);
+        let td = EhvvaTables::<f64>::new(&p).unwrap().t_delay_ms(7.0, 22.0, true);
         let mut m = EhvvaReduced::<f64>::new(&p, &i, 0.02).unwrap();
         let ev = ValveEvent {
             t_open_ms: 1.0,

@@ -44,10 +44,7 @@ impl<R: Real> EhvvaTables<R> {
 
     /// Like [`Self::new`] with a valve-motion calibration for another valve (e.g.
     /// [`ValveMotionData::from_model`] of the same `params`).
-    pub fn with_valve_motion(
-        params: &EhvvaParams,
-        motion: &ValveMotionData,
-    ) -> Result<Self, EhvvaError> {
+    pub fn with_valve_motion(params: &EhvvaParams, motion: &ValveMotionData) -> Result<Self, EhvvaError> {
         params.validate()?;
         motion.validate()?;
         let lut = |z: [[f64; 5]; 4], what: &'static str| {
@@ -66,8 +63,8 @@ impl<R: Real> EhvvaTables<R> {
             .map_err(|e| EhvvaError::Table("tables.td_open_ms", e))?;
         let td_close = Lut2::new(t.td_p_supply_mpa, t.td_temp_c, t.td_close_ms)
             .map_err(|e| EhvvaError::Table("tables.td_close_ms", e))?;
-        let tau = Lut2::new(t.tau_p_supply_mpa, t.tau_temp_c, t.tau_ms)
-            .map_err(|e| EhvvaError::Table("tables.tau_ms", e))?;
+        let tau =
+            Lut2::new(t.tau_p_supply_mpa, t.tau_temp_c, t.tau_ms).map_err(|e| EhvvaError::Table("tables.tau_ms", e))?;
         let cd = Lut1::new(t.cd_temp_c, t.cd).map_err(|e| EhvvaError::Table("tables.cd", e))?;
         let cd_reference = cd.eval(R::from_f64(CD_REFERENCE_TEMP_C));
         Ok(Self {
@@ -108,8 +105,7 @@ impl<R: Real> EhvvaTables<R> {
     /// Mean effective discharge coefficient Cd(T) (Table 4), with the `viscosity` effect gain.
     pub fn cd(&self, temp_c: R) -> R {
         let table = self.cd.eval(temp_c);
-        (self.cd_reference + self.gain_viscosity * (table - self.cd_reference))
-            .max(R::from_f64(CD_MIN))
+        (self.cd_reference + self.gain_viscosity * (table - self.cd_reference)).max(R::from_f64(CD_MIN))
     }
 
     /// Actuation delay td(Ph, T) in ms (Fig. 4, eq. (11)) for the opening (`true`, VO) or
@@ -134,17 +130,12 @@ impl<R: Real> EhvvaTables<R> {
         let half = R::from_f64(0.5);
         let mean = half * (vo + vc);
         let half_split = self.gain_direction_delay * half * (vo - vc);
-        (
-            (mean + half_split).max(R::ZERO),
-            (mean - half_split).max(R::ZERO),
-        )
+        ((mean + half_split).max(R::ZERO), (mean - half_split).max(R::ZERO))
     }
 
     /// Main-valve outlet pressure time constant τp(Ph, T) in ms (eq. (10), Fig. 5 top).
     pub fn tau_p_ms(&self, p_supply_mpa: R, temp_c: R) -> R {
-        self.tau
-            .eval(p_supply_mpa, temp_c)
-            .max(R::from_f64(TAU_MIN_MS))
+        self.tau.eval(p_supply_mpa, temp_c).max(R::from_f64(TAU_MIN_MS))
     }
 }
 
@@ -228,9 +219,7 @@ impl ValveMotionData {
                             if t >= onset_ms && t_close_ms.is_none() {
                                 let level = *level_mm.get_or_insert(0.99 * stroke_mm.min(last.1));
                                 if last.1 >= level && y < level {
-                                    t_close_ms = Some(
-                                        last.0 + (level - last.1) / (y - last.1) * (t - last.0),
-                                    );
+                                    t_close_ms = Some(last.0 + (level - last.1) / (y - last.1) * (t - last.0));
                                 }
                             }
                             last = (t, y);
@@ -239,9 +228,9 @@ impl ValveMotionData {
                     let open = m.opening_delay_ms().ok_or(EhvvaError::InvalidParameter(
                         "valve_motion: the valve does not reach 1 % lift",
                     ))?;
-                    let close = t_close_ms.ok_or(EhvvaError::InvalidParameter(
-                        "valve_motion: the valve does not close",
-                    ))? - m.t_command_off_ms;
+                    let close = t_close_ms
+                        .ok_or(EhvvaError::InvalidParameter("valve_motion: the valve does not close"))?
+                        - m.t_command_off_ms;
                     out.open_ms[k][i][j] = open - td_open;
                     out.close_ms[k][i][j] = close - td_close;
                 }
@@ -261,17 +250,10 @@ impl ValveMotionData {
     }
 
     fn validate(&self) -> Result<(), EhvvaError> {
-        let values = self
-            .open_ms
-            .iter()
-            .chain(self.close_ms.iter())
-            .flatten()
-            .flatten();
+        let values = self.open_ms.iter().chain(self.close_ms.iter()).flatten().flatten();
         for &v in values {
             if !(v.is_finite() && (0.0..50.0).contains(&v)) {
-                return Err(EhvvaError::InvalidParameter(
-                    "valve_motion: a time outside 0..50 ms",
-                ));
+                return Err(EhvvaError::InvalidParameter("valve_motion: a time outside 0..50 ms"));
             }
         }
         Ok(())
@@ -279,12 +261,7 @@ impl ValveMotionData {
 }
 
 /// Host convenience: td(Ph, T) in f64 straight from a parameter set.
-pub fn t_delay_ms(
-    params: &EhvvaParams,
-    p_supply_mpa: f64,
-    temp_c: f64,
-    opening: bool,
-) -> Result<f64, EhvvaError> {
+pub fn t_delay_ms(params: &EhvvaParams, p_supply_mpa: f64, temp_c: f64, opening: bool) -> Result<f64, EhvvaError> {
     Ok(EhvvaTables::<f64>::new(params)?.t_delay_ms(p_supply_mpa, temp_c, opening))
 }
 
@@ -337,14 +314,8 @@ mod tests {
             (100.0, 0.70, 3.2, 3.0),
         ] {
             assert!((t.cd(temp) - cd).abs() < 1e-12, "Cd({temp})");
-            assert!(
-                (t.t_delay_ms(5.0, temp, true) - vo).abs() < 1e-9,
-                "VO delay at {temp}"
-            );
-            assert!(
-                (t.t_delay_ms(5.0, temp, false) - vc).abs() < 0.05,
-                "VC delay at {temp}"
-            );
+            assert!((t.t_delay_ms(5.0, temp, true) - vo).abs() < 1e-9, "VO delay at {temp}");
+            assert!((t.t_delay_ms(5.0, temp, false) - vc).abs() < 0.05, "VC delay at {temp}");
         }
     }
 
@@ -357,10 +328,7 @@ mod tests {
             for i in 0..=30 {
                 let p = 5.0 + 0.1 * i as f64;
                 let (vo, vc) = t.t_delay_pair_ms(p, temp);
-                assert!(
-                    vo < last_vo + 1e-12 && vc < last_vc + 1e-12,
-                    "not falling at {p} MPa"
-                );
+                assert!(vo < last_vo + 1e-12 && vc < last_vc + 1e-12, "not falling at {p} MPa");
                 assert!(vc < vo, "VC not below VO at {p} MPa, {temp} °C");
                 last_vo = vo;
                 last_vc = vc;
@@ -415,8 +383,7 @@ mod tests {
     fn stored_valve_motion_matches_the_model() {
         extern crate std;
         let computed = ValveMotionData::from_model(&EhvvaParams::paper_default(), 1.0).unwrap();
-        let r =
-            |a: [[[f64; 5]; 4]; 2]| a.map(|l| l.map(|row| row.map(|v| (v * 1e4).round() / 1e4)));
+        let r = |a: [[[f64; 5]; 4]; 2]| a.map(|l| l.map(|row| row.map(|v| (v * 1e4).round() / 1e4)));
         std::println!(
             "const PAPER_MOTION_OPEN_MS: [[[f64; 5]; 4]; 2] = {:?};",
             r(computed.open_ms)
@@ -470,10 +437,7 @@ mod tests {
             let (td_o, td_c) = t.t_delay_pair_ms(p, temp);
             let (m_o, m_c) = t.t_motion_pair_ms(p, temp, high);
             let (a_o, a_c) = t.t_event_advance_pair_ms(p, temp, high);
-            assert!(
-                m_o > 0.3 && m_o < 1.2 && m_c > 0.15 && m_c < 0.6,
-                "{m_o} {m_c}"
-            );
+            assert!(m_o > 0.3 && m_o < 1.2 && m_c > 0.15 && m_c < 0.6, "{m_o} {m_c}");
             assert!((a_o - td_o - m_o).abs() < 1e-6 && (a_c - td_c - m_c).abs() < 1e-6);
         }
         // A calibration that is not finite or negative is refused, by name.
