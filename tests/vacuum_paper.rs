@@ -87,9 +87,12 @@ fn supply_sag_of_1_5_v_moves_hpt_pressure_by_about_5_kpa_and_the_compensator_rem
     assert!((y1 - y0).abs() < 0.1 * (x1 - x0).abs());
 }
 
+/// (pressure, position) samples of one ramp.
+type PressurePosition = Vec<(f64, f64)>;
+
 /// Slow ramp 20 -> 100 -> 20 % duty (Figs. 9-10 experiment); returns the (p, x) samples of the
 /// up ramp (position increasing) and of the down ramp.
-fn ramp_up_down(params: &VacuumParams, ramp_s: f64) -> (Vec<(f64, f64)>, Vec<(f64, f64)>) {
+fn ramp_up_down(params: &VacuumParams, ramp_s: f64) -> (PressurePosition, PressurePosition) {
     let mut a = actuator::<f64>(params);
     a.settle(&inputs(20.0, 12.0, 20.0));
     let n = (ramp_s / DT_S) as usize;

@@ -150,14 +150,14 @@ pub async fn supervisor(
         }
         // Every 50 ms: all three tasks must have run since the last check.
         scans = scans.wrapping_add(1);
-        if scans % 5 == 0 {
+        if scans.is_multiple_of(5) {
             let beats = shared::HEARTBEATS.each_ref().map(|h| h.load(Ordering::Relaxed));
             if beats.iter().zip(last_beats.iter()).all(|(now, then)| now != then) {
                 pet_watchdog();
             }
             last_beats = beats;
         }
-        if scans % 100 == 0 {
+        if scans.is_multiple_of(100) {
             let m = out.measurements;
             defmt::info!(
                 "{=f32} V, Ph {=f32} MPa, oil {=f32} C, tank {=f32} kPa, ECU {=f32} C, faults {=u32:#x}",

@@ -376,7 +376,7 @@ fn trust_step(h_mat: &[f64], g: &[f64], d: &[f64], free: &[usize], p: usize, del
     }
     // ‖D h(λ)‖ falls monotonically in λ: bracket and bisect in log space.
     let (mut lo, mut hi) = (1e-12f64, 1.0f64);
-    while solve_with(hi).map_or(true, |h| norm_scaled(&h, d) > delta) && hi < 1e30 {
+    while solve_with(hi).is_none_or(|h| norm_scaled(&h, d) > delta) && hi < 1e30 {
         lo = hi;
         hi *= 100.0;
     }

@@ -7,6 +7,7 @@
 //! event from the battery voltage measured then:
 //! - peak time from the RL step response: t_peak = −(L/R) · ln(1 − I_peak·R/U);
 //! - hold duty from the mean coil voltage: d = I_hold·R/U.
+//!
 //! When the battery is too low for the peak current, the peak phase is cut at `t_peak_max_us`
 //! and a fault is reported: the valve may open late, but the coil is never left on full voltage.
 

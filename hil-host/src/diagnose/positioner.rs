@@ -86,12 +86,7 @@ impl PositionerFamily {
     }
 
     /// The regressor columns of a model, already decimated, and their parameter names.
-    fn columns(
-        &self,
-        m: &Motion,
-        effect: Option<&str>,
-        fs: f64,
-    ) -> Result<(Vec<Vec<f64>>, Vec<String>, Vec<f64>), String> {
+    fn columns(&self, m: &Motion, effect: Option<&str>, fs: f64) -> Result<Regression, String> {
         let still = self.v_still_m_s;
         let pos = |v: f64| if v > still { 1.0 } else { 0.0 };
         let neg = |v: f64| if v < -still { 1.0 } else { 0.0 };
@@ -125,6 +120,10 @@ impl PositionerFamily {
         Ok((data, names, self.decimate(&m.force, fs)?))
     }
 }
+
+/// A linear regression problem: the regressor columns, their parameter names, the target (the
+/// measured force), all decimated alike.
+type Regression = (Vec<Vec<f64>>, Vec<String>, Vec<f64>);
 
 impl Family for PositionerFamily {
     fn plant(&self) -> Plant {

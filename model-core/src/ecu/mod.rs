@@ -165,7 +165,7 @@ mod fault_reactions {
                 p.set_duty(d);
             }
             self.pump.set(out.pump_on);
-            if now % 12_500 == 0 {
+            if now.is_multiple_of(12_500) {
                 let duties = [0, 1, 2].map(|k| self.valves[k].duty * 100.0);
                 self.plant
                     .step(duties, self.ecu.measurements().u_batt_v, 100.0, self.pump.on, 0.0125);
