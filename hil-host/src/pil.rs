@@ -47,12 +47,17 @@ pub fn target_dir() -> PathBuf {
     }
 }
 
-/// Where `cargo build --release -p firmware-qemu --target thumbv7em-none-eabihf` puts the ELF.
+/// The cargo profile the firmware images are built with (size-optimised, fat LTO; the
+/// workspace's `[profile.firmware]`).
+pub const FIRMWARE_PROFILE: &str = "firmware";
+
+/// Where `cargo build --profile firmware -p firmware-qemu --target thumbv7em-none-eabihf` puts
+/// the ELF.
 pub fn firmware_elf_path() -> PathBuf {
-    target_dir().join(TARGET).join("release").join(FIRMWARE_PACKAGE)
+    target_dir().join(TARGET).join(FIRMWARE_PROFILE).join(FIRMWARE_PACKAGE)
 }
 
-/// Builds the firmware image (release, locked, the workspace's target directory) and returns
+/// Builds the firmware image (profile `firmware`, locked, the workspace's target directory) and returns
 /// its path. Must not be called while cargo holds the build lock of the same target
 /// directory (from a build script, say); a running test binary is fine.
 pub fn build_firmware() -> Result<PathBuf, String> {
@@ -61,7 +66,8 @@ pub fn build_firmware() -> Result<PathBuf, String> {
         .current_dir(workspace_root())
         .args([
             "build",
-            "--release",
+            "--profile",
+            FIRMWARE_PROFILE,
             "--locked",
             "-p",
             FIRMWARE_PACKAGE,
