@@ -17,6 +17,8 @@ use std::cell::RefCell;
 use std::fmt;
 use std::sync::Arc;
 
+use nalgebra::{DMatrix, DVector};
+
 /// Told the number of each solver iteration as it starts (a progress display's feed).
 pub type IterationObserver = Arc<dyn Fn(usize) + Send + Sync>;
 
@@ -362,7 +364,7 @@ fn trust_step(h_mat: &[f64], g: &[f64], d: &[f64], free: &[usize], p: usize, del
             a[ii * m + ii] += lambda * d[i] * d[i] + 1e-12 * (h_mat[i * p + i] + 1e-300);
             b[ii] = -g[i];
         }
-        let sol = cholesky_solve(&mut a, &mut b, m)?;
+        let sol = cholesky_solve(&a, &b, m)?;
         let mut h = vec![0.0; p];
         for (ii, &i) in free.iter().enumerate() {
             h[i] = sol[ii];
@@ -397,70 +399,54 @@ fn trust_step(h_mat: &[f64], g: &[f64], d: &[f64], free: &[usize], p: usize, del
     best
 }
 
-/// Solves A x = b for symmetric positive definite A (row-major m×m), in place.
-fn cholesky_solve(a: &mut [f64], b: &mut [f64], m: usize) -> Option<Vec<f64>> {
-    for j in 0..m {
-        let mut s = a[j * m + j];
-        for k in 0..j {
-            s -= a[j * m + k] * a[j * m + k];
-        }
-        if !(s > 0.0) {
-            return None;
-        }
-        let l = s.sqrt();
-        a[j * m + j] = l;
-        for i in j + 1..m {
-            let mut t = a[i * m + j];
-            for k in 0..j {
-                t -= a[i * m + k] * a[j * m + k];
-            }
-            a[i * m + j] = t / l;
-        }
-    }
-    let mut y = b.to_vec();
-    for i in 0..m {
-        for k in 0..i {
-            y[i] -= a[i * m + k] * y[k];
-        }
-        y[i] /= a[i * m + i];
-    }
-    for i in (0..m).rev() {
-        for k in i + 1..m {
-            y[i] -= a[k * m + i] * y[k];
-        }
-        y[i] /= a[i * m + i];
-    }
-    Some(y)
+/// Solves A x = b for symmetric positive definite A (row-major m×m) by nalgebra's Cholesky
+/// factorization; `None` when A is not positive definite.
+fn cholesky_solve(a: &[f64], b: &[f64], m: usize) -> Option<Vec<f64>> {
+    let chol = DMatrix::from_row_slice(m, m, a).cholesky()?;
+    let x = chol.solve(&DVector::from_column_slice(b));
+    x.iter().all(|v| v.is_finite()).then(|| x.as_slice().to_vec())
 }
 
-/// Inverse of a symmetric positive definite matrix, `None` when singular.
+/// Inverse of a symmetric positive definite matrix (row-major m×m) from its Cholesky factor,
+/// `None` when it is not positive definite (singular).
 pub fn invert_spd(a: &[f64], m: usize) -> Option<Vec<f64>> {
-    let mut inv = vec![0.0; m * m];
-    for c in 0..m {
-        let mut work = a.to_vec();
-        let mut e = vec![0.0; m];
-        e[c] = 1.0;
-        let col = cholesky_solve(&mut work, &mut e, m)?;
-        for r in 0..m {
-            inv[r * m + c] = col[r];
-        }
-    }
-    Some(inv)
+    let inv = DMatrix::from_row_slice(m, m, a).cholesky()?.inverse();
+    // Row-major out; the inverse is symmetric, so the column-major storage is the same up to
+    // rounding, but transpose to be exact about the layout.
+    let inv = inv.transpose();
+    inv.iter().all(|v| v.is_finite()).then(|| inv.as_slice().to_vec())
 }
 
-/// Ordinary linear least squares min ‖A x − y‖ by the normal equations (A column-major, n×p);
-/// `None` when A has dependent columns. For regressions such as the inverse-model fits.
+/// Linear least squares min ‖A X − Y‖ for several right-hand sides at once (A row-major
+/// n×p, Y row-major n×k, n >= p) by Householder QR (nalgebra): A = QR, X = R⁻¹QᵀY, without
+/// forming AᵀA (whose condition number is the square of A's). `None` when A's columns are
+/// dependent (a diagonal entry of R below 1e-12 of the largest). X row-major p×k.
+pub fn linear_lsq_qr(a: &[f64], n: usize, p: usize, y: &[f64], k: usize) -> Option<Vec<f64>> {
+    if p == 0 || n < p || a.len() != n * p || y.len() != n * k {
+        return None;
+    }
+    let qr = DMatrix::from_row_slice(n, p, a).qr();
+    let r = qr.r();
+    let largest = r.diagonal().iter().fold(0.0f64, |m, d| m.max(d.abs()));
+    if !(largest > 0.0) || r.diagonal().iter().any(|d| !(d.abs() > 1e-12 * largest)) {
+        return None;
+    }
+    let qty = qr.q().transpose() * DMatrix::from_row_slice(n, k, y);
+    let x = r.solve_upper_triangular(&qty)?.transpose();
+    x.iter().all(|v| v.is_finite()).then(|| x.as_slice().to_vec())
+}
+
+/// Ordinary linear least squares min ‖A x − y‖ (A given by its columns, n×p) by QR
+/// ([`linear_lsq_qr`]); `None` when A has dependent columns. For regressions such as the
+/// inverse-model fits.
 pub fn linear_lsq(a_cols: &[Vec<f64>], y: &[f64]) -> Option<Vec<f64>> {
     let p = a_cols.len();
-    let mut ata = vec![0.0; p * p];
-    let mut aty = vec![0.0; p];
-    for i in 0..p {
-        for k in 0..p {
-            ata[i * p + k] = a_cols[i].iter().zip(&a_cols[k]).map(|(u, v)| u * v).sum();
-        }
-        aty[i] = a_cols[i].iter().zip(y).map(|(u, v)| u * v).sum();
+    let n = y.len();
+    if a_cols.iter().any(|c| c.len() != n) {
+        return None;
     }
-    cholesky_solve(&mut ata, &mut aty, p)
+    let a: Vec<f64> = (0..n).flat_map(|i| a_cols.iter().map(move |c| c[i])).collect();
+    linear_lsq_qr(&a, n, p, y, 1)
 }
 
 #[cfg(test)]
@@ -606,5 +592,42 @@ mod tests {
         let y: Vec<f64> = x.iter().map(|x| 3.0 * x - 2.0).collect();
         let c = linear_lsq(&[x, ones], &y).unwrap();
         assert!((c[0] - 3.0).abs() < 1e-9 && (c[1] + 2.0).abs() < 1e-9);
+        // Dependent columns are refused, not solved into noise.
+        let twice: Vec<f64> = (0..50).map(|k| 2.0 * k as f64).collect();
+        let x: Vec<f64> = (0..50).map(|k| k as f64).collect();
+        assert!(linear_lsq(&[x, twice], &y).is_none());
+    }
+
+    /// QR keeps the digits the normal equations lose: a polynomial fit on 1..2 in powers up to
+    /// 7 (condition number of A about 1e7, of AᵀA about 1e14) comes back to 1e-6.
+    #[test]
+    fn qr_least_squares_on_an_ill_conditioned_basis() {
+        let (n, p) = (200, 8);
+        let t: Vec<f64> = (0..n).map(|i| 1.0 + i as f64 / (n - 1) as f64).collect();
+        let truth: Vec<f64> = (0..p).map(|j| (j as f64 - 3.5) / 2.0).collect();
+        let a: Vec<f64> = t.iter().flat_map(|&x| (0..p).map(move |j| x.powi(j as i32))).collect();
+        let y: Vec<f64> = (0..n).map(|i| (0..p).map(|j| a[i * p + j] * truth[j]).sum()).collect();
+        let c = linear_lsq_qr(&a, n, p, &y, 1).unwrap();
+        for j in 0..p {
+            assert!(
+                (c[j] - truth[j]).abs() < 1e-6,
+                "coefficient {j}: {} vs {}",
+                c[j],
+                truth[j]
+            );
+        }
+    }
+
+    #[test]
+    fn spd_inverse_and_refusal() {
+        let a = [4.0, 1.0, 0.5, 1.0, 3.0, 0.2, 0.5, 0.2, 2.0];
+        let inv = invert_spd(&a, 3).unwrap();
+        for i in 0..3 {
+            for j in 0..3 {
+                let e: f64 = (0..3).map(|k| a[i * 3 + k] * inv[k * 3 + j]).sum();
+                assert!((e - if i == j { 1.0 } else { 0.0 }).abs() < 1e-12);
+            }
+        }
+        assert!(invert_spd(&[1.0, 2.0, 2.0, 1.0], 2).is_none(), "indefinite");
     }
 }

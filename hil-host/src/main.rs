@@ -389,7 +389,8 @@ fn identify_evvt(args: &[String]) -> Result<(), CliError> {
     let a = parse_args(args, &["json"])?;
     if a.positional.is_empty() {
         return Err(CliError::Usage(
-            "identify evvt takes one or more closed-loop PRBS logs".into(),
+            "identify evvt takes one or more closed-loop logs (one operating point each, or recordings over several)"
+                .into(),
         ));
     }
     let opts = evvt::EvvtIdentifyOptions::default();
@@ -399,9 +400,12 @@ fn identify_evvt(args: &[String]) -> Result<(), CliError> {
         for n in &log.notices {
             eprintln!("notice: {}: {n}", log.file);
         }
-        let p = evvt::identify_log(&log, &opts).map_err(CliError::Failed)?;
-        print!("{}", p.report);
-        points.push(p);
+        let rec = evvt::identify_recording(&log, &opts).map_err(CliError::Failed)?;
+        print!("{}", rec.report);
+        for p in rec.segments {
+            print!("{}", p.report);
+            points.push(p);
+        }
     }
     print!("{}", evvt::tables_text(&points));
     if let Some(out) = a.get("json") {

@@ -6,7 +6,9 @@
 use std::path::{Path, PathBuf};
 
 use hil_host::generate::evvt::{identification_log, IdentificationExperiment, PhaseSampling};
-use hil_host::identify::evvt::{identify_log, lpv_table, EvvtIdentifyOptions, EvvtPointResult};
+use hil_host::identify::evvt::{
+    identify_log, identify_recording, lpv_table, EvvtIdentifyOptions, EvvtMethod, EvvtPointResult,
+};
 use hil_host::log::{format_log, parse_log};
 use model_core::evvt::{EvvtLpvTable, EvvtParams, EvvtPlant};
 
@@ -235,8 +237,8 @@ fn nine_point_family_gives_tables_with_matching_step_responses() {
 }
 
 /// Bad logs: no kp, no reference column (open loop), a command that does not follow the
-/// stated law, a step-test reference instead of a PRBS. Each error names the file and what
-/// is missing.
+/// stated law, several operating points given to `identify_log`, a constant reference. Each
+/// error names the file (and the segment) and what is missing.
 #[test]
 fn bad_logs_give_errors_naming_file_and_what_is_missing() {
     let x = IdentificationExperiment {
@@ -281,10 +283,47 @@ fn bad_logs_give_errors_naming_file_and_what_is_missing() {
         "{e}"
     );
 
-    // A step/ramp validation log of the diagnosis generator: closed loop, but not a PRBS.
+    // A step/ramp validation log of the diagnosis generator: closed loop, six operating points
+    // of 17 s: not one point, so identify_log sends the user to identify_recording, which
+    // takes it (steps and ramps excite; issue #13).
     let case = hil_host::generate::evvt::generate("none", 4).unwrap();
     let e = identify_text("steps.csv", &case.validation_csv).unwrap_err();
-    assert!(e.starts_with("steps.csv:") && e.contains("two-level PRBS"), "{e}");
+    assert!(
+        e.starts_with("steps.csv:") && e.contains("6 operating points") && e.contains("identify_recording"),
+        "{e}"
+    );
+    let rec = identify_recording(
+        &parse_log("steps.csv", &case.validation_csv, None).unwrap(),
+        &EvvtIdentifyOptions::default(),
+    )
+    .unwrap();
+    assert_eq!(rec.segments.len(), 6, "{}", rec.report);
+    assert!(rec
+        .segments
+        .iter()
+        .all(|p| p.method == EvvtMethod::ClosedLoopSimulation));
+
+    // A constant reference does not excite: refused, naming the segment.
+    let flat: String = good
+        .lines()
+        .map(|l| {
+            if l.starts_with('#') || l.starts_with("t_s") {
+                format!("{l}\n")
+            } else {
+                // Reference 25 deg, command by the law from it: still the stated closed loop.
+                let mut f: Vec<String> = l.split(',').map(str::to_string).collect();
+                let y: f64 = f[5].trim().parse().unwrap();
+                f[4] = "25".into();
+                f[1] = format!("{}", (25.0 * (25.0 - y)).clamp(-1000.0, 1000.0));
+                format!("{}\n", f.join(","))
+            }
+        })
+        .collect();
+    let e = identify_text("flat.csv", &flat).unwrap_err();
+    assert!(
+        e.starts_with("flat.csv: segment 1 (t = 0.00..") && e.contains("does not excite"),
+        "{e}"
+    );
 
     // Through the command line: a missing file is named.
     let out = std::process::Command::new(hil_host_bin())

@@ -344,44 +344,20 @@ fn sim_error(m: &Model, d: &Data, out: &mut [f64]) -> Result<(), String> {
     Ok(())
 }
 
-/// In-place radix-2 FFT (length a power of two), X_m = Σ x_k e^{−2πi mk/n}.
+/// In-place forward FFT (`rustfft`, any length), X_m = Σ x_k e^{−2πi mk/n}.
 fn fft(re: &mut [f64], im: &mut [f64]) {
     let n = re.len();
-    if n < 2 || !n.is_power_of_two() || im.len() != n {
+    if n < 2 || im.len() != n {
         return;
     }
-    let mut j = 0usize;
-    for i in 1..n {
-        let mut bit = n >> 1;
-        while j & bit != 0 {
-            j ^= bit;
-            bit >>= 1;
-        }
-        j |= bit;
-        if i < j {
-            re.swap(i, j);
-            im.swap(i, j);
-        }
-    }
-    let twiddle: Vec<(f64, f64)> = (0..n / 2)
-        .map(|k| (-2.0 * PI * k as f64 / n as f64).sin_cos())
+    let mut x: Vec<rustfft::num_complex::Complex64> = re
+        .iter()
+        .zip(im.iter())
+        .map(|(&r, &i)| rustfft::num_complex::Complex64::new(r, i))
         .collect();
-    let mut len = 2;
-    while len <= n {
-        let stride = n / len;
-        for start in (0..n).step_by(len) {
-            for k in 0..len / 2 {
-                let (s, c) = twiddle[k * stride];
-                let (a, b) = (start + k, start + k + len / 2);
-                let tr = re[b] * c - im[b] * s;
-                let ti = re[b] * s + im[b] * c;
-                re[b] = re[a] - tr;
-                im[b] = im[a] - ti;
-                re[a] += tr;
-                im[a] += ti;
-            }
-        }
-        len <<= 1;
+    rustfft::FftPlanner::new().plan_fft_forward(n).process(&mut x);
+    for ((r, i), c) in re.iter_mut().zip(im.iter_mut()).zip(&x) {
+        (*r, *i) = (c.re, c.im);
     }
 }
 

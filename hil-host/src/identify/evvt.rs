@@ -49,13 +49,42 @@
 //!    as it does in the closed loop, where the data determine G). The refined values are the
 //!    result; the map's values are printed beside them.
 //!
+//! **Recordings.** A log may hold several operating points (a bench recording that sweeps the
+//! nine (N, V) points in one file) and any persistently exciting reference (PRBS, steps,
+//! chirps). [`identify_recording`] first checks the stated law in every row to the log's own
+//! resolution (`motor_cmd_rpm` logged in whole rpm is within ±0.5 rpm of kp (r − y): the step
+//! the command is logged in is found from its values, [`logged_resolution`]), then cuts the log
+//! into segments: engine speed and battery voltage are smoothed by a running median over
+//! ±`settle_window_s`, and a row where either moves by more than its tolerance within that
+//! window belongs to a transition, which is left out and reported; steady stretches shorter than
+//! `min_segment_s` are left out too. A log that is one segment with a two-level PRBS reference is
+//! the paper's experiment and goes steps 2-5 ([`EvvtMethod::PrbsMarkov`]). Every other segment
+//! (several points in one log, or steps, chirps, a PRBS too short for the correlation) is fitted
+//! by the **simulation error of the stated closed loop** ([`EvvtMethod::ClosedLoopSimulation`]):
+//! the PRBS-correlation Markov estimate needs a white two-level input, a closed-loop output-error
+//! fit needs only an input that excites. The logged reference drives u = clamp(kp (r − y_m),
+//! ±max) into α/(s(s+β)) discretized exactly at T, with the measured phase y_m the plant's phase
+//! τ earlier (the cam hold, step 1); α, β, the initial phase and rate are fitted by `lsq::solve`
+//! to the logged phase from the best point of a coarse (β, α/β) grid. The reference is external
+//! to the loop, so the sensor noise and quantization, which the feedback carries into the
+//! command, do not bias the fit (the indirect approach again, in the time domain). A segment
+//! whose reference does not excite (standard deviation below `min_reference_std_deg`, or a 95 %
+//! CI of α or β beyond `max_relative_ci95`) is refused by name.
+//!
+//! Numerics: the Hankel SVD, the Schur eigenvalues (poles), the LU solves (frequency responses,
+//! B from B̃) are nalgebra's, the PRBS regression is solved by QR ([`lsq::linear_lsq_qr`]), the
+//! complex arithmetic is num-complex's.
+//!
 //! Units: phase in crank degrees, command in rpm, so α in crank-deg/(s²·rpm) and β in 1/s,
 //! as model-core's [`EvvtLpvTable`] takes them.
 
 use std::fmt::Write as _;
+use std::ops::Range;
 use std::path::Path;
 
 use model_core::evvt::{zoh, EvvtLpvTable};
+use nalgebra::{DMatrix, DVector, Schur, SVD};
+use num_complex::Complex64;
 
 use crate::log::{read_log, Log, Plant};
 use crate::lsq::{self, LsqOptions};
@@ -70,8 +99,22 @@ pub struct EvvtIdentifyOptions {
     pub hankel_rows: usize,
     /// Largest realization order considered.
     pub max_order: usize,
-    /// Fewest full PRBS clock intervals accepted.
+    /// Fewest full PRBS clock intervals for the paper's method (fewer: the simulation fit).
     pub min_prbs_values: usize,
+    /// Segmentation: engine speed counts as steady within the larger of this, rpm, ...
+    pub rpm_tolerance: f64,
+    /// ... and this share of the speed, %.
+    pub rpm_tolerance_pct: f64,
+    /// Battery voltage counts as steady within this, V.
+    pub voltage_tolerance_v: f64,
+    /// Half-width of the running median and of the steadiness window, s.
+    pub settle_window_s: f64,
+    /// Shortest segment identified, s (shorter steady stretches are left out and reported).
+    pub min_segment_s: f64,
+    /// Least standard deviation of the reference over a segment for the simulation fit, deg.
+    pub min_reference_std_deg: f64,
+    /// Largest 95 % CI of α and β of the simulation fit relative to the value.
+    pub max_relative_ci95: f64,
 }
 
 impl Default for EvvtIdentifyOptions {
@@ -81,14 +124,31 @@ impl Default for EvvtIdentifyOptions {
             hankel_rows: 40,
             max_order: 6,
             min_prbs_values: 300,
+            rpm_tolerance: 25.0,
+            rpm_tolerance_pct: 2.5,
+            voltage_tolerance_v: 0.25,
+            settle_window_s: 0.5,
+            min_segment_s: 10.0,
+            min_reference_std_deg: 0.25,
+            max_relative_ci95: 0.2,
         }
     }
 }
 
-/// The result for one log (one operating point).
+/// The result for one operating point (a log, or a segment of a recording).
 #[derive(Clone, Debug)]
 pub struct EvvtPointResult {
     pub file: String,
+    pub method: EvvtMethod,
+    /// 1-based segment of the log, its rows (0-based, end exclusive) and times.
+    pub segment: usize,
+    pub rows: Range<usize>,
+    pub t_start_s: f64,
+    pub t_end_s: f64,
+    /// The step `motor_cmd_rpm` is logged in (0: full precision).
+    pub cmd_resolution_rpm: f64,
+    /// Standard deviation of the reference over the segment, deg.
+    pub reference_std_deg: f64,
     pub engine_rpm: f64,
     pub u_batt_v: f64,
     pub kp_rpm_per_deg: f64,
@@ -126,6 +186,10 @@ pub struct EvvtPointResult {
     pub fit_iterations: usize,
     pub fit_initial_cost: f64,
     pub fit_cost: f64,
+    /// Simulation fit only (NaN otherwise): share of the phase's variance it explains, %, and
+    /// the rms residual, deg.
+    pub fit_vaf_pct: f64,
+    pub fit_rms_deg: f64,
     /// Rows whose command is at the saturation limit, %.
     pub saturated_pct: f64,
     /// The lines of the per-log report.
@@ -133,236 +197,19 @@ pub struct EvvtPointResult {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Small complex arithmetic and polynomials (for poles and frequency responses).
+// Linear algebra and complex numbers: nalgebra (SVD, Schur eigenvalues, LU) and num-complex.
 
-#[derive(Clone, Copy, Debug, PartialEq)]
-struct Cx(f64, f64);
+type C64 = Complex64;
 
-impl Cx {
-    fn add(self, o: Cx) -> Cx {
-        Cx(self.0 + o.0, self.1 + o.1)
-    }
-    fn sub(self, o: Cx) -> Cx {
-        Cx(self.0 - o.0, self.1 - o.1)
-    }
-    fn mul(self, o: Cx) -> Cx {
-        Cx(self.0 * o.0 - self.1 * o.1, self.0 * o.1 + self.1 * o.0)
-    }
-    fn scale(self, k: f64) -> Cx {
-        Cx(self.0 * k, self.1 * k)
-    }
-    fn div(self, o: Cx) -> Cx {
-        let d = o.0 * o.0 + o.1 * o.1;
-        Cx((self.0 * o.0 + self.1 * o.1) / d, (self.1 * o.0 - self.0 * o.1) / d)
-    }
-    fn abs(self) -> f64 {
-        self.0.hypot(self.1)
-    }
-    fn expj(w: f64) -> Cx {
-        Cx(w.cos(), w.sin())
-    }
-    fn ln(self) -> Cx {
-        Cx(self.abs().ln(), self.1.atan2(self.0))
-    }
+fn expj(w: f64) -> C64 {
+    C64::from_polar(1.0, w)
 }
 
-/// Coefficients of det(zI − A), lowest power first (A row-major n×n), by Faddeev–LeVerrier
-/// (exact in exact arithmetic; fine in f64 for the orders used here, n <= 8).
-fn char_poly(a: &[f64], n: usize) -> Vec<f64> {
-    let mut c = vec![0.0; n + 1];
-    c[n] = 1.0;
-    let mut m = vec![0.0; n * n];
-    for k in 1..=n {
-        // M_k = A M_{k−1} + c_{n−k+1} I
-        let mut next = vec![0.0; n * n];
-        for i in 0..n {
-            for j in 0..n {
-                let mut s = 0.0;
-                for l in 0..n {
-                    s += a[i * n + l] * m[l * n + j];
-                }
-                next[i * n + j] = s + if i == j { c[n - k + 1] } else { 0.0 };
-            }
-        }
-        m = next;
-        let mut tr = 0.0;
-        for i in 0..n {
-            for l in 0..n {
-                tr += a[i * n + l] * m[l * n + i];
-            }
-        }
-        c[n - k] = -tr / k as f64;
-    }
-    c
-}
-
-fn poly_eval(c: &[f64], z: Cx) -> Cx {
-    c.iter()
-        .rev()
-        .fold(Cx(0.0, 0.0), |acc, &ci| acc.mul(z).add(Cx(ci, 0.0)))
-}
-
-fn poly_deriv(c: &[f64]) -> Vec<f64> {
-    c.iter().enumerate().skip(1).map(|(i, &ci)| i as f64 * ci).collect()
-}
-
-/// Roots of a monic polynomial (lowest power first) by the Durand–Kerner iteration.
-fn poly_roots(c: &[f64]) -> Vec<Cx> {
-    let n = c.len().saturating_sub(1);
-    if n == 0 {
-        return Vec::new();
-    }
-    let bound = 1.0 + c[..n].iter().fold(0.0f64, |m, x| m.max(x.abs()));
-    // Starting points spread on a spiral (the usual (0.4 + 0.9i)^k), scaled to the root bound.
-    let mut z = Vec::with_capacity(n);
-    let mut w = Cx(1.0, 0.0);
-    for _ in 0..n {
-        w = w.mul(Cx(0.4, 0.9));
-        z.push(w.scale(bound.min(2.0)));
-    }
-    for _ in 0..2000 {
-        let mut moved = 0.0f64;
-        for i in 0..n {
-            let mut den = Cx(1.0, 0.0);
-            for j in 0..n {
-                if i != j {
-                    den = den.mul(z[i].sub(z[j]));
-                }
-            }
-            if den.abs() == 0.0 {
-                den = Cx(1e-12, 0.0);
-            }
-            let step = poly_eval(c, z[i]).div(den);
-            z[i] = z[i].sub(step);
-            moved = moved.max(step.abs());
-        }
-        if moved < 1e-15 {
-            break;
-        }
-    }
-    z
-}
-
-// ---------------------------------------------------------------------------------------------
-// Dense linear algebra (row-major), small sizes.
-
-fn mat_mul(a: &[f64], b: &[f64], n: usize, k: usize, m: usize) -> Vec<f64> {
-    let mut c = vec![0.0; n * m];
-    for i in 0..n {
-        for l in 0..k {
-            let x = a[i * k + l];
-            if x != 0.0 {
-                for j in 0..m {
-                    c[i * m + j] += x * b[l * m + j];
-                }
-            }
-        }
-    }
-    c
-}
-
-/// Solves A x = b (n×n) by Gaussian elimination with partial pivoting; `None` when singular.
-fn solve_linear(a: &[f64], b: &[f64], n: usize) -> Option<Vec<f64>> {
-    let mut m = a.to_vec();
-    let mut x = b.to_vec();
-    for col in 0..n {
-        let piv = (col..n).max_by(|&i, &j| m[i * n + col].abs().total_cmp(&m[j * n + col].abs()))?;
-        if m[piv * n + col].abs() < 1e-300 {
-            return None;
-        }
-        if piv != col {
-            for j in 0..n {
-                m.swap(col * n + j, piv * n + j);
-            }
-            x.swap(col, piv);
-        }
-        for i in col + 1..n {
-            let f = m[i * n + col] / m[col * n + col];
-            if f != 0.0 {
-                for j in col..n {
-                    m[i * n + j] -= f * m[col * n + j];
-                }
-                x[i] -= f * x[col];
-            }
-        }
-    }
-    for i in (0..n).rev() {
-        let mut s = x[i];
-        for j in i + 1..n {
-            s -= m[i * n + j] * x[j];
-        }
-        x[i] = s / m[i * n + i];
-    }
-    x.iter().all(|v| v.is_finite()).then_some(x)
-}
-
-/// Thin SVD of an m×n matrix (row-major) with m >= n by one-sided Jacobi (Hestenes):
-/// orthogonalizes the columns by plane rotations until every pair is orthogonal to 1e-13.
-/// Returns (U m×n, σ n, V n×n), σ descending, U's columns unit (zero for σ = 0).
-pub fn svd_jacobi(a: &[f64], m: usize, n: usize) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
-    // Work on columns stored contiguously.
-    let mut cols: Vec<Vec<f64>> = (0..n).map(|j| (0..m).map(|i| a[i * n + j]).collect()).collect();
-    let mut v: Vec<Vec<f64>> = (0..n)
-        .map(|j| (0..n).map(|i| if i == j { 1.0 } else { 0.0 }).collect())
-        .collect();
-    for _sweep in 0..60 {
-        let mut rotated = false;
-        for p in 0..n {
-            for q in p + 1..n {
-                let (alpha, beta, gamma) = cols[p]
-                    .iter()
-                    .zip(&cols[q])
-                    .fold((0.0, 0.0, 0.0), |(a, b, g), (x, y)| (a + x * x, b + y * y, g + x * y));
-                if gamma == 0.0 || gamma.abs() <= 1e-13 * (alpha * beta).sqrt() {
-                    continue;
-                }
-                rotated = true;
-                let zeta = (beta - alpha) / (2.0 * gamma);
-                let t = zeta.signum() / (zeta.abs() + (1.0 + zeta * zeta).sqrt());
-                let c = 1.0 / (1.0 + t * t).sqrt();
-                let s = c * t;
-                let (cp, cq) = two_mut(&mut cols, p, q);
-                for (x, y) in cp.iter_mut().zip(cq.iter_mut()) {
-                    let (xp, yq) = (*x, *y);
-                    *x = c * xp - s * yq;
-                    *y = s * xp + c * yq;
-                }
-                let (vp, vq) = two_mut(&mut v, p, q);
-                for (x, y) in vp.iter_mut().zip(vq.iter_mut()) {
-                    let (xp, yq) = (*x, *y);
-                    *x = c * xp - s * yq;
-                    *y = s * xp + c * yq;
-                }
-            }
-        }
-        if !rotated {
-            break;
-        }
-    }
-    let mut idx: Vec<usize> = (0..n).collect();
-    let norms: Vec<f64> = cols
-        .iter()
-        .map(|c| c.iter().map(|x| x * x).sum::<f64>().sqrt())
-        .collect();
-    idx.sort_by(|&i, &j| norms[j].total_cmp(&norms[i]));
-    let mut u = vec![0.0; m * n];
-    let mut vv = vec![0.0; n * n];
-    let mut sigma = vec![0.0; n];
-    for (k, &j) in idx.iter().enumerate() {
-        sigma[k] = norms[j];
-        for i in 0..m {
-            u[i * n + k] = if norms[j] > 0.0 { cols[j][i] / norms[j] } else { 0.0 };
-        }
-        for i in 0..n {
-            vv[i * n + k] = v[j][i];
-        }
-    }
-    (u, sigma, vv)
-}
-
-fn two_mut<T>(v: &mut [T], p: usize, q: usize) -> (&mut T, &mut T) {
-    let (lo, hi) = v.split_at_mut(q);
-    (&mut lo[p], &mut hi[0])
+/// Eigenvalues of a square matrix by nalgebra's real Schur decomposition.
+fn eigenvalues(a: &DMatrix<f64>) -> Result<Vec<C64>, String> {
+    let schur = Schur::try_new(a.clone(), f64::EPSILON, 100_000)
+        .ok_or("the Schur decomposition of the realization did not converge")?;
+    Ok(schur.complex_eigenvalues().iter().copied().collect())
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -432,10 +279,12 @@ fn mean(x: &[f64]) -> f64 {
 }
 
 // ---------------------------------------------------------------------------------------------
+// ---------------------------------------------------------------------------------------------
 // Steps 2-5.
 
 /// The held-pulse response s(k), k = 0..J·p − 1, by the lifted FIR regression (module doc,
-/// step 2).
+/// step 2), solved by QR for the p phases at once ([`lsq::linear_lsq_qr`]: one factorization
+/// of the PRBS regressor, p right-hand sides).
 fn pulse_response(prbs: &PrbsData, phase: &[f64], lags: usize) -> Result<Vec<f64>, String> {
     let p = prbs.hold;
     let r = &prbs.values;
@@ -446,71 +295,74 @@ fn pulse_response(prbs: &PrbsData, phase: &[f64], lags: usize) -> Result<Vec<f64
         return Err(format!("{} PRBS values are too few for {lags} lags", r.len()));
     }
     let q = lags + 1;
-    let mut ata = vec![0.0; q * q];
-    for &n in &rows {
-        for i in 0..q {
-            let xi = if i == lags { 1.0 } else { r[n - i] };
-            for j in 0..=i {
-                let xj = if j == lags { 1.0 } else { r[n - j] };
-                ata[i * q + j] += xi * xj;
-            }
-        }
-    }
-    for i in 0..q {
-        for j in i + 1..q {
-            ata[i * q + j] = ata[j * q + i];
-        }
-    }
-    let inv = lsq::invert_spd(&ata, q).ok_or("the PRBS regression is singular")?;
+    let x: Vec<f64> = rows
+        .iter()
+        .flat_map(|&n| (0..q).map(move |i| if i == lags { 1.0 } else { r[n - i] }))
+        .collect();
+    let y: Vec<f64> = rows
+        .iter()
+        .flat_map(|&n| (0..p).map(move |phi| phase[prbs.offset + n * p + phi]))
+        .collect();
+    let theta = lsq::linear_lsq_qr(&x, rows.len(), q, &y, p).ok_or("the PRBS regression is singular")?;
     let mut s = vec![0.0; lags * p];
-    for phi in 0..p {
-        let mut aty = vec![0.0; q];
-        for &n in &rows {
-            let y = phase[prbs.offset + n * p + phi];
-            for i in 0..lags {
-                aty[i] += r[n - i] * y;
-            }
-            aty[lags] += y;
-        }
-        for j in 0..lags {
-            s[j * p + phi] = (0..q).map(|l| inv[j * q + l] * aty[l]).sum();
+    for j in 0..lags {
+        for phi in 0..p {
+            s[j * p + phi] = theta[j * p + phi];
         }
     }
     Ok(s)
 }
 
-/// A realization (A row-major n×n, B, C).
+/// A realization (A n×n, B, C; D = 0).
 struct StateSpace {
-    n: usize,
-    a: Vec<f64>,
-    b: Vec<f64>,
-    c: Vec<f64>,
+    a: DMatrix<f64>,
+    b: DVector<f64>,
+    c: DVector<f64>,
 }
 
 impl StateSpace {
+    fn n(&self) -> usize {
+        self.b.len()
+    }
     /// Markov parameters C A^(k−1) B, k = 1..=count (D = 0).
     fn markov(&self, count: usize) -> Vec<f64> {
         let mut x = self.b.clone();
         let mut out = Vec::with_capacity(count);
         for _ in 0..count {
-            out.push(self.c.iter().zip(&x).map(|(c, x)| c * x).sum());
-            x = mat_mul(&self.a, &x, self.n, self.n, 1);
+            out.push(self.c.dot(&x));
+            x = &self.a * x;
         }
         out
     }
-    /// Transfer function numerator and denominator (lowest power first), D = 0:
-    /// C adj(zI − A) B = det(zI − A + BC) − det(zI − A).
-    fn tf(&self) -> (Vec<f64>, Vec<f64>) {
-        let n = self.n;
-        let den = char_poly(&self.a, n);
-        let mut abc = self.a.clone();
-        for i in 0..n {
-            for j in 0..n {
-                abc[i * n + j] -= self.b[i] * self.c[j];
-            }
-        }
-        let num: Vec<f64> = char_poly(&abc, n).iter().zip(&den).map(|(x, y)| x - y).collect();
-        (num, den)
+    /// Poles: the eigenvalues of A.
+    fn poles(&self) -> Result<Vec<C64>, String> {
+        eigenvalues(&self.a)
+    }
+    /// Frequency response C (zI − A)⁻¹ B by a complex LU solve; `None` at a pole.
+    fn response(&self, z: C64) -> Option<C64> {
+        let n = self.n();
+        let m = DMatrix::<C64>::from_fn(n, n, |i, j| {
+            let d = if i == j { z } else { C64::new(0.0, 0.0) };
+            d - C64::new(self.a[(i, j)], 0.0)
+        });
+        let b = DVector::<C64>::from_fn(n, |i, _| C64::new(self.b[i], 0.0));
+        let x = m.lu().solve(&b)?;
+        Some((0..n).map(|i| x[i] * self.c[i]).sum())
+    }
+    /// Residue of C (zI − A)⁻¹ B at the simple pole `poles[i]`, by the determinant lemma
+    /// 1 + C (zI − A)⁻¹ B = det(zI − A + BC)/det(zI − A): with μ the eigenvalues of A − BC,
+    /// the residue at λ_i is Π_j (λ_i − μ_j) / Π_{j≠i} (λ_i − λ_j).
+    fn residue(&self, poles: &[C64], i: usize) -> Result<C64, String> {
+        let a_bc = &self.a - &self.b * self.c.transpose();
+        let mu = eigenvalues(&a_bc)?;
+        let lam = poles[i];
+        let num = mu.iter().fold(C64::new(1.0, 0.0), |acc, m| acc * (lam - m));
+        let den = poles
+            .iter()
+            .enumerate()
+            .filter(|(j, _)| *j != i)
+            .fold(C64::new(1.0, 0.0), |acc, (_, l)| acc * (lam - l));
+        Ok(num / den)
     }
 }
 
@@ -522,15 +374,14 @@ fn realize(s: &[f64], hold: usize, rows: usize, max_order: usize) -> Result<(Sta
     if rows < max_order + 2 {
         return Err("the pulse response is too short for the Hankel matrix".into());
     }
-    // H0ᵀ (cols × rows): its SVD gives H0's factors with U and V swapped.
-    let mut h0t = vec![0.0; cols * rows];
-    for i in 0..rows {
-        for j in 0..cols {
-            h0t[j * rows + i] = g[i + j];
-        }
-    }
-    let (ut, sigma, vt) = svd_jacobi(&h0t, cols, rows);
-    // H0 = Uh Σ Vhᵀ with Uh = vt (rows × rows), Vh = ut (cols × rows).
+    // H0 (rows × cols) and its thin SVD H0 = U Σ Vᵀ (nalgebra, singular values descending).
+    let h0 = DMatrix::from_fn(rows, cols, |i, j| g[i + j]);
+    let svd = SVD::new(h0, true, true);
+    let (u, vt) = match (&svd.u, &svd.v_t) {
+        (Some(u), Some(vt)) => (u, vt),
+        _ => return Err("the Hankel SVD gave no singular vectors".into()),
+    };
+    let sigma: Vec<f64> = svd.singular_values.iter().copied().collect();
     let top = max_order.min(rows - 1);
     let mut order = 2;
     let mut best = 0.0;
@@ -543,49 +394,31 @@ fn realize(s: &[f64], hold: usize, rows: usize, max_order: usize) -> Result<(Sta
     }
     let n = order;
     let sq: Vec<f64> = sigma[..n].iter().map(|x| x.sqrt()).collect();
-    if sq.iter().any(|&x| x <= 0.0) {
+    if sq.iter().any(|&x| !(x > 0.0)) {
         return Err("zero Hankel singular value within the chosen order".into());
     }
-    // O = Uh_n Σ^½ (rows × n), Ctrl = Σ^½ Vh_nᵀ (n × cols).
-    let obs: Vec<f64> = (0..rows)
-        .flat_map(|i| (0..n).map(move |k| (i, k)))
-        .map(|(i, k)| vt[i * rows + k] * sq[k])
-        .collect();
-    let ctrl: Vec<f64> = (0..n)
-        .flat_map(|k| (0..cols).map(move |j| (k, j)))
-        .map(|(k, j)| ut[j * rows + k] * sq[k])
-        .collect();
-    // A = Σ^-½ Uhᵀ H1 Vh Σ^-½ with H1 the shifted Hankel.
-    let mut a = vec![0.0; n * n];
-    for k in 0..n {
-        for l in 0..n {
-            let mut acc = 0.0;
-            for i in 0..rows {
-                let u = vt[i * rows + k];
-                if u == 0.0 {
-                    continue;
-                }
-                let mut inner = 0.0;
-                for j in 0..cols {
-                    inner += g[i + j + 1] * ut[j * rows + l];
-                }
-                acc += u * inner;
-            }
-            a[k * n + l] = acc / (sq[k] * sq[l]);
-        }
-    }
-    let c: Vec<f64> = obs[..n].to_vec();
-    let b_tilde: Vec<f64> = (0..n).map(|k| ctrl[k * cols]).collect();
+    // O = U_n Σ^½ (rows × n), Ctrl = Σ^½ V_nᵀ (n × cols); A = Σ^-½ U_nᵀ H1 V_n Σ^-½ with H1
+    // the shifted Hankel (shift invariance).
+    let un = u.columns(0, n);
+    let vtn = vt.rows(0, n);
+    let h1 = DMatrix::from_fn(rows, cols, |i, j| g[i + j + 1]);
+    let core = un.transpose() * h1 * vtn.transpose();
+    let a = DMatrix::from_fn(n, n, |k, l| core[(k, l)] / (sq[k] * sq[l]));
+    let c = DVector::from_fn(n, |k, _| un[(0, k)] * sq[k]);
+    let b_tilde = DVector::from_fn(n, |k, _| vtn[(k, 0)] * sq[k]);
     // B = (I + A + … + A^{p−1})⁻¹ B̃.
-    let mut sum = vec![0.0; n * n];
-    let mut pow: Vec<f64> = (0..n * n).map(|i| if i % (n + 1) == 0 { 1.0 } else { 0.0 }).collect();
+    let mut sum = DMatrix::<f64>::zeros(n, n);
+    let mut pow = DMatrix::<f64>::identity(n, n);
     for _ in 0..hold {
-        sum.iter_mut().zip(&pow).for_each(|(s, p)| *s += p);
-        pow = mat_mul(&pow, &a, n, n, n);
+        sum += &pow;
+        pow = &pow * &a;
     }
-    let b = solve_linear(&sum, &b_tilde, n)
+    let b = sum
+        .lu()
+        .solve(&b_tilde)
+        .filter(|b| b.iter().all(|v| v.is_finite()))
         .ok_or("I + A + … + A^(p−1) is singular: the realization has a pole on the PRBS clock's aliasing circle")?;
-    Ok((StateSpace { n, a, b, c }, sigma, order))
+    Ok((StateSpace { a, b, c }, sigma, order))
 }
 
 /// Model response to one held unit pulse of `hold` samples, k = 0..len−1.
@@ -606,7 +439,7 @@ fn held_pulse_response(ss: &StateSpace, hold: usize, len: usize) -> Vec<f64> {
 
 /// Frequency response of α e^{−sτ}/(s(s+β)) sampled with a ZOH at period T, exactly: with
 /// τ = dT + ε, x⁺ = Φx + Γ0 u(k−d) + Γ1 u(k−d−1), Γ0 = Bd(T−ε), Γ1 = Ad(T−ε)Bd(ε).
-fn model_response(alpha: f64, beta: f64, tau_s: f64, t_s: f64, w_rad_s: f64) -> Cx {
+fn model_response(alpha: f64, beta: f64, tau_s: f64, t_s: f64, w_rad_s: f64) -> C64 {
     let d = (tau_s / t_s).floor();
     let eps = tau_s - d * t_s;
     let full = zoh(alpha, beta, t_s);
@@ -617,91 +450,31 @@ fn model_response(alpha: f64, beta: f64, tau_s: f64, t_s: f64, w_rad_s: f64) -> 
         ge.bd1_deg_per_rpm + g0.ad12_s * ge.bd2_deg_per_s_rpm,
         g0.ad22 * ge.bd2_deg_per_s_rpm,
     );
-    let z = Cx::expj(w_rad_s * t_s);
-    let zi = Cx::expj(-w_rad_s * t_s);
-    let g1 = Cx(gamma0.0, 0.0).add(zi.scale(gamma1.0));
-    let g2 = Cx(gamma0.1, 0.0).add(zi.scale(gamma1.1));
-    let num = z.sub(Cx(full.ad22, 0.0)).mul(g1).add(g2.scale(full.ad12_s));
-    let den = z.sub(Cx(1.0, 0.0)).mul(z.sub(Cx(full.ad22, 0.0)));
-    num.div(den).mul(Cx::expj(-w_rad_s * t_s * d))
+    let z = expj(w_rad_s * t_s);
+    let zi = expj(-w_rad_s * t_s);
+    let g1 = zi * gamma1.0 + gamma0.0;
+    let g2 = zi * gamma1.1 + gamma0.1;
+    let num = (z - full.ad22) * g1 + g2 * full.ad12_s;
+    let den = (z - 1.0) * (z - full.ad22);
+    num / den * expj(-w_rad_s * t_s * d)
 }
 
-/// Identifies one log.
-pub fn identify_log(log: &Log, opts: &EvvtIdentifyOptions) -> Result<EvvtPointResult, String> {
-    let file = log.file.as_str();
-    if log.plant != Plant::Evvt {
-        return Err(format!(
-            "{file}: plant is `{}`, identify evvt needs an `evvt` log",
-            log.plant
-        ));
-    }
-    let reference = log.col("phase_ref_deg").ok_or_else(|| {
-        format!("{file}: no phase_ref_deg column: this is an open-loop log; identify evvt needs the closed-loop PRBS experiment (phase_ref_deg and `# kp:`)")
-    })?;
-    let kp = log.meta_f64("kp").map_err(|e| e.to_string())?.ok_or_else(|| {
-        format!("{file}: no `# kp:` metadata: the proportional gain of the closed loop (rpm per crank degree) is needed for the indirect approach G = H(I - H)^-1 K^-1")
-    })?;
-    if kp <= 0.0 {
-        return Err(format!("{file}: metadata `kp` is {kp}; it must be positive"));
-    }
-    let t_s = match log.meta_f64("control_period_s").map_err(|e| e.to_string())? {
-        Some(tc) if (tc - log.dt_s).abs() > 0.01 * log.dt_s => {
-            return Err(format!("{file}: metadata control_period_s {tc} s differs from the log's period {} s: identify evvt needs the log on the control grid", log.dt_s));
-        }
-        Some(tc) if tc > 0.0 => tc,
-        _ => log.dt_s,
-    };
-    let cam_events = log.meta_f64("cam_events_per_cycle").map_err(|e| e.to_string())?;
-    let (cmd, phase, rpm, volt) = match (
-        log.col("motor_cmd_rpm"),
-        log.col("phase_deg"),
-        log.col("engine_rpm"),
-        log.col("u_batt_V"),
-    ) {
-        (Some(c), Some(p), Some(n), Some(v)) => (c, p, n, v),
-        _ => return Err(format!("{file}: a required evvt column is missing")),
-    };
-    // The log must obey the law it states (otherwise K is not what the metadata says).
-    let cmd_max = log
-        .meta_f64("motor_cmd_max_rpm")
-        .map_err(|e| e.to_string())?
-        .unwrap_or(f64::INFINITY);
-    let mut disobey = 0usize;
-    let mut first_bad = None;
-    let mut saturated = 0usize;
-    for k in 0..log.len() {
-        let law = kp * (reference[k] - phase[k]);
-        if law.abs() >= cmd_max {
-            saturated += 1;
-        }
-        let expect = law.clamp(-cmd_max, cmd_max);
-        if (cmd[k] - expect).abs() > 1e-6 * (1.0 + expect.abs()) {
-            disobey += 1;
-            first_bad.get_or_insert(k);
-        }
-    }
-    if disobey * 20 > log.len() {
-        return Err(format!(
-            "{file}: motor_cmd_rpm does not follow kp (phase_ref_deg - phase_deg) with kp = {kp} in {disobey} of {} rows (first at data row {}): not the closed loop the metadata states (an open-loop log?)",
-            log.len(),
-            first_bad.unwrap_or(0) + 1
-        ));
-    }
-    let engine_rpm = mean(rpm);
-    let u_batt_v = mean(volt);
-    let measurement_delay_s = match cam_events {
-        Some(e) if e > 0.0 && engine_rpm > 0.0 => 0.5 * 120.0 / (engine_rpm * e),
-        Some(e) => {
-            return Err(format!(
-                "{file}: metadata cam_events_per_cycle {e} (or the engine speed {engine_rpm} rpm) is not positive"
-            ))
-        }
-        None => 0.0,
-    };
-    let prbs = prbs_of(file, reference, opts.min_prbs_values)?;
+/// One segment by the paper's method (module doc, steps 2-5).
+fn identify_by_markov(
+    lp: &ClosedLoop,
+    seg: &Segment,
+    prbs: &PrbsData,
+    opts: &EvvtIdentifyOptions,
+) -> Result<EvvtPointResult, String> {
+    let file = lp.file;
+    let (kp, t_s, cam_events) = (lp.kp, lp.t_s, lp.cam_events);
+    let phase = &lp.phase[seg.rows.clone()];
+    let (engine_rpm, u_batt_v) = (seg.engine_rpm, seg.u_batt_v);
+    let measurement_delay_s = measurement_delay_s(lp, engine_rpm, file)?;
+    let mut res = base_result(lp, seg, EvvtMethod::PrbsMarkov, measurement_delay_s);
     let p = prbs.hold;
     let lags = ((opts.markov_horizon_s / (p as f64 * t_s)).ceil() as usize).max(opts.hankel_rows / p.max(1) + 4);
-    let s = pulse_response(&prbs, phase, lags).map_err(|e| format!("{file}: {e}"))?;
+    let s = pulse_response(prbs, phase, lags).map_err(|e| format!("{file}: {e}"))?;
     let (cl, sigma, order) = realize(&s, p, opts.hankel_rows, opts.max_order).map_err(|e| format!("{file}: {e}"))?;
     let fit = held_pulse_response(&cl, p, s.len());
     let s_mean = mean(&s);
@@ -710,59 +483,43 @@ pub fn identify_log(log: &Log, opts: &EvvtIdentifyOptions) -> Result<EvvtPointRe
     let vaf = 100.0 * (1.0 - ss_res / ss_tot.max(1e-300));
 
     // Indirect approach: G = (A + BC, B/kp, C).
-    let n = cl.n;
-    let mut a_ol = cl.a.clone();
-    for i in 0..n {
-        for j in 0..n {
-            a_ol[i * n + j] += cl.b[i] * cl.c[j];
-        }
-    }
     let g = StateSpace {
-        n,
-        a: a_ol,
-        b: cl.b.iter().map(|x| x / kp).collect(),
+        a: &cl.a + &cl.b * cl.c.transpose(),
+        b: &cl.b / kp,
         c: cl.c.clone(),
     };
-    let (h_num, h_den) = cl.tf();
-    let (g_num, g_den) = g.tf();
-    let cl_poles = poly_roots(&h_den);
-    let ol_poles = poly_roots(&g_den);
-    let integ = ol_poles
-        .iter()
-        .copied()
-        .min_by(|x, y| x.sub(Cx(1.0, 0.0)).abs().total_cmp(&y.sub(Cx(1.0, 0.0)).abs()))
-        .ok_or("no poles")?;
-    let s_poles: Vec<Cx> = ol_poles.iter().map(|z| z.ln().scale(1.0 / t_s)).collect();
-    let integrator_pole_s = integ.ln().scale(1.0 / t_s).0;
+    let cl_poles = cl.poles().map_err(|e| format!("{file}: {e}"))?;
+    let ol_poles = g.poles().map_err(|e| format!("{file}: {e}"))?;
+    let integ_i = (0..ol_poles.len())
+        .min_by(|&x, &y| (ol_poles[x] - 1.0).norm().total_cmp(&(ol_poles[y] - 1.0).norm()))
+        .ok_or_else(|| format!("{file}: the realization has no poles"))?;
+    let integ = ol_poles[integ_i];
+    let s_poles: Vec<C64> = ol_poles.iter().map(|z| z.ln() / t_s).collect();
+    let integrator_pole_s = (integ.ln() / t_s).re;
     // Paper map: slowest other real (or nearly real) stable pole.
     let beta_map = s_poles
         .iter()
         .zip(&ol_poles)
-        .filter(|(_, z)| **z != integ && z.1.abs() < 1e-6 && z.0 > 0.0)
-        .map(|(s, _)| -s.0)
+        .enumerate()
+        .filter(|(i, (_, z))| *i != integ_i && z.im.abs() < 1e-6 && z.re > 0.0)
+        .map(|(_, (s, _))| -s.re)
         .filter(|b| *b > 0.0)
         .fold(f64::NAN, |m: f64, b| if m.is_nan() || b < m { b } else { m });
-    let residue = poly_eval(&g_num, integ).div(poly_eval(&poly_deriv(&g_den), integ));
-    let velocity_gain = residue.0 / t_s;
+    let residue = g.residue(&ol_poles, integ_i).map_err(|e| format!("{file}: {e}"))?;
+    let velocity_gain = residue.re / t_s;
     let alpha_map = beta_map * velocity_gain;
 
     // Crossover of kp·G and the fit band.
-    let g_at = |w: f64| {
-        let z = Cx::expj(w * t_s);
-        poly_eval(&g_num, z).div(poly_eval(&g_den, z))
-    };
-    let h_at = |w: f64| {
-        let z = Cx::expj(w * t_s);
-        poly_eval(&h_num, z).div(poly_eval(&h_den, z))
-    };
+    let g_at = |w: f64| g.response(expj(w * t_s)).unwrap_or(C64::new(f64::NAN, f64::NAN));
+    let h_at = |w: f64| cl.response(expj(w * t_s)).unwrap_or(C64::new(f64::NAN, f64::NAN));
     let nyquist = std::f64::consts::PI / t_s;
     let (mut lo, mut hi) = (1e-3f64, 0.5 * nyquist);
-    if g_at(lo).abs() * kp < 1.0 || g_at(hi).abs() * kp > 1.0 {
+    if !(g_at(lo).norm() * kp >= 1.0 && g_at(hi).norm() * kp <= 1.0) {
         return Err(format!("{file}: the identified loop kp·G has no crossover between {lo} and {hi} rad/s: the identification failed (order {order}, Hankel singular values {:?})", &sigma[..sigma.len().min(6)]));
     }
     for _ in 0..100 {
         let mid = (lo * hi).sqrt();
-        if g_at(mid).abs() * kp > 1.0 {
+        if g_at(mid).norm() * kp > 1.0 {
             lo = mid;
         } else {
             hi = mid;
@@ -772,21 +529,18 @@ pub fn identify_log(log: &Log, opts: &EvvtIdentifyOptions) -> Result<EvvtPointRe
     let w_hi = (5.0 * wc).min(0.2 * nyquist);
     let w_lo = wc / 10.0;
     let freqs: Vec<f64> = (0..40).map(|i| w_lo * (w_hi / w_lo).powf(i as f64 / 39.0)).collect();
-    let targets: Vec<(Cx, f64)> = freqs
+    let targets: Vec<(C64, f64)> = freqs
         .iter()
         .map(|&w| {
             let h = h_at(w);
-            (g_at(w), h.mul(Cx(1.0, 0.0).sub(h)).abs())
+            (g_at(w), (h * (1.0 - h)).norm())
         })
         .collect();
     let residual = |x: &[f64], out: &mut [f64]| -> Result<(), String> {
         for (i, (&w, (gid, wt))) in freqs.iter().zip(&targets).enumerate() {
-            let e = model_response(x[0], x[1], measurement_delay_s, t_s, w)
-                .div(*gid)
-                .sub(Cx(1.0, 0.0))
-                .scale(*wt);
-            out[2 * i] = e.0;
-            out[2 * i + 1] = e.1;
+            let e = (model_response(x[0], x[1], measurement_delay_s, t_s, w) / gid - 1.0) * *wt;
+            out[2 * i] = e.re;
+            out[2 * i + 1] = e.im;
         }
         Ok(())
     };
@@ -814,7 +568,7 @@ pub fn identify_log(log: &Log, opts: &EvvtIdentifyOptions) -> Result<EvvtPointRe
     let _ = writeln!(
         rep,
         "{file}: N = {engine_rpm:.1} rpm, V = {u_batt_v:.2} V, kp = {kp} rpm/deg, control period {t_s} s, {} rows",
-        log.len()
+        phase.len()
     );
     let _ = writeln!(
         rep,
@@ -824,7 +578,7 @@ pub fn identify_log(log: &Log, opts: &EvvtIdentifyOptions) -> Result<EvvtPointRe
         prbs.centre,
         p,
         p as f64 * t_s,
-        100.0 * saturated as f64 / log.len() as f64
+        res.saturated_pct
     );
     match cam_events {
         Some(e) => {
@@ -857,13 +611,13 @@ pub fn identify_log(log: &Log, opts: &EvvtIdentifyOptions) -> Result<EvvtPointRe
         svs.join(" ")
     );
     let _ = writeln!(rep, "  order {order} (largest gap σ{order}/σ{} = {:.1} over orders 2..={}); realization reproduces s(k) with VAF {vaf:.2} %", order + 1, sigma[order - 1] / sigma[order].max(1e-300), opts.max_order);
-    let fmt_z = |v: &[Cx]| {
+    let fmt_z = |v: &[C64]| {
         v.iter()
             .map(|z| {
-                if z.1.abs() < 1e-9 {
-                    format!("{:.5}", z.0)
+                if z.im.abs() < 1e-9 {
+                    format!("{:.5}", z.re)
                 } else {
-                    format!("{:.5}{:+.5}i", z.0, z.1)
+                    format!("{:.5}{:+.5}i", z.re, z.im)
                 }
             })
             .collect::<Vec<_>>()
@@ -893,49 +647,700 @@ pub fn identify_log(log: &Log, opts: &EvvtIdentifyOptions) -> Result<EvvtPointRe
         ci(fit_res.ci95[1])
     );
 
-    Ok(EvvtPointResult {
-        file: file.to_string(),
-        engine_rpm,
-        u_batt_v,
-        kp_rpm_per_deg: kp,
-        control_period_s: t_s,
-        prbs_hold_periods: p,
-        prbs_values: prbs.values.len(),
-        prbs_amplitude_deg: prbs.amplitude,
-        prbs_centre_deg: prbs.centre,
-        cam_events_per_cycle: cam_events,
-        measurement_delay_s,
-        pulse_response: s,
-        hankel_sv: sigma,
-        order,
-        realization_vaf_pct: vaf,
-        closed_loop_poles_z: cl_poles.iter().map(|z| (z.0, z.1)).collect(),
-        open_loop_poles_z: ol_poles.iter().map(|z| (z.0, z.1)).collect(),
-        integrator_pole_s,
-        alpha_map,
-        beta_map,
-        alpha: fit_res.x[0],
-        beta: fit_res.x[1],
-        alpha_ci95: fit_res.ci95[0],
-        beta_ci95: fit_res.ci95[1],
-        crossover_rad_s: wc,
-        fit_iterations: fit_res.iterations,
-        fit_initial_cost: fit_res.initial_cost,
-        fit_cost: fit_res.cost,
-        saturated_pct: 100.0 * saturated as f64 / log.len() as f64,
+    res.prbs_hold_periods = p;
+    res.prbs_values = prbs.values.len();
+    res.prbs_amplitude_deg = prbs.amplitude;
+    res.prbs_centre_deg = prbs.centre;
+    res.pulse_response = s;
+    res.hankel_sv = sigma;
+    res.order = order;
+    res.realization_vaf_pct = vaf;
+    res.closed_loop_poles_z = cl_poles.iter().map(|z| (z.re, z.im)).collect();
+    res.open_loop_poles_z = ol_poles.iter().map(|z| (z.re, z.im)).collect();
+    res.integrator_pole_s = integrator_pole_s;
+    res.alpha_map = alpha_map;
+    res.beta_map = beta_map;
+    res.alpha = fit_res.x[0];
+    res.beta = fit_res.x[1];
+    res.alpha_ci95 = fit_res.ci95[0];
+    res.beta_ci95 = fit_res.ci95[1];
+    res.crossover_rad_s = wc;
+    res.fit_iterations = fit_res.iterations;
+    res.fit_initial_cost = fit_res.initial_cost;
+    res.fit_cost = fit_res.cost;
+    res.report = rep;
+    Ok(res)
+}
+
+// ---------------------------------------------------------------------------------------------
+// The closed loop a log states, its operating-point segments and the simulation-error fit.
+
+/// How a segment's α, β were found.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum EvvtMethod {
+    /// The paper's: PRBS correlation → Markov parameters → Hankel SVD realization → indirect
+    /// approach → pole map, refined by the frequency-response fit (module doc, steps 2-5).
+    /// Used when the log is one operating point with a two-level PRBS reference.
+    PrbsMarkov,
+    /// α, β (and the initial phase and rate) by the simulation error of the stated closed loop
+    /// from the logged reference (module doc, "Recordings"). Any persistently exciting reference.
+    ClosedLoopSimulation,
+}
+
+impl EvvtMethod {
+    pub fn name(self) -> &'static str {
+        match self {
+            EvvtMethod::PrbsMarkov => "prbs-markov",
+            EvvtMethod::ClosedLoopSimulation => "closed-loop-simulation",
+        }
+    }
+}
+
+/// One stretch of rows at one operating point.
+#[derive(Clone, Debug)]
+pub struct Segment {
+    /// 1-based, in log order.
+    pub index: usize,
+    /// Rows of the log (0-based, end exclusive; data row = index + 1).
+    pub rows: Range<usize>,
+    pub t_start_s: f64,
+    pub t_end_s: f64,
+    /// Means over the segment.
+    pub engine_rpm: f64,
+    pub u_batt_v: f64,
+}
+
+impl Segment {
+    fn describe(&self) -> String {
+        format!(
+            "segment {} (t = {:.2}..{:.2} s, data rows {}-{}, {:.0} rpm, {:.2} V)",
+            self.index,
+            self.t_start_s,
+            self.t_end_s,
+            self.rows.start + 1,
+            self.rows.end,
+            self.engine_rpm,
+            self.u_batt_v
+        )
+    }
+}
+
+/// Rows left out of the identification, and why (a transition between operating points, or a
+/// steady stretch too short to identify from).
+#[derive(Clone, Debug)]
+pub struct LeftOut {
+    pub rows: Range<usize>,
+    pub t_start_s: f64,
+    pub t_end_s: f64,
+    pub reason: String,
+}
+
+/// The closed loop a log states (metadata) and obeys (checked row by row).
+struct ClosedLoop<'a> {
+    file: &'a str,
+    kp: f64,
+    t_s: f64,
+    cmd_max: f64,
+    cam_events: Option<f64>,
+    time_s: Vec<f64>,
+    reference: &'a [f64],
+    phase: &'a [f64],
+    rpm: &'a [f64],
+    volt: &'a [f64],
+    /// The step `motor_cmd_rpm` is logged in (0: full precision).
+    cmd_resolution_rpm: f64,
+    /// Rows whose law value is at or beyond the saturation limit.
+    saturated: Vec<bool>,
+}
+
+/// The step a column is logged in: the largest of 1, 2, 5 × 10^k (k = −6..=3), at most 1 % of
+/// the largest magnitude, that every value is a whole multiple of; 0 when none is (values
+/// logged at full precision).
+pub fn logged_resolution(values: &[f64]) -> f64 {
+    let largest = values.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    for k in (-6..=3).rev() {
+        for m in [5.0, 2.0, 1.0] {
+            let q = m * 10f64.powi(k);
+            if q > 0.01 * largest {
+                continue;
+            }
+            if values.iter().all(|v| {
+                let x = v / q;
+                (x - x.round()).abs() <= 1e-6
+            }) {
+                return q;
+            }
+        }
+    }
+    0.0
+}
+
+/// The log-level checks: plant, columns, metadata, and the stated law
+/// `motor_cmd_rpm = clamp(kp (phase_ref_deg − phase_deg), ±motor_cmd_max_rpm)` in every row to
+/// the command's own logged resolution (half a step, plus 1e-6 relative).
+fn closed_loop(log: &Log) -> Result<ClosedLoop<'_>, String> {
+    let file = log.file.as_str();
+    if log.plant != Plant::Evvt {
+        return Err(format!(
+            "{file}: plant is `{}`, identify evvt needs an `evvt` log",
+            log.plant
+        ));
+    }
+    let reference = log.col("phase_ref_deg").ok_or_else(|| {
+        format!("{file}: no phase_ref_deg column: this is an open-loop log; identify evvt needs a closed-loop recording (phase_ref_deg and `# kp:`)")
+    })?;
+    let kp = log.meta_f64("kp").map_err(|e| e.to_string())?.ok_or_else(|| {
+        format!("{file}: no `# kp:` metadata: the proportional gain of the closed loop (rpm per crank degree) is needed for the indirect approach G = H(I - H)^-1 K^-1")
+    })?;
+    if !(kp > 0.0) {
+        return Err(format!("{file}: metadata `kp` is {kp}; it must be positive"));
+    }
+    let t_s = match log.meta_f64("control_period_s").map_err(|e| e.to_string())? {
+        Some(tc) if (tc - log.dt_s).abs() > 0.01 * log.dt_s => {
+            return Err(format!("{file}: metadata control_period_s {tc} s differs from the log's period {} s: identify evvt needs the log on the control grid", log.dt_s));
+        }
+        Some(tc) if tc > 0.0 => tc,
+        _ => log.dt_s,
+    };
+    let cam_events = log.meta_f64("cam_events_per_cycle").map_err(|e| e.to_string())?;
+    if let Some(e) = cam_events {
+        if !(e > 0.0) {
+            return Err(format!(
+                "{file}: metadata cam_events_per_cycle is {e}; it must be positive"
+            ));
+        }
+    }
+    let (cmd, phase, rpm, volt) = match (
+        log.col("motor_cmd_rpm"),
+        log.col("phase_deg"),
+        log.col("engine_rpm"),
+        log.col("u_batt_V"),
+    ) {
+        (Some(c), Some(p), Some(n), Some(v)) => (c, p, n, v),
+        _ => return Err(format!("{file}: a required evvt column is missing")),
+    };
+    let cmd_max = log
+        .meta_f64("motor_cmd_max_rpm")
+        .map_err(|e| e.to_string())?
+        .unwrap_or(f64::INFINITY);
+    // The log must obey the law it states (otherwise K is not what the metadata says), to the
+    // resolution the command is logged in (a command logged in whole rpm is within ±0.5 rpm).
+    let q = logged_resolution(cmd);
+    let mut disobey = 0usize;
+    let mut first_bad = None;
+    let mut saturated = vec![false; log.len()];
+    for k in 0..log.len() {
+        let law = kp * (reference[k] - phase[k]);
+        saturated[k] = law.abs() >= cmd_max;
+        let expect = law.clamp(-cmd_max, cmd_max);
+        if (cmd[k] - expect).abs() > 0.5 * q + 1e-6 * (1.0 + expect.abs()) {
+            disobey += 1;
+            first_bad.get_or_insert(k);
+        }
+    }
+    if disobey * 20 > log.len() {
+        let k = first_bad.unwrap_or(0);
+        return Err(format!(
+            "{file}: motor_cmd_rpm does not follow kp (phase_ref_deg - phase_deg) with kp = {kp} to the log's resolution (±{} rpm: the command is logged {}) in {disobey} of {} rows (first at data row {}: {} logged, {} by the law): not the closed loop the metadata states (an open-loop log?)",
+            0.5 * q,
+            if q > 0.0 { format!("in steps of {q} rpm") } else { "at full precision".to_string() },
+            log.len(),
+            k + 1,
+            cmd[k],
+            (kp * (reference[k] - phase[k])).clamp(-cmd_max, cmd_max)
+        ));
+    }
+    let time_s = match log.col("t_s") {
+        Some(t) => t.to_vec(),
+        None => (0..log.len()).map(|k| k as f64 * log.dt_s).collect(),
+    };
+    Ok(ClosedLoop {
+        file,
+        kp,
+        t_s,
+        cmd_max,
+        cam_events,
+        time_s,
+        reference,
+        phase,
+        rpm,
+        volt,
+        cmd_resolution_rpm: q,
+        saturated,
+    })
+}
+
+/// Median of x over the window k − w..=k + w (clipped at the ends).
+fn rolling_median(x: &[f64], w: usize) -> Vec<f64> {
+    let mut buf = Vec::with_capacity(2 * w + 1);
+    (0..x.len())
+        .map(|k| {
+            buf.clear();
+            buf.extend_from_slice(&x[k.saturating_sub(w)..(k + w + 1).min(x.len())]);
+            buf.sort_by(f64::total_cmp);
+            buf[buf.len() / 2]
+        })
+        .collect()
+}
+
+/// max − min of x over the window k − w..=k + w (clipped at the ends).
+fn rolling_range(x: &[f64], w: usize) -> Vec<f64> {
+    (0..x.len())
+        .map(|k| {
+            let s = &x[k.saturating_sub(w)..(k + w + 1).min(x.len())];
+            let (lo, hi) = s.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+                (lo.min(*v), hi.max(*v))
+            });
+            hi - lo
+        })
+        .collect()
+}
+
+/// Cuts the log into operating-point segments (module doc, "Recordings"): engine speed and
+/// battery voltage are smoothed by a running median over ±`settle_window_s`; a row is moving
+/// when either smoothed signal spans more than its tolerance within ±`settle_window_s` of it.
+/// Moving rows are transitions, left out; a steady stretch whose level drifts beyond the
+/// tolerance from its start is cut there; steady stretches shorter than `min_segment_s` are
+/// left out.
+fn segment_rows(cl: &ClosedLoop, opts: &EvvtIdentifyOptions) -> (Vec<Segment>, Vec<LeftOut>) {
+    let n = cl.rpm.len();
+    let w = ((opts.settle_window_s / cl.t_s).round() as usize).max(1);
+    let n_med = rolling_median(cl.rpm, w);
+    let v_med = rolling_median(cl.volt, w);
+    let n_rng = rolling_range(&n_med, w);
+    let v_rng = rolling_range(&v_med, w);
+    let tol_n = |level: f64| opts.rpm_tolerance.max(0.01 * opts.rpm_tolerance_pct * level.abs());
+    let moving: Vec<bool> = (0..n)
+        .map(|k| n_rng[k] > tol_n(n_med[k]) || v_rng[k] > opts.voltage_tolerance_v)
+        .collect();
+    let t = &cl.time_s;
+    let stretch = |rows: Range<usize>, reason: String| LeftOut {
+        t_start_s: t[rows.start],
+        t_end_s: t[rows.end - 1],
+        rows,
+        reason,
+    };
+    let mut left_out = Vec::new();
+    let mut pieces: Vec<Range<usize>> = Vec::new();
+    let mut k = 0;
+    while k < n {
+        let start = k;
+        while k < n && moving[k] == moving[start] {
+            k += 1;
+        }
+        if moving[start] {
+            left_out.push(stretch(
+                start..k,
+                format!(
+                    "transition: engine speed {:.0} -> {:.0} rpm, battery {:.2} -> {:.2} V (moving by more than ±{:.0} rpm / ±{:.2} V within ±{} s)",
+                    n_med[start],
+                    n_med[k - 1],
+                    v_med[start],
+                    v_med[k - 1],
+                    tol_n(n_med[start]),
+                    opts.voltage_tolerance_v,
+                    opts.settle_window_s
+                ),
+            ));
+            continue;
+        }
+        // A steady run: cut where its level has drifted beyond the tolerance.
+        let mut s = start;
+        for j in start..k {
+            if (n_med[j] - n_med[s]).abs() > tol_n(n_med[s]) || (v_med[j] - v_med[s]).abs() > opts.voltage_tolerance_v {
+                pieces.push(s..j);
+                s = j;
+            }
+        }
+        pieces.push(s..k);
+    }
+    let mut segments = Vec::new();
+    for rows in pieces {
+        let dur_s = rows.len() as f64 * cl.t_s;
+        if dur_s < opts.min_segment_s {
+            left_out.push(stretch(
+                rows.clone(),
+                format!(
+                    "steady at {:.0} rpm, {:.2} V for only {dur_s:.2} s (less than {} s)",
+                    n_med[rows.start], v_med[rows.start], opts.min_segment_s
+                ),
+            ));
+            continue;
+        }
+        segments.push(Segment {
+            index: segments.len() + 1,
+            t_start_s: t[rows.start],
+            t_end_s: t[rows.end - 1],
+            engine_rpm: mean(&cl.rpm[rows.clone()]),
+            u_batt_v: mean(&cl.volt[rows.clone()]),
+            rows,
+        });
+    }
+    left_out.sort_by_key(|l| l.rows.start);
+    (segments, left_out)
+}
+
+/// What the closed-loop simulation needs of a segment.
+struct LoopData<'a> {
+    reference: &'a [f64],
+    phase: &'a [f64],
+    kp: f64,
+    cmd_max: f64,
+    t_s: f64,
+    tau_s: f64,
+}
+
+/// Simulates the stated loop from the logged reference with x = [α, β, phase0, rate0]:
+/// u(k) = clamp(kp (r(k) − y_m(k)), ±max), the plant α/(s(s+β)) discretized exactly (ZOH) at T,
+/// the measured phase y_m(k) = phase(kT − τ) (τ = dT + ε: the state d + 1 periods back moved on
+/// by T − ε). Fills `out` with y_m − the logged phase.
+fn simulate_loop(x: &[f64], d: &LoopData, out: &mut [f64]) -> Result<(), String> {
+    let (alpha, beta, y0, v0) = (x[0], x[1], x[2], x[3]);
+    let steps = (d.tau_s / d.t_s).floor();
+    let eps = d.tau_s - steps * d.t_s;
+    let back = steps as usize + 1;
+    let full = zoh(alpha, beta, d.t_s);
+    let part = zoh(alpha, beta, d.t_s - eps);
+    let n = d.reference.len();
+    let mut xs: Vec<(f64, f64)> = Vec::with_capacity(n + 1);
+    let mut us: Vec<f64> = Vec::with_capacity(n);
+    xs.push((y0, v0));
+    for k in 0..n {
+        let ym = if k >= back {
+            let j = k - back;
+            let (p, v) = xs[j];
+            p + part.ad12_s * v + part.bd1_deg_per_rpm * us[j]
+        } else {
+            y0
+        };
+        if !ym.is_finite() || ym.abs() > 1e6 {
+            return Err(format!("the simulated loop diverges at α = {alpha}, β = {beta}"));
+        }
+        let u = (d.kp * (d.reference[k] - ym)).clamp(-d.cmd_max, d.cmd_max);
+        us.push(u);
+        let (p, v) = xs[k];
+        xs.push((
+            p + full.ad12_s * v + full.bd1_deg_per_rpm * u,
+            full.ad22 * v + full.bd2_deg_per_s_rpm * u,
+        ));
+        out[k] = ym - d.phase[k];
+    }
+    Ok(())
+}
+
+/// The simulation-error fit of one segment.
+struct SimFit {
+    x: Vec<f64>,
+    ci95: Vec<Option<f64>>,
+    start: [f64; 2],
+    iterations: usize,
+    initial_cost: f64,
+    cost: f64,
+    vaf_pct: f64,
+    rms_deg: f64,
+}
+
+/// α, β, phase0, rate0 by `lsq::solve` on the simulation error, from the best of a coarse grid
+/// over β (1..32 1/s) and the velocity gain α/β (0.01..0.32 deg/s per rpm).
+fn fit_by_simulation(d: &LoopData) -> Result<SimFit, String> {
+    let n = d.reference.len();
+    let y0 = d.phase[0];
+    let mut out = vec![0.0; n];
+    let mut best = (f64::INFINITY, [0.3, 5.0]);
+    for beta in [1.0, 2.0, 4.0, 8.0, 16.0, 32.0] {
+        for gain in [0.01, 0.02, 0.04, 0.08, 0.16, 0.32] {
+            let x = [gain * beta, beta, y0, 0.0];
+            if simulate_loop(&x, d, &mut out).is_ok() {
+                let cost: f64 = out.iter().map(|e| e * e).sum();
+                if cost < best.0 {
+                    best = (cost, [x[0], x[1]]);
+                }
+            }
+        }
+    }
+    if !best.0.is_finite() {
+        return Err("the simulated loop diverges for every starting α, β".into());
+    }
+    let (lo_y, hi_y) = d
+        .phase
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| (l.min(*v), h.max(*v)));
+    let r = lsq::solve(
+        |x: &[f64], out: &mut [f64]| simulate_loop(x, d, out),
+        &[best.1[0], best.1[1], y0, 0.0],
+        &[1e-5, 0.0, lo_y - 50.0, -1e4],
+        &[100.0, 500.0, hi_y + 50.0, 1e4],
+        n,
+        &LsqOptions {
+            max_iterations: 100,
+            ..Default::default()
+        },
+    )
+    .map_err(|e| format!("closed-loop simulation fit: {e}"))?;
+    let m = mean(d.phase);
+    let ss_tot: f64 = d.phase.iter().map(|y| (y - m).powi(2)).sum();
+    Ok(SimFit {
+        vaf_pct: 100.0 * (1.0 - 2.0 * r.cost / ss_tot.max(1e-300)),
+        rms_deg: (2.0 * r.cost / n as f64).sqrt(),
+        x: r.x,
+        ci95: r.ci95,
+        start: best.1,
+        iterations: r.iterations,
+        initial_cost: r.initial_cost,
+        cost: r.cost,
+    })
+}
+
+fn std_dev(x: &[f64]) -> f64 {
+    let m = mean(x);
+    (x.iter().map(|v| (v - m).powi(2)).sum::<f64>() / x.len().max(1) as f64).sqrt()
+}
+
+/// Mean age of the held phase at engine speed `engine_rpm`, s (module doc, step 1).
+fn measurement_delay_s(cl: &ClosedLoop, engine_rpm: f64, label: &str) -> Result<f64, String> {
+    match cl.cam_events {
+        Some(e) if engine_rpm > 0.0 => Ok(0.5 * 120.0 / (engine_rpm * e)),
+        Some(_) => Err(format!(
+            "{label}: the engine speed {engine_rpm} rpm is not positive: the cam-event sampling has no period"
+        )),
+        None => Ok(0.0),
+    }
+}
+
+/// A result with the common fields filled and the method's fields empty.
+fn base_result(cl: &ClosedLoop, seg: &Segment, method: EvvtMethod, tau_s: f64) -> EvvtPointResult {
+    let rows = seg.rows.clone();
+    let saturated = cl.saturated[rows.clone()].iter().filter(|s| **s).count();
+    EvvtPointResult {
+        file: cl.file.to_string(),
+        method,
+        segment: seg.index,
+        t_start_s: seg.t_start_s,
+        t_end_s: seg.t_end_s,
+        rows: rows.clone(),
+        engine_rpm: seg.engine_rpm,
+        u_batt_v: seg.u_batt_v,
+        kp_rpm_per_deg: cl.kp,
+        control_period_s: cl.t_s,
+        cmd_resolution_rpm: cl.cmd_resolution_rpm,
+        reference_std_deg: std_dev(&cl.reference[rows.clone()]),
+        prbs_hold_periods: 0,
+        prbs_values: 0,
+        prbs_amplitude_deg: f64::NAN,
+        prbs_centre_deg: f64::NAN,
+        cam_events_per_cycle: cl.cam_events,
+        measurement_delay_s: tau_s,
+        pulse_response: Vec::new(),
+        hankel_sv: Vec::new(),
+        order: 2,
+        realization_vaf_pct: f64::NAN,
+        closed_loop_poles_z: Vec::new(),
+        open_loop_poles_z: Vec::new(),
+        integrator_pole_s: f64::NAN,
+        alpha_map: f64::NAN,
+        beta_map: f64::NAN,
+        alpha: f64::NAN,
+        beta: f64::NAN,
+        alpha_ci95: None,
+        beta_ci95: None,
+        crossover_rad_s: f64::NAN,
+        fit_iterations: 0,
+        fit_initial_cost: f64::NAN,
+        fit_cost: f64::NAN,
+        fit_vaf_pct: f64::NAN,
+        fit_rms_deg: f64::NAN,
+        saturated_pct: 100.0 * saturated as f64 / rows.len().max(1) as f64,
+        report: String::new(),
+    }
+}
+
+/// One segment by the closed-loop simulation error (any persistently exciting reference).
+fn identify_by_simulation(
+    cl: &ClosedLoop,
+    seg: &Segment,
+    opts: &EvvtIdentifyOptions,
+) -> Result<EvvtPointResult, String> {
+    let label = format!("{}: {}", cl.file, seg.describe());
+    let tau = measurement_delay_s(cl, seg.engine_rpm, &label)?;
+    let mut res = base_result(cl, seg, EvvtMethod::ClosedLoopSimulation, tau);
+    let rows = seg.rows.clone();
+    if !(res.reference_std_deg >= opts.min_reference_std_deg) {
+        return Err(format!(
+            "{label}: phase_ref_deg does not excite the loop: its standard deviation over the segment is {:.3} deg (at least {} deg needed): α and β cannot be identified from a constant reference; drive the reference with a PRBS, steps or a chirp",
+            res.reference_std_deg, opts.min_reference_std_deg
+        ));
+    }
+    let data = LoopData {
+        reference: &cl.reference[rows.clone()],
+        phase: &cl.phase[rows.clone()],
+        kp: cl.kp,
+        cmd_max: cl.cmd_max,
+        t_s: cl.t_s,
+        tau_s: tau,
+    };
+    let fit = fit_by_simulation(&data).map_err(|e| format!("{label}: {e}"))?;
+    let (alpha, beta) = (fit.x[0], fit.x[1]);
+    let rel = |ci: Option<f64>, v: f64| ci.map_or(f64::INFINITY, |c| c / v.abs().max(1e-300));
+    let (ra, rb) = (rel(fit.ci95[0], alpha), rel(fit.ci95[1], beta));
+    if !(ra <= opts.max_relative_ci95 && rb <= opts.max_relative_ci95) {
+        return Err(format!(
+            "{label}: α and β are not identifiable from this segment (95 % CI ±{:.1} % and ±{:.1} %, at most ±{:.0} % accepted): phase_ref_deg (standard deviation {:.3} deg) does not excite the loop enough",
+            100.0 * ra,
+            100.0 * rb,
+            100.0 * opts.max_relative_ci95,
+            res.reference_std_deg
+        ));
+    }
+    let mut rep = String::new();
+    let _ = writeln!(
+        rep,
+        "{}: {}: kp = {} rpm/deg, control period {} s, {} rows; command saturated in {:.2} % of rows",
+        cl.file,
+        seg.describe(),
+        cl.kp,
+        cl.t_s,
+        rows.len(),
+        res.saturated_pct
+    );
+    let switches = (1..data.reference.len())
+        .filter(|&k| data.reference[k] != data.reference[k - 1])
+        .count();
+    let _ = writeln!(
+        rep,
+        "  reference: standard deviation {:.3} deg, {switches} changes; measurement delay τ = {:.2} ms ({})",
+        res.reference_std_deg,
+        1e3 * tau,
+        match cl.cam_events {
+            Some(e) => format!("half the cam-event period, {e} per cycle"),
+            None => "phase sampled at every control instant".to_string(),
+        }
+    );
+    let _ = writeln!(
+        rep,
+        "  closed-loop simulation-error fit of α e^(-sτ)/(s(s+β)) under the stated P law from phase_ref_deg to phase_deg (start α = {:.4}, β = {:.3} from a grid): {} iterations, cost {:.3e} -> {:.3e}, fit explains {:.2} % of the phase's variance, rms residual {:.3} deg",
+        fit.start[0], fit.start[1], fit.iterations, fit.initial_cost, fit.cost, fit.vaf_pct, fit.rms_deg
+    );
+    let ci = |c: Option<f64>| c.map_or("n/a".to_string(), |c| format!("{c:.2e}"));
+    let _ = writeln!(
+        rep,
+        "  α = {alpha:.4} ± {} crank-deg/(s²·rpm), β = {beta:.4} ± {} 1/s (95 % CI); initial phase {:.2} deg, rate {:.2} deg/s",
+        ci(fit.ci95[0]),
+        ci(fit.ci95[1]),
+        fit.x[2],
+        fit.x[3]
+    );
+    res.alpha = alpha;
+    res.beta = beta;
+    res.alpha_ci95 = fit.ci95[0];
+    res.beta_ci95 = fit.ci95[1];
+    res.fit_iterations = fit.iterations;
+    res.fit_initial_cost = fit.initial_cost;
+    res.fit_cost = fit.cost;
+    res.fit_vaf_pct = fit.vaf_pct;
+    res.fit_rms_deg = fit.rms_deg;
+    res.report = rep;
+    Ok(res)
+}
+
+/// Everything one log gave: its segments' results and what was left out.
+#[derive(Clone, Debug)]
+pub struct EvvtRecording {
+    pub file: String,
+    pub rows: usize,
+    /// The step `motor_cmd_rpm` is logged in (0: full precision); the law is checked to half of it.
+    pub cmd_resolution_rpm: f64,
+    /// One result per operating-point segment, in log order.
+    pub segments: Vec<EvvtPointResult>,
+    /// Transitions and short stretches, in log order.
+    pub left_out: Vec<LeftOut>,
+    /// The recording's lines (the law check, segments, left-out stretches); each segment's
+    /// own lines are in its `report`.
+    pub report: String,
+}
+
+/// Identifies a log: one operating point or a recording over several (module doc,
+/// "Recordings"). A log that is one segment with a two-level PRBS reference goes the paper's
+/// way ([`EvvtMethod::PrbsMarkov`]); every other segment by the closed-loop simulation error.
+pub fn identify_recording(log: &Log, opts: &EvvtIdentifyOptions) -> Result<EvvtRecording, String> {
+    let cl = closed_loop(log)?;
+    let (segs, left_out) = segment_rows(&cl, opts);
+    let mut rep = String::new();
+    let _ = writeln!(
+        rep,
+        "{}: {} rows; motor_cmd_rpm follows kp (phase_ref_deg - phase_deg) to the log's resolution (command logged {}); {} operating-point segment(s), {} stretch(es) left out",
+        cl.file,
+        log.len(),
+        if cl.cmd_resolution_rpm > 0.0 {
+            format!("in steps of {} rpm, checked to ±{} rpm", cl.cmd_resolution_rpm, 0.5 * cl.cmd_resolution_rpm)
+        } else {
+            "at full precision".to_string()
+        },
+        segs.len(),
+        left_out.len()
+    );
+    for s in &segs {
+        let _ = writeln!(rep, "  {}", s.describe());
+    }
+    for l in &left_out {
+        let _ = writeln!(
+            rep,
+            "  left out: t = {:.2}..{:.2} s (data rows {}-{}): {}",
+            l.t_start_s,
+            l.t_end_s,
+            l.rows.start + 1,
+            l.rows.end,
+            l.reason
+        );
+    }
+    if segs.is_empty() {
+        return Err(format!(
+            "{}: no stretch of at least {} s at one operating point (engine speed within ±{} rpm or {} %, battery voltage within ±{} V):\n{rep}",
+            cl.file, opts.min_segment_s, opts.rpm_tolerance, opts.rpm_tolerance_pct, opts.voltage_tolerance_v
+        ));
+    }
+    let single = segs.len() == 1;
+    let mut results = Vec::with_capacity(segs.len());
+    for seg in &segs {
+        let reference = &cl.reference[seg.rows.clone()];
+        let r = match prbs_of(cl.file, reference, opts.min_prbs_values) {
+            Ok(prbs) if single => identify_by_markov(&cl, seg, &prbs, opts)?,
+            _ => identify_by_simulation(&cl, seg, opts)?,
+        };
+        results.push(r);
+    }
+    Ok(EvvtRecording {
+        file: cl.file.to_string(),
+        rows: log.len(),
+        cmd_resolution_rpm: cl.cmd_resolution_rpm,
+        segments: results,
+        left_out,
         report: rep,
     })
 }
 
-/// Reads and identifies each file.
+/// Identifies a log of one operating point (the paper's per-point experiment, or any one
+/// segment); a log with several is refused (use [`identify_recording`]).
+pub fn identify_log(log: &Log, opts: &EvvtIdentifyOptions) -> Result<EvvtPointResult, String> {
+    let mut rec = identify_recording(log, opts)?;
+    if rec.segments.len() != 1 {
+        return Err(format!(
+            "{}: {} operating points in one log; identify_log takes one, identify_recording gives each:\n{}",
+            rec.file,
+            rec.segments.len(),
+            rec.report
+        ));
+    }
+    Ok(rec.segments.remove(0))
+}
+
+/// Reads and identifies each file ([`identify_recording`]); the points of all files, in order.
 pub fn identify_files(paths: &[&Path], opts: &EvvtIdentifyOptions) -> Result<Vec<EvvtPointResult>, String> {
-    paths
-        .iter()
-        .map(|p| {
-            let log = read_log(p, Some(Plant::Evvt)).map_err(|e| e.to_string())?;
-            identify_log(&log, opts)
-        })
-        .collect()
+    let mut points = Vec::new();
+    for p in paths {
+        let log = read_log(p, Some(Plant::Evvt)).map_err(|e| e.to_string())?;
+        points.extend(identify_recording(&log, opts)?.segments);
+    }
+    Ok(points)
 }
 
 /// Groups values within `tol` of each other; returns the sorted group means.
@@ -1001,7 +1406,7 @@ pub fn tables_text(points: &[EvvtPointResult]) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "{:>10} {:>8} {:>6} {:>10} {:>9} {:>10} {:>9}",
+        "{:>10} {:>8} {:>6} {:>10} {:>9} {:>10} {:>9}  method",
         "N rpm", "V", "order", "alpha", "beta", "alpha map", "beta map"
     );
     let mut sorted: Vec<&EvvtPointResult> = points.iter().collect();
@@ -1013,10 +1418,27 @@ pub fn tables_text(points: &[EvvtPointResult]) -> String {
             .then(a.u_batt_v.total_cmp(&b.u_batt_v))
     });
     for p in sorted {
+        let map = |v: f64, w: usize| {
+            if v.is_finite() {
+                format!("{v:>w$.4}")
+            } else {
+                format!("{:>w$}", "-")
+            }
+        };
         let _ = writeln!(
             s,
-            "{:>10.1} {:>8.2} {:>6} {:>10.4} {:>9.4} {:>10.4} {:>9.4}",
-            p.engine_rpm, p.u_batt_v, p.order, p.alpha, p.beta, p.alpha_map, p.beta_map
+            "{:>10.1} {:>8.2} {:>6} {:>10.4} {:>9.4} {} {}  {} segment {} ({:.1}..{:.1} s)",
+            p.engine_rpm,
+            p.u_batt_v,
+            p.order,
+            p.alpha,
+            p.beta,
+            map(p.alpha_map, 10),
+            map(p.beta_map, 9),
+            p.method.name(),
+            p.segment,
+            p.t_start_s,
+            p.t_end_s
         );
     }
     match lpv_table(points) {
@@ -1054,7 +1476,7 @@ pub fn tables_text(points: &[EvvtPointResult]) -> String {
 }
 
 /// The `--json` document: `{"points": [{"engine_rpm", "u_batt_V", "alpha", "beta", "order",
-/// ...}]}` (the grid table follows from the points with [`lpv_table`]).
+/// "method", "segment", "t_start_s", "t_end_s", ...}]}` (the grid table follows from the points with [`lpv_table`]).
 pub fn to_json(points: &[EvvtPointResult]) -> serde_json::Value {
     let pts: Vec<serde_json::Value> = points
         .iter()
@@ -1066,6 +1488,10 @@ pub fn to_json(points: &[EvvtPointResult]) -> serde_json::Value {
                 "beta": p.beta,
                 "order": p.order,
                 "file": p.file,
+                "method": p.method.name(),
+                "segment": p.segment,
+                "t_start_s": p.t_start_s,
+                "t_end_s": p.t_end_s,
                 "alpha_ci95": p.alpha_ci95,
                 "beta_ci95": p.beta_ci95,
                 "alpha_pole_map": p.alpha_map,
@@ -1086,39 +1512,72 @@ pub fn to_json(points: &[EvvtPointResult]) -> serde_json::Value {
 mod tests {
     use super::*;
 
+    /// Poles from nalgebra's Schur form, frequency response by the LU solve and the residue by
+    /// the determinant lemma, against a system written as partial fractions:
+    /// G(z) = 2/(z − 1) + 0.5/(z − 0.9) + (z − 0.2)/(z² − z + 0.5), a block-diagonal realization.
     #[test]
-    fn jacobi_svd_reconstructs_and_orders() {
-        let (m, n) = (7, 4);
-        let a: Vec<f64> = (0..m * n).map(|i| ((i * 37 % 11) as f64 - 5.0) / 3.0).collect();
-        let (u, s, v) = svd_jacobi(&a, m, n);
-        assert!(s.windows(2).all(|w| w[0] >= w[1]));
-        for i in 0..m {
-            for j in 0..n {
-                let r: f64 = (0..n).map(|k| u[i * n + k] * s[k] * v[j * n + k]).sum();
-                assert!((r - a[i * n + j]).abs() < 1e-12, "{r} vs {}", a[i * n + j]);
-            }
+    fn poles_response_and_residue_of_a_known_system() {
+        #[rustfmt::skip]
+        let a = DMatrix::from_row_slice(4, 4, &[
+            1.0, 0.0, 0.0, 0.0,
+            0.0, 0.9, 0.0, 0.0,
+            0.0, 0.0, 0.0, 1.0,
+            0.0, 0.0, -0.5, 1.0,
+        ]);
+        let ss = StateSpace {
+            a,
+            b: DVector::from_column_slice(&[2.0, 0.5, 0.0, 1.0]),
+            c: DVector::from_column_slice(&[1.0, 1.0, -0.2, 1.0]),
+        };
+        let mut poles = ss.poles().unwrap();
+        poles.sort_by(|x, y| x.re.total_cmp(&y.re).then(x.im.total_cmp(&y.im)));
+        let expect = [
+            C64::new(0.5, -0.5),
+            C64::new(0.5, 0.5),
+            C64::new(0.9, 0.0),
+            C64::new(1.0, 0.0),
+        ];
+        for (r, e) in poles.iter().zip(&expect) {
+            assert!((r - e).norm() < 1e-12, "{r:?} vs {e:?}");
         }
-        // VᵀV = I.
-        for p in 0..n {
-            for q in 0..n {
-                let d: f64 = (0..n).map(|i| v[i * n + p] * v[i * n + q]).sum();
-                assert!((d - if p == q { 1.0 } else { 0.0 }).abs() < 1e-12);
-            }
+        for z in [C64::new(0.3, 0.8), expj(0.7), C64::new(-1.5, 0.2)] {
+            let direct = 2.0 / (z - 1.0) + 0.5 / (z - 0.9) + (z - 0.2) / (z * z - z + 0.5);
+            let g = ss.response(z).unwrap();
+            assert!((g - direct).norm() < 1e-12 * direct.norm(), "{g} vs {direct}");
         }
+        let at = |p: C64| poles.iter().position(|q| (q - p).norm() < 1e-9).unwrap();
+        assert!((ss.residue(&poles, at(C64::new(1.0, 0.0))).unwrap() - 2.0).norm() < 1e-9);
+        assert!((ss.residue(&poles, at(C64::new(0.9, 0.0))).unwrap() - 0.5).norm() < 1e-9);
     }
 
+    /// The realization of a known second-order pulse response (Markov parameters of a stable
+    /// (A, B, C)) reproduces it, with the order found at the singular-value gap.
     #[test]
-    fn poles_of_a_known_polynomial() {
-        // (z − 1)(z − 0.9)(z² − z + 0.5)
-        let a = [
-            0.9, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, -0.5, 0.0, 0.0, 1.0, 1.0,
-        ];
-        let c = char_poly(&a, 4);
-        let mut roots = poly_roots(&c);
-        roots.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.total_cmp(&y.1)));
-        let expect = [Cx(0.5, -0.5), Cx(0.5, 0.5), Cx(0.9, 0.0), Cx(1.0, 0.0)];
-        for (r, e) in roots.iter().zip(&expect) {
-            assert!(r.sub(*e).abs() < 1e-9, "{r:?} vs {e:?}");
+    fn hankel_realization_reproduces_a_known_system() {
+        let truth = StateSpace {
+            a: DMatrix::from_row_slice(2, 2, &[1.0, 0.01, 0.0, 0.95]),
+            b: DVector::from_column_slice(&[0.0005, 0.1]),
+            c: DVector::from_column_slice(&[1.0, 0.0]),
+        };
+        // Closed loop with unit feedback keeps it stable: A − BC.
+        let cl = StateSpace {
+            a: &truth.a - &truth.b * truth.c.transpose(),
+            b: truth.b.clone(),
+            c: truth.c.clone(),
+        };
+        let hold = 1;
+        let s: Vec<f64> = std::iter::once(0.0).chain(cl.markov(400)).collect();
+        let (ss, sigma, order) = realize(&s, hold, 40, 6).unwrap();
+        assert_eq!(order, 2, "σ = {:?}", &sigma[..4]);
+        assert!(sigma[1] > 1e6 * sigma[2]);
+        let again = ss.markov(100);
+        for k in 0..100 {
+            assert!(
+                (again[k] - s[k + 1]).abs() < 1e-9,
+                "k {k}: {} vs {}",
+                again[k],
+                s[k + 1]
+            );
         }
     }
 
@@ -1128,16 +1587,53 @@ mod tests {
         let z = zoh(alpha, beta, t);
         for &w in &[0.3, 3.0, 30.0] {
             let g = model_response(alpha, beta, 0.0, t, w);
-            let zz = Cx::expj(w * t);
-            let num = zz
-                .sub(Cx(z.ad22, 0.0))
-                .scale(z.bd1_deg_per_rpm)
-                .add(Cx(z.ad12_s * z.bd2_deg_per_s_rpm, 0.0));
-            let den = zz.sub(Cx(1.0, 0.0)).mul(zz.sub(Cx(z.ad22, 0.0)));
-            assert!(g.sub(num.div(den)).abs() < 1e-12 * g.abs());
+            let zz = expj(w * t);
+            let num = (zz - z.ad22) * z.bd1_deg_per_rpm + z.ad12_s * z.bd2_deg_per_s_rpm;
+            let den = (zz - 1.0) * (zz - z.ad22);
+            assert!((g - num / den).norm() < 1e-12 * g.norm());
             // A delay of one period is z^-1 exactly.
             let gd = model_response(alpha, beta, t, t, w);
-            assert!(gd.sub(g.mul(Cx::expj(-w * t))).abs() < 1e-9 * g.abs());
+            assert!((gd - g * expj(-w * t)).norm() < 1e-9 * g.norm());
         }
+    }
+
+    #[test]
+    fn logged_resolution_finds_the_step() {
+        assert_eq!(logged_resolution(&[187.0, -3.0, 1000.0, 12.0]), 1.0);
+        assert_eq!(logged_resolution(&[12.5, -37.5, 250.0]), 0.5);
+        assert_eq!(logged_resolution(&[0.25, 0.5, 10.75]), 0.05);
+        assert_eq!(logged_resolution(&[1.0 / 3.0, 2.0f64.sqrt(), 100.0]), 0.0);
+        assert_eq!(logged_resolution(&[0.0, 0.0]), 0.0);
+    }
+
+    /// The closed-loop simulation with one period of delay at τ = T equals the one with the
+    /// delay split as d = 0, ε = T (the same instant reached two ways), and the fit recovers
+    /// α, β from its own noise-free output under a step reference.
+    #[test]
+    fn closed_loop_simulation_fit_recovers_its_own_parameters() {
+        let reference: Vec<f64> = (0..3000)
+            .map(
+                |k| if (k / 300) % 2 == 0 { 20.0 } else { 30.0 } + if k > 1500 { (k as f64 * 0.01).sin() } else { 0.0 },
+            )
+            .collect();
+        let zero = vec![0.0; reference.len()];
+        let mut d = LoopData {
+            reference: &reference,
+            phase: &zero,
+            kp: 25.0,
+            cmd_max: 1000.0,
+            t_s: 0.01,
+            tau_s: 0.013,
+        };
+        let mut y = vec![0.0; reference.len()];
+        simulate_loop(&[0.3, 4.0, 20.0, 0.0], &d, &mut y).unwrap();
+        d.phase = &y;
+        let fit = fit_by_simulation(&d).unwrap();
+        assert!(
+            (fit.x[0] / 0.3 - 1.0).abs() < 1e-5 && (fit.x[1] / 4.0 - 1.0).abs() < 1e-5,
+            "{:?}",
+            fit.x
+        );
+        assert!(fit.rms_deg < 1e-6);
     }
 }
