@@ -395,7 +395,20 @@ pub fn conditions(sets: &[Events]) -> Vec<Events> {
             }
         }
     }
-    groups.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
+    // By supply pressure, then temperature: pressures within SAME_P_MPA of the group before
+    // count as one (the first event's reading is noisy; a plain sort on it would mix the
+    // temperatures of one pressure in a recording whose conditions come in any order).
+    groups.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut level = f64::NEG_INFINITY;
+    let mut keyed: Vec<(f64, f64, Events)> = Vec::with_capacity(groups.len());
+    for (p, t, g) in groups {
+        if p - level > SAME_P_MPA {
+            level = p;
+        }
+        keyed.push((level, t, g));
+    }
+    keyed.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
+    let groups = keyed;
     groups
         .into_iter()
         .map(|(_, _, mut g)| {
