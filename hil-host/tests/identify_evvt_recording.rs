@@ -38,6 +38,7 @@ struct Reference {
     prbs: InversePrbs<f64>,
     level: f64,
     until_s: f64,
+    until_k: usize,
     chirp_phase: f64,
 }
 
@@ -48,6 +49,7 @@ impl Reference {
             prbs: InversePrbs::<f64>::new(7, 7.5).unwrap(),
             level: 25.0,
             until_s: 0.0,
+            until_k: 0,
             chirp_phase: 0.0,
         }
     }
@@ -56,8 +58,9 @@ impl Reference {
         match self.kind {
             Excitation::Constant => 25.0,
             Excitation::Prbs => {
-                if k % 10 == 0 {
+                if k >= self.until_k {
                     self.level = 25.0 + self.prbs.next_value();
+                    self.until_k = k + 10;
                 }
                 self.level
             }
