@@ -109,6 +109,15 @@ fn at_row(rows: &RowLines, row: usize) -> (Option<usize>, String) {
     }
 }
 
+/// A number as a reader wants it: plain when moderate, in exponent form when huge or tiny.
+fn show(x: f64) -> String {
+    if x != 0.0 && x.is_finite() && !(1e-4..1e9).contains(&x.abs()) {
+        format!("{x:e}")
+    } else {
+        format!("{x}")
+    }
+}
+
 fn parse_number(value: &str) -> Option<f64> {
     value.trim().parse::<f64>().ok().filter(|x| x.is_finite())
 }
@@ -351,7 +360,12 @@ pub fn check_samples(
             let problem = if !x.is_finite() {
                 Some(format!("{x} is not finite"))
             } else if let Some((lo, hi)) = range.filter(|(lo, hi)| x < *lo || x > *hi) {
-                Some(format!("{x} is outside the column's range {lo}..{hi}"))
+                Some(format!(
+                    "{} is outside the column's range {}..{}",
+                    show(x),
+                    show(lo),
+                    show(hi)
+                ))
             } else if flag && x != 0.0 && x != 1.0 {
                 Some(format!("{x} is not a flag (0 or 1)"))
             } else {
@@ -388,7 +402,11 @@ pub fn check_samples(
             source,
             line,
             Some("t_s"),
-            format!("{prefix}time {} does not increase (previous {})", t[i], t[i - 1]),
+            format!(
+                "{prefix}time {} does not increase (previous {})",
+                show(t[i]),
+                show(t[i - 1])
+            ),
         ));
     }
     // The period: the median step (robust to a gap), found in linear time.
@@ -421,8 +439,10 @@ pub fn check_samples(
                 line,
                 Some("t_s"),
                 format!(
-                    "not uniformly sampled: step {s} s between {} deviates {dev:.1} % from the period {dt_s} s (1 % accepted)",
-                    between(i)
+                    "not uniformly sampled: step {} s between {} deviates {dev:.1} % from the period {} s (1 % accepted)",
+                    show(s),
+                    between(i),
+                    show(dt_s)
                 ),
             ));
         }
