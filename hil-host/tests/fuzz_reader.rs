@@ -346,7 +346,10 @@ fn mutated() -> impl Strategy<Value = Vec<u8>> {
 /// are mostly plausible and sometimes any f64 (NaN, infinities, subnormals, huge), a time base
 /// that is uniform or not, columns of other lengths, extra and duplicate names, metadata from
 /// a small set of good and bad values.
-fn tables() -> impl Strategy<Value = (Vec<(String, String)>, Vec<(String, Vec<f64>)>, Option<Plant>)> {
+/// Metadata, columns and `--plant` for `log_from_columns`.
+type Table = (Vec<(String, String)>, Vec<(String, Vec<f64>)>, Option<Plant>);
+
+fn tables() -> impl Strategy<Value = Table> {
     const N: usize = 8;
     let cell = |lo: f64, hi: f64| prop_oneof![60 => lo..hi, 1 => any::<f64>(), 1 => Just(0.0)];
     let column = move |lo: f64, hi: f64| {

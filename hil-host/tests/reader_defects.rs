@@ -152,7 +152,7 @@ fn invalid_utf8_names_the_line_and_column() {
 /// an editor shows.
 #[test]
 fn time_gaps_name_the_files_lines() {
-    let text = format!("# plant: positioner\n# source: x\n\nt_s,force_N,pos_m\n0,0,0\n\n0.001,0,0\n0.002,0,0\n0.0045,0,0\n0.0055,0,0\n");
+    let text = "# plant: positioner\n# source: x\n\nt_s,force_N,pos_m\n0,0,0\n\n0.001,0,0\n0.002,0,0\n0.0045,0,0\n0.0055,0,0\n".to_string();
     let e = error(&text);
     assert_eq!((e.line, e.column.as_deref()), (Some(9), Some("t_s")), "{e}");
     assert!(e.message.contains("between lines 8 and 9"), "{e}");

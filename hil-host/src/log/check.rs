@@ -122,14 +122,14 @@ fn parse_number(value: &str) -> Option<f64> {
     value.trim().parse::<f64>().ok().filter(|x| x.is_finite())
 }
 
+/// What [`check_meta`] settles: the plant, the metadata as (key, value) in source order, and
+/// notices.
+pub type MetaVerdict = (Plant, Vec<(String, String)>, Vec<String>);
+
 /// Checks the metadata's types and consistency and settles the plant (`plant_override`, from
 /// `--plant`, wins over `# plant:`). Returns the plant, the metadata as (key, value) in
 /// source order, and notices.
-pub fn check_meta(
-    source: &str,
-    meta: &[MetaEntry],
-    plant_override: Option<Plant>,
-) -> Result<(Plant, Vec<(String, String)>, Vec<String>), LogError> {
+pub fn check_meta(source: &str, meta: &[MetaEntry], plant_override: Option<Plant>) -> Result<MetaVerdict, LogError> {
     let mut notices = Vec::new();
     let mut seen: HashMap<&str, &MetaEntry> = HashMap::new();
     let mut unknown = Vec::new();

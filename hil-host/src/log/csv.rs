@@ -515,7 +515,7 @@ mod tests {
         assert_eq!(number("-2,5e-3", true), Some(-2.5e-3));
         assert_eq!(number("1.234,5", true), None);
         assert_eq!(number("1,5", false), None);
-        assert_eq!(number(&"1".repeat(100), true), Some(1.111_111_111_111_111_1e99));
+        assert_eq!(number(&"1".repeat(60), true), "1".repeat(60).parse().ok());
         assert_eq!(number(&format!("{},5", "1".repeat(100)), true), None);
     }
 
