@@ -193,12 +193,30 @@ fn generate(a: GenerateArgs) -> Result<()> {
         .out
         .unwrap_or_else(|| PathBuf::from(format!("out/{}-{}-seed{seed}", plant.name(), a.effect)));
     let claim = Claim::new("generate", format!("{} {} --seed {seed}", plant.name(), a.effect));
+    let known = hil_host::generate::effects(plant);
+    if !known.contains(&a.effect.as_str()) && !(plant == Plant::Evvt && a.effect == "prbs-grid") {
+        use clap::CommandFactory;
+        let mut cmd = Cli::command();
+        cmd.build();
+        let msg = format!(
+            "invalid value '{}' for '<EFFECT>': {} has no such effect\n  [possible values: {}{}]",
+            a.effect,
+            plant.name(),
+            known.join(", "),
+            if plant == Plant::Evvt { ", prbs-grid" } else { "" }
+        );
+        let sub = cmd.find_subcommand_mut("generate").map(|c| c.clone());
+        sub.unwrap_or(cmd)
+            .error(clap::error::ErrorKind::InvalidValue, msg)
+            .exit();
+    }
+    // The directory is judged before the (seconds of) generation.
+    let mut dir = OutputDir::open(&out, claim, a.force)?;
     if plant == Plant::Evvt && a.effect == "prbs-grid" {
         let logs = {
             let _s = Spinner::start("generating the EVVT PRBS identification logs", true);
             hil_host::generate::evvt::identification_grid(seed).map_err(fail)?
         };
-        let mut dir = OutputDir::open(&out, claim, a.force)?;
         for (name, text) in logs {
             dir.write(&name, text.as_bytes())?;
         }
@@ -222,7 +240,6 @@ fn generate(a: GenerateArgs) -> Result<()> {
     tidy_json(&mut truth);
     // The set as a whole: the old truth goes first and the new one comes last, so no reader
     // sees new logs next to an old truth.json; the manifest says when the set is complete.
-    let mut dir = OutputDir::open(&out, claim, a.force)?;
     dir.remove_old("truth.json")?;
     dir.write("estimation.csv", case.estimation_csv.as_bytes())?;
     dir.write("validation.csv", case.validation_csv.as_bytes())?;
@@ -300,9 +317,9 @@ fn pil(a: PilArgs) -> Result<()> {
     let out = a
         .out
         .unwrap_or_else(|| PathBuf::from(format!("out/{}-pil", scenario.name)));
-    let mut dir = OutputDir::open(&out, Claim::new("pil", format!("scenario {}", scenario.name)), a.force)?;
     let elf = pil::find_firmware(a.elf.as_deref()).map_err(fail)?;
     output::protect_inputs(&[&elf]);
+    let mut dir = OutputDir::open(&out, Claim::new("pil", format!("scenario {}", scenario.name)), a.force)?;
     let faults = LinkFaults {
         corrupt_every: a.corrupt_every,
         drop_every: a.drop_every,
@@ -339,13 +356,13 @@ fn target_bench(a: TargetBenchArgs) -> Result<()> {
     use hil_host::pil;
     use hil_host::run::{run_with, NativeLink, RunOptions};
     let scenario = load_scenario(a.scenario.as_deref())?;
+    let elf = pil::find_firmware(a.elf.as_deref()).map_err(fail)?;
+    output::protect_inputs(&[&elf]);
     let mut dir = OutputDir::open(
         &a.out,
         Claim::new("target-bench", format!("scenario {}", scenario.name)),
         a.force,
     )?;
-    let elf = pil::find_firmware(a.elf.as_deref()).map_err(fail)?;
-    output::protect_inputs(&[&elf]);
     // The sensor frames of the scenario's first `steps` lockstep steps, closed loop natively;
     // the target then steps its core on the same frames with every task counted.
     let until_s = f64::from(a.steps) * f64::from(model_core::ecu::lockstep::STEP_US) * 1e-6;

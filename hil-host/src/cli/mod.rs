@@ -121,7 +121,12 @@ Examples:
 fn generate_help() -> String {
     let mut s = String::from("Effects by plant (or `none`, the control case):\n");
     for p in Plant::ALL {
-        s += &format!("  {:<11} {}\n", p.name(), hil_host::generate::effects(p).join(", "));
+        let effects: Vec<&str> = hil_host::generate::effects(p)
+            .iter()
+            .copied()
+            .filter(|e| *e != "none")
+            .collect();
+        s += &format!("  {:<11} {}\n", p.name(), effects.join(", "));
     }
     s += "  evvt        prbs-grid: the nine closed-loop PRBS identification logs instead\n";
     s += "\nExamples:\n  hil-host generate vacuum backlash --seed 3\n  hil-host generate positioner none --seed=7 --out cases/control\n  hil-host generate evvt prbs-grid --out prbs";
