@@ -194,7 +194,8 @@ fn generate(a: GenerateArgs) -> Result<()> {
         .unwrap_or_else(|| PathBuf::from(format!("out/{}-{}-seed{seed}", plant.name(), a.effect)));
     let claim = Claim::new("generate", format!("{} {} --seed {seed}", plant.name(), a.effect));
     let known = hil_host::generate::effects(plant);
-    if !known.contains(&a.effect.as_str()) && !(plant == Plant::Evvt && a.effect == "prbs-grid") {
+    let prbs_grid = plant == Plant::Evvt && a.effect == "prbs-grid";
+    if !(known.contains(&a.effect.as_str()) || prbs_grid) {
         use clap::CommandFactory;
         let mut cmd = Cli::command();
         cmd.build();
