@@ -181,8 +181,12 @@ pub struct QemuOptions {
 pub struct QemuBoard {
     child: Child,
     stream: TcpStream,
-    /// QEMU's stdout: the firmware's defmt frames (decode with `defmt-print -e <elf>`).
+    /// QEMU's stdout: the firmware's defmt frames (decode with `defmt-print -e <elf>`), in
+    /// place once the board is dropped (QEMU streams into a temporary file until then).
     pub defmt_log: PathBuf,
+    /// Where QEMU streams while it runs: stdout, stderr.
+    live: [PathBuf; 2],
+    /// QEMU's stderr, in place once the board is dropped.
     stderr_log: PathBuf,
 }
 
@@ -190,7 +194,20 @@ impl Drop for QemuBoard {
     fn drop(&mut self) {
         let _ = self.child.kill();
         let _ = self.child.wait();
+        // Whole streams only under their final names: a killed host leaves the previous run's
+        // files (or none) and the temporaries.
+        let _ = std::fs::rename(&self.live[0], &self.defmt_log);
+        let _ = std::fs::rename(&self.live[1], &self.stderr_log);
     }
+}
+
+/// The temporary name QEMU streams `file` into while it runs.
+fn live_name(file: &Path) -> PathBuf {
+    let name = file
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    file.with_file_name(format!("{}{name}", crate::output::TMP_PREFIX))
 }
 
 impl QemuBoard {
@@ -206,6 +223,10 @@ impl QemuBoard {
         std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
         let defmt_log = dir.join("defmt.bin");
         let stderr_log = dir.join("qemu-stderr.txt");
+        for f in [&defmt_log, &stderr_log] {
+            crate::output::check_not_input(f).map_err(|e| e.to_string())?;
+        }
+        let live = [live_name(&defmt_log), live_name(&stderr_log)];
         // A port that was free a moment ago; QEMU failing to bind it (a race with another
         // process) is retried on a new one.
         let mut last_err = String::new();
@@ -225,8 +246,8 @@ impl QemuBoard {
             if let Some(p) = &opts.plugin {
                 cmd.args(["-plugin", p]);
             }
-            let out = File::create(&defmt_log).map_err(|e| format!("{}: {e}", defmt_log.display()))?;
-            let err = File::create(&stderr_log).map_err(|e| format!("{}: {e}", stderr_log.display()))?;
+            let out = File::create(&live[0]).map_err(|e| format!("{}: {e}", live[0].display()))?;
+            let err = File::create(&live[1]).map_err(|e| format!("{}: {e}", live[1].display()))?;
             let child = cmd
                 .stdin(Stdio::null())
                 .stdout(out)
@@ -234,25 +255,29 @@ impl QemuBoard {
                 .spawn()
                 .map_err(|e| format!("cannot start {QEMU} ({e}); run tools/setup-qemu.sh"))?;
             let mut board = Pending { child: Some(child) };
-            match connect(&mut board, port, &stderr_log) {
+            match connect(&mut board, port, &live[1]) {
                 Ok(stream) => {
                     let child = board.child.take().ok_or("QEMU process lost")?;
                     return Ok(QemuBoard {
                         child,
                         stream,
                         defmt_log,
+                        live,
                         stderr_log,
                     });
                 }
                 Err(e) => last_err = e,
             }
         }
+        // QEMU's last words stay readable under the usual name.
+        let _ = std::fs::remove_file(&live[0]);
+        let _ = std::fs::rename(&live[1], &stderr_log);
         Err(last_err)
     }
 
     /// What QEMU printed on stderr so far.
     pub fn stderr_text(&self) -> String {
-        std::fs::read_to_string(&self.stderr_log).unwrap_or_default()
+        std::fs::read_to_string(&self.live[1]).unwrap_or_default()
     }
 
     /// Whether QEMU is still running.
