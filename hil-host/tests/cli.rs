@@ -317,3 +317,17 @@ fn a_missing_firmware_image_is_named() {
             "--elf /nonexistent/firmware-qemu: no such firmware image",
         ));
 }
+
+/// The workspace (for the firmware image and the QEMU plugin) is found at run time from the
+/// current directory: cargo runs this test in hil-host/, inside it.
+#[test]
+fn the_workspace_is_found_at_run_time() {
+    let root = hil_host::pil::workspace_root().expect("inside the workspace");
+    let expected = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .unwrap()
+        .canonicalize()
+        .unwrap();
+    assert_eq!(root.canonicalize().unwrap(), expected);
+    assert!(hil_host::pil::firmware_elf_path(&root).ends_with("thumbv7em-none-eabihf/firmware/firmware-qemu"));
+}
