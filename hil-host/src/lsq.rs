@@ -431,8 +431,10 @@ pub fn linear_lsq_qr(a: &[f64], n: usize, p: usize, y: &[f64], k: usize) -> Opti
     if !(largest > 0.0) || r.diagonal().iter().any(|d| !(d.abs() > 1e-12 * largest)) {
         return None;
     }
-    let qty = qr.q().transpose() * DMatrix::from_row_slice(n, k, y);
-    let x = r.solve_upper_triangular(&qty)?.transpose();
+    // QᵀY by the Householder reflectors themselves (Q is never formed).
+    let mut qty = DMatrix::from_row_slice(n, k, y);
+    qr.q_tr_mul(&mut qty);
+    let x = r.solve_upper_triangular(&qty.rows(0, p).into_owned())?.transpose();
     x.iter().all(|v| v.is_finite()).then(|| x.as_slice().to_vec())
 }
 

@@ -54,7 +54,7 @@
 //! chirps). [`identify_recording`] first checks the stated law in every row to the log's own
 //! resolution (`motor_cmd_rpm` logged in whole rpm is within ±0.5 rpm of kp (r − y): the step
 //! the command is logged in is found from its values, [`logged_resolution`]), then cuts the log
-//! into segments: engine speed and battery voltage are smoothed by a running median over
+//! into segments: engine speed and battery voltage are smoothed by a running mean over
 //! ±`settle_window_s`, and a row where either moves by more than its tolerance within that
 //! window belongs to a transition, which is left out and reported; steady stretches shorter than
 //! `min_segment_s` are left out too. A log that is one segment with a two-level PRBS reference is
@@ -107,7 +107,7 @@ pub struct EvvtIdentifyOptions {
     pub rpm_tolerance_pct: f64,
     /// Battery voltage counts as steady within this, V.
     pub voltage_tolerance_v: f64,
-    /// Half-width of the running median and of the steadiness window, s.
+    /// Half-width of the running mean and of the steadiness window, s.
     pub settle_window_s: f64,
     /// Shortest segment identified, s (shorter steady stretches are left out and reported).
     pub min_segment_s: f64,
@@ -870,15 +870,17 @@ fn closed_loop(log: &Log) -> Result<ClosedLoop<'_>, String> {
     })
 }
 
-/// Median of x over the window k − w..=k + w (clipped at the ends).
-fn rolling_median(x: &[f64], w: usize) -> Vec<f64> {
-    let mut buf = Vec::with_capacity(2 * w + 1);
+/// Mean of x over the window k − w..=k + w (clipped at the ends), from prefix sums.
+fn rolling_mean(x: &[f64], w: usize) -> Vec<f64> {
+    let mut prefix = Vec::with_capacity(x.len() + 1);
+    prefix.push(0.0);
+    for v in x {
+        prefix.push(prefix[prefix.len() - 1] + v);
+    }
     (0..x.len())
         .map(|k| {
-            buf.clear();
-            buf.extend_from_slice(&x[k.saturating_sub(w)..(k + w + 1).min(x.len())]);
-            buf.sort_by(f64::total_cmp);
-            buf[buf.len() / 2]
+            let (lo, hi) = (k.saturating_sub(w), (k + w + 1).min(x.len()));
+            (prefix[hi] - prefix[lo]) / (hi - lo) as f64
         })
         .collect()
 }
@@ -897,7 +899,7 @@ fn rolling_range(x: &[f64], w: usize) -> Vec<f64> {
 }
 
 /// Cuts the log into operating-point segments (module doc, "Recordings"): engine speed and
-/// battery voltage are smoothed by a running median over ±`settle_window_s`; a row is moving
+/// battery voltage are smoothed by a running mean over ±`settle_window_s`; a row is moving
 /// when either smoothed signal spans more than its tolerance within ±`settle_window_s` of it.
 /// Moving rows are transitions, left out; a steady stretch whose level drifts beyond the
 /// tolerance from its start is cut there; steady stretches shorter than `min_segment_s` are
@@ -905,8 +907,8 @@ fn rolling_range(x: &[f64], w: usize) -> Vec<f64> {
 fn segment_rows(cl: &ClosedLoop, opts: &EvvtIdentifyOptions) -> (Vec<Segment>, Vec<LeftOut>) {
     let n = cl.rpm.len();
     let w = ((opts.settle_window_s / cl.t_s).round() as usize).max(1);
-    let n_med = rolling_median(cl.rpm, w);
-    let v_med = rolling_median(cl.volt, w);
+    let n_med = rolling_mean(cl.rpm, w);
+    let v_med = rolling_mean(cl.volt, w);
     let n_rng = rolling_range(&n_med, w);
     let v_rng = rolling_range(&v_med, w);
     let tol_n = |level: f64| opts.rpm_tolerance.max(0.01 * opts.rpm_tolerance_pct * level.abs());
