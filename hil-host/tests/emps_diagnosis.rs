@@ -1,12 +1,14 @@
 //! `diagnose` on real measured data: the EMPS benchmark (closed loop, estimation and validation
-//! experiments) in ../shared/data/emps. Skips with a message where ../shared is absent.
+//! experiments) in ../shared/data/emps (or `$SHARED_DIR/data/emps`, for a worktree that sits
+//! elsewhere). Skips with a message where neither is present.
 use std::path::PathBuf;
 use std::process::Command;
 
 fn emps(file: &str) -> Option<PathBuf> {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared/data/emps")
-        .join(file);
+    let shared = std::env::var_os("SHARED_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared"));
+    let p = shared.join("data/emps").join(file);
     if p.exists() {
         Some(p)
     } else {

@@ -27,12 +27,13 @@ use std::sync::Mutex;
 
 use model_core::ehvva::{EhvvaInputs, EhvvaParams, EhvvaPlant, EhvvaReduced, EhvvaTables};
 
+use super::catalogue::{Effect, EhvvaEffect};
 use super::{Family, Fit};
 use crate::log::{Log, Plant};
 use crate::lsq::{solve, LsqOptions, LsqResult};
 
-/// The catalogue effects of this family (DATA-FORMAT.md).
-pub const EFFECTS: [&str; 4] = ["viscosity", "pressure-delay", "direction-delay", "snubber"];
+/// The catalogue effects of this family (DATA-FORMAT.md), from the typed catalogue.
+pub const EFFECTS: [&str; 4] = EhvvaEffect::NAMES;
 
 /// Rest kept before each rising command edge (the segment start), ms.
 pub const PRE_MS: f64 = 1.0;
@@ -401,39 +402,21 @@ pub const BASELINE_KNOBS: [Knob; 4] = [
     },
 ];
 
-/// The knob each catalogue effect adds.
+/// The knob each catalogue effect adds: its model-core gain, 0 (neutral, the baseline) to 2
+/// (1 = the paper).
 pub fn effect_knob(effect: &str) -> Result<Knob, String> {
-    Ok(match effect {
-        "viscosity" => Knob {
-            name: "viscosity_gain",
-            lo: 0.0,
-            hi: 2.0,
-            apply: |p, v| p.effect_viscosity = v,
-        },
-        "pressure-delay" => Knob {
-            name: "pressure_delay_gain",
-            lo: 0.0,
-            hi: 2.0,
-            apply: |p, v| p.effect_pressure_delay = v,
-        },
-        "direction-delay" => Knob {
-            name: "direction_delay_gain",
-            lo: 0.0,
-            hi: 2.0,
-            apply: |p, v| p.effect_direction_delay = v,
-        },
-        "snubber" => Knob {
-            name: "snubber_gain",
-            lo: 0.0,
-            hi: 2.0,
-            apply: |p, v| p.effect_snubber = v,
-        },
-        other => {
-            return Err(format!(
-                "unknown ehvva effect `{other}` (known: {})",
-                EFFECTS.join(", ")
-            ))
-        }
+    let e = EhvvaEffect::from_name(effect)?;
+    let apply: fn(&mut EhvvaParams, f64) = match e {
+        EhvvaEffect::Viscosity => |p, v| p.effect_viscosity = v,
+        EhvvaEffect::PressureDelay => |p, v| p.effect_pressure_delay = v,
+        EhvvaEffect::DirectionDelay => |p, v| p.effect_direction_delay = v,
+        EhvvaEffect::Snubber => |p, v| p.effect_snubber = v,
+    };
+    Ok(Knob {
+        name: e.params()[0].0,
+        lo: 0.0,
+        hi: 2.0,
+        apply,
     })
 }
 
@@ -608,18 +591,43 @@ impl Family for EhvvaFamily {
         &EFFECTS
     }
 
-    fn fit(&self, effect: Option<&str>, est: &Log, val: &Log) -> Result<Fit, String> {
+    fn fit(&self, effects: &[&str], parent: Option<&Fit>, est: &Log, val: &Log) -> Result<Fit, String> {
         let de = Events::from_log(est)?;
         let dv = Events::from_log(val)?;
         let (xb, rb) = self.fit_baseline(&de)?;
         let mut knobs: Vec<Knob> = BASELINE_KNOBS.to_vec();
-        let r = match effect {
-            None => rb,
-            Some(e) => {
-                knobs.push(effect_knob(e)?);
-                let mut x0 = xb.clone();
-                x0.push(1.0);
-                calibrate(&EhvvaParams::baseline(), &knobs, &x0, &de, &self.lsq)?
+        for e in effects {
+            knobs.push(effect_knob(e)?);
+        }
+        let r = if effects.is_empty() {
+            rb
+        } else {
+            // Start from the parent's optimum (the baseline's when there is none), the new
+            // effect first at the paper's gain (where its gradient is informative), then, if
+            // that ends above the parent, from the parent itself with the gain at neutral: a
+            // richer model never ends worse than the one it extends.
+            let from_parent = |name: &str| {
+                parent
+                    .and_then(|f| f.internal.iter().find(|(n, _)| n == name).map(|(_, v)| *v))
+                    .or_else(|| BASELINE_KNOBS.iter().position(|k| k.name == name).map(|i| xb[i]))
+            };
+            let start = |new_gain: f64| -> Vec<f64> {
+                knobs
+                    .iter()
+                    .map(|k| from_parent(k.name).unwrap_or(new_gain))
+                    .collect()
+            };
+            let parent_cost = parent.map_or(rb.cost, |f| f.est_cost);
+            let r = calibrate(&EhvvaParams::baseline(), &knobs, &start(1.0), &de, &self.lsq)?;
+            if r.cost > parent_cost {
+                let r0 = calibrate(&EhvvaParams::baseline(), &knobs, &start(0.0), &de, &self.lsq)?;
+                if r0.cost < r.cost {
+                    r0
+                } else {
+                    r
+                }
+            } else {
+                r
             }
         };
         let p = apply_knobs(&EhvvaParams::baseline(), &knobs, &r.x);
@@ -635,14 +643,22 @@ impl Family for EhvvaFamily {
         measured[..skip].copy_from_slice(&lift[..skip]);
         predicted[..skip].copy_from_slice(&lift[..skip]);
         let params = knobs.iter().zip(&r.x).map(|(k, v)| (k.name.to_string(), *v)).collect();
-        Ok(Fit::new(
-            effect.unwrap_or("baseline"),
+        let names: Vec<String> = knobs.iter().map(|k| k.name.to_string()).collect();
+        let lo: Vec<f64> = knobs.iter().map(|k| k.lo).collect();
+        let hi: Vec<f64> = knobs.iter().map(|k| k.hi).collect();
+        let fit = Fit::new(
+            &Fit::label(effects),
             params,
             r.ci95.clone(),
             measured,
             predicted,
             r.iterations,
-        ))
+        );
+        // An effect gain at 0 is the effect switched off (its neutral value), not a bound the
+        // data pushed against.
+        let mut fit = fit.with_solver(&names, &lo, &hi, &r);
+        fit.at_bound.retain(|n| !(n.ends_with("_gain") && fit.params.iter().any(|(k, v)| k == n && *v == 0.0)));
+        Ok(fit)
     }
 
     fn regressors(&self, val: &Log) -> Vec<(String, Vec<f64>)> {
@@ -763,7 +779,7 @@ mod tests {
         let rms = crate::residuals::rmse(&e);
         assert!(rms < 0.008, "rms {rms} mm");
         // The family scores the skipped samples as measured, for every candidate alike.
-        let fit = EhvvaFamily::default().fit(Some("snubber"), &est, &tail).unwrap();
+        let fit = EhvvaFamily::default().fit(&["snubber"], None, &est, &tail).unwrap();
         assert_eq!(&fit.measured[..seated], &tail.col("lift_mm").unwrap()[..seated]);
         assert!(fit.rmse < 0.008, "validation rmse {} mm", fit.rmse);
     }
@@ -774,13 +790,13 @@ mod tests {
     fn fits_recover_the_hidden_parameters() {
         let f = EhvvaFamily::default();
         let (est, val, truth) = logs("none", 17);
-        let fit = f.fit(None, &est, &val).unwrap();
+        let fit = f.fit(&[], None, &est, &val).unwrap();
         for (name, tol) in [("td_ms_at_7MPa_22C", 0.01), ("cd_at_22C", 0.02), ("mass_kg", 0.05)] {
             let (got, want) = (get(&fit.params, name), get(&truth, name));
             assert!((got / want - 1.0).abs() < tol, "{name}: {got} vs {want}");
         }
         let (est, val, truth) = logs("viscosity", 18);
-        let fit = f.fit(Some("viscosity"), &est, &val).unwrap();
+        let fit = f.fit(&["viscosity"], None, &est, &val).unwrap();
         let (got, want) = (get(&fit.params, "viscosity_gain"), get(&truth, "viscosity_gain"));
         assert!((got / want - 1.0).abs() < 0.05, "viscosity gain {got} vs {want}");
         assert!(fit.rmse < 0.012, "validation rmse {}", fit.rmse);

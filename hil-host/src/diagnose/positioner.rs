@@ -13,10 +13,17 @@
 //! Baseline: M, Fv, offset. `coulomb-friction`: + Fc. `asymmetric-friction`: viscous and
 //! Coulomb coefficients per direction, M, Fv+, Fv−, Fc+, Fc− (EMPS description eq. (12)).
 
+use super::catalogue::{Effect, PositionerEffect};
 use super::{Family, Fit};
 use crate::log::{Log, Plant};
 use crate::lsq::{invert_spd, linear_lsq};
 use crate::signal::{derivative, downsample, Butterworth};
+
+/// Asymmetric friction contains Coulomb friction.
+const NESTED: [(&str, &str); 1] = [(
+    PositionerEffect::CoulombFriction.name(),
+    PositionerEffect::AsymmetricFriction.name(),
+)];
 
 /// Filter settings. Defaults reproduce the published EMPS IDIM-LS estimates.
 #[derive(Clone, Debug)]
@@ -136,13 +143,26 @@ impl Family for PositionerFamily {
         "equation-error: inverse dynamic model (IDIM-LS) — force reconstructed from the filtered, differentiated measured position; no closed-loop simulation"
     }
     fn effects(&self) -> &'static [&'static str] {
-        &["coulomb-friction", "asymmetric-friction"]
+        &PositionerEffect::NAMES
     }
     fn nested(&self) -> &'static [(&'static str, &'static str)] {
-        &[("coulomb-friction", "asymmetric-friction")]
+        &NESTED
     }
 
-    fn fit(&self, effect: Option<&str>, est: &Log, val: &Log) -> Result<Fit, String> {
+    fn fit(&self, effects: &[&str], _parent: Option<&Fit>, est: &Log, val: &Log) -> Result<Fit, String> {
+        // Linear least squares finds the global optimum of every model at once, so a richer
+        // model is never worse on the estimation data than the one it nests; asymmetric
+        // friction contains Coulomb friction (the set of both is the asymmetric model).
+        for e in effects {
+            PositionerEffect::from_name(e)?;
+        }
+        let effect = if effects.contains(&PositionerEffect::AsymmetricFriction.name()) {
+            Some(PositionerEffect::AsymmetricFriction.name())
+        } else if effects.contains(&PositionerEffect::CoulombFriction.name()) {
+            Some(PositionerEffect::CoulombFriction.name())
+        } else {
+            None
+        };
         let (cols, names, y) = self.columns(&self.motion(est)?, effect, 1.0 / est.dt_s)?;
         let theta =
             linear_lsq(&cols, &y).ok_or("the regressors are linearly dependent (no motion in the estimation data?)")?;
@@ -167,14 +187,28 @@ impl Family for PositionerFamily {
         let pred: Vec<f64> = (0..vy.len())
             .map(|i| (0..p).map(|j| vcols[j][i] * theta[j]).sum())
             .collect();
-        Ok(Fit::new(
-            effect.unwrap_or("baseline"),
+        let mut fit = Fit::new(
+            &Fit::label(effects),
             names.into_iter().zip(theta).collect(),
             ci95,
             vy,
             pred,
             0,
-        ))
+        );
+        fit.est_cost = 0.5 * resid.iter().map(|r| r * r).sum::<f64>();
+        // A mass, a viscous or a Coulomb coefficient below zero is no physical positioner.
+        for (k, v) in &fit.params {
+            // Fc± hold the offset too (eq. (12)): either may be negative.
+            if *v < 0.0 && (k.starts_with("M_") || k.starts_with("Fv") || k == "Fc_N") {
+                fit.impossible.push(format!("{k} = {v:.4}"));
+            }
+        }
+        for (c, (k, _)) in fit.ci95.iter().zip(&fit.params) {
+            if c.is_none() {
+                fit.not_identifiable.push(k.clone());
+            }
+        }
+        Ok(fit)
     }
 
     fn regressors(&self, val: &Log) -> Vec<(String, Vec<f64>)> {

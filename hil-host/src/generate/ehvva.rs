@@ -46,7 +46,7 @@ pub struct Test {
 }
 
 /// Draws the plant and the truth.
-pub fn draw_params(effect: &str, rng: &mut Rng) -> Result<(EhvvaParams, Vec<(String, f64)>), String> {
+pub fn draw_params(effects: &[&str], rng: &mut Rng) -> Result<(EhvvaParams, Vec<(String, f64)>), String> {
     let (td0, cd0, tau0) = reference_values();
     let x = [
         td0 * rng.uniform(0.85, 1.15),
@@ -60,7 +60,7 @@ pub fn draw_params(effect: &str, rng: &mut Rng) -> Result<(EhvvaParams, Vec<(Str
         .zip(x)
         .map(|(k, v)| (k.name.to_string(), v))
         .collect();
-    if effect != "none" {
+    for effect in effects.iter().copied().filter(|e| crate::diagnose::catalogue::check(Plant::Ehvva, e).is_ok()) {
         let knob = effect_knob(effect)?;
         // The snubber shows only in the last half millimetre of each closing: drawn from the
         // paper's zone up to the model's largest (1-2), the others around the paper's 0.6-1.5.
@@ -259,8 +259,14 @@ pub fn log_text(source: &str, dt_ms: f64, c: &Columns) -> String {
 }
 
 pub fn generate(effect: &str, seed: u64) -> Result<Case, String> {
+    generate_effects(&super::parse_effects(Plant::Ehvva, effect)?, seed)
+}
+
+/// A case with the given hidden effects (catalogue or outside).
+pub fn generate_effects(parts: &[&str], seed: u64) -> Result<Case, String> {
+    let effect = if parts.is_empty() { "none".to_string() } else { parts.join("+") };
     let mut rng = Rng::new(seed);
-    let (params, truth) = draw_params(effect, &mut rng)?;
+    let (params, mut truth) = draw_params(parts, &mut rng)?;
     let sensors = Sensors {
         lift_sigma_mm: rng.uniform(0.002, 0.006),
         lift_lsb_mm: 0.002,
@@ -269,15 +275,33 @@ pub fn generate(effect: &str, seed: u64) -> Result<Case, String> {
         temp_sigma_c: 0.3,
         temp_lsb_c: 0.1,
     };
+    // Outside the catalogue: the stroke grows with fluid temperature, 0.1-0.2 %/°C about
+    // 22 °C (the whole lift profile scales; re-quantized on the sensor's grid).
+    let growth_per_c = if parts.contains(&"thermal-stroke") {
+        let g = rng.uniform(0.001, 0.002);
+        truth.push(("stroke_growth_per_C".into(), g));
+        g
+    } else {
+        0.0
+    };
+    let grow = |c: &mut Columns| {
+        if growth_per_c != 0.0 {
+            for (y, t) in c.lift.iter_mut().zip(&c.temp) {
+                *y = quantize(*y * (1.0 + growth_per_c * (t - 22.0)), sensors.lift_lsb_mm);
+            }
+        }
+    };
     let make = |i: &EhvvaInputs<f64>| EhvvaReduced::<f64, 1024>::new(&params, i, DT_MS).map_err(|e| format!("{e:?}"));
     let est_tests = estimation_tests(&mut rng);
-    let est = run_bench(&est_tests, DT_MS, &sensors, &mut rng, make)?;
+    let mut est = run_bench(&est_tests, DT_MS, &sensors, &mut rng, make)?;
     let val_tests = validation_tests(&mut rng, 24);
-    let val = run_bench(&val_tests, DT_MS, &sensors, &mut rng, make)?;
+    let mut val = run_bench(&val_tests, DT_MS, &sensors, &mut rng, make)?;
+    grow(&mut est);
+    grow(&mut val);
     Ok(Case {
         plant: Plant::Ehvva,
         seed,
-        effect: effect.to_string(),
+        effect,
         truth,
         estimation_csv: log_text(
             &format!(
