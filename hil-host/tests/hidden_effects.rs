@@ -66,8 +66,14 @@ fn judge(plant: Plant, effect: &str, o: &Outcome) -> Result<(), String> {
 }
 
 fn check(plant: Plant, effect: &str, seed: u64) {
-    eprintln!("case: plant {plant}, hidden {effect}, seed {seed}");
+    let t0 = std::time::Instant::now();
     let o = run(plant, effect, seed);
+    eprintln!(
+        "case: plant {plant}, hidden {effect}, seed {seed}: {:?} {} ({:.1} s)",
+        o.causes,
+        o.verdict,
+        t0.elapsed().as_secs_f64()
+    );
     if let Err(e) = judge(plant, effect, &o) {
         panic!("plant {plant}, seed {seed}: hidden `{effect}`: {e}\n{}", o.summary);
     }

@@ -148,14 +148,14 @@ pub struct NoiseFloor {
     pub method: String,
 }
 
-/// The noise floor of a measured output from the data themselves: the sensor noise from the
-/// second differences of the output (a smooth signal's second difference is small next to
-/// white noise's, whose variance it multiplies by 6), as a trimmed RMS of the 80 % smallest
-/// |Δ²y| (robust to the few samples where the signal itself moves fast; corrected for the
-/// trimming of a Gaussian), and at least the quantization error q/√12 of the output's step q
-/// (the smallest spacing of its values): what remains of a perfect model's error.
-pub fn noise_floor_of(y: &[f64]) -> NoiseFloor {
-    let q = resolution(y);
+/// The noise floor from the data themselves: the sensor noise from the second differences of a
+/// model's validation residual `y` (what the model already explains is removed; a smooth
+/// remainder's second difference is small next to white noise's, whose variance it multiplies
+/// by 6), as a trimmed RMS of the 80 % smallest |Δ²y| (robust to the few samples where a
+/// remainder moves fast; corrected for the trimming of a Gaussian), and at least the
+/// quantization error q/√12 of the measured output's step `q`: what a perfect model would
+/// leave. The diagnosis takes the smallest over the baseline and each model it selects.
+pub fn noise_floor_of(y: &[f64], q: f64) -> NoiseFloor {
     let mut d: Vec<f64> = y.windows(3).map(|w| (w[0] - 2.0 * w[1] + w[2]).abs()).collect();
     let sigma = if d.len() >= 10 {
         d.sort_by(f64::total_cmp);
@@ -170,7 +170,7 @@ pub fn noise_floor_of(y: &[f64]) -> NoiseFloor {
     NoiseFloor {
         rmse: sigma.max(quant),
         method: format!(
-            "sensor noise from the second differences of the measured output (trimmed RMS of the 80 % smallest, /√6): σ = {}; quantization step q = {} (q/√12 = {}); floor = the larger",
+            "sensor noise from the second differences of the validation residual (trimmed RMS of the 80 % smallest, /√6): σ = {}; quantization step of the output q = {} (q/√12 = {}); floor = the larger",
             sig(sigma),
             sig(q),
             sig(quant)
@@ -231,10 +231,11 @@ pub trait Family {
     /// Signals of the validation data to correlate the residual with (inputs and candidate
     /// regressors), aligned with the fit's `measured`.
     fn regressors(&self, val: &Log) -> Vec<(String, Vec<f64>)>;
-    /// What a perfect model would score on the validation data; `fit` is any calibrated model
-    /// (its `measured` is the output as scored).
+    /// What a perfect model would score on the validation data, estimated from `fit`'s
+    /// validation residual (the part of the output the model already explains is no noise)
+    /// and the quantization of the measured output.
     fn noise_floor(&self, _val: &Log, fit: &Fit) -> NoiseFloor {
-        noise_floor_of(&fit.measured)
+        noise_floor_of(&fit.residual(), resolution(&fit.measured))
     }
 }
 
@@ -252,7 +253,9 @@ pub struct Rules {
     /// "explains the data about equally" is judged against what the baseline got wrong.
     pub nested_margin_pct: f64,
     /// The verdict is `explained` when the validation RMSE is at most this multiple of the
-    /// noise floor (what is left beyond the noise is then below ~0.8 of it).
+    /// noise floor (what is left beyond the noise is then below 1.7 σ of it): clean generated
+    /// logs of healthy units end at 1.0-1.7× (a simulation from logged set-points does not
+    /// reproduce every detail of a bench, e.g. the EHVVA's accumulator dips).
     pub explained_ratio: f64,
     /// Forward selection stops adding effects once the remainder is this close to the floor.
     pub stop_ratio: f64,
@@ -267,7 +270,7 @@ impl Default for Rules {
             min_z: 4.0,
             penalty_per_param: 0.01,
             nested_margin_pct: 10.0,
-            explained_ratio: 1.3,
+            explained_ratio: 2.0,
             stop_ratio: 1.1,
             max_causes: 3,
         }
@@ -515,11 +518,10 @@ fn diagnose_fits(
     let baseline = fit(&[], None, index, total)?;
     let e0 = baseline.residual();
     let lags = (e0.len() / 20).clamp(5, 50);
-    let floor = family.noise_floor(val, &baseline);
+    let mut floor = family.noise_floor(val, &baseline);
     // Seconds per residual sample (an equation-error family may decimate).
     let dt_res = val.dt_s * val.len() as f64 / e0.len().max(1) as f64;
     let regressors = family.regressors(val);
-    let tests = ResidualTests::run(&e0, &regressors, lags, floor.rmse);
     let mut evidence = Vec::new();
 
     let mut selected: Vec<&'static str> = Vec::new();
@@ -637,6 +639,71 @@ fn diagnose_fits(
                 }
             }
         }
+        // Two effects can mask each other: each alone gains but not consistently enough. When
+        // no single effect is eligible, the two with the largest gains are fitted together
+        // and added together if the pair is eligible and significantly better than each alone.
+        if best.is_none() && selected.len() + 2 <= rules.max_causes {
+            let mut gaining: Vec<usize> = (0..candidates.len())
+                .filter(|&i| candidates[i].gain_pct >= rules.min_gain_pct && candidates[i].fit.rmse.is_finite())
+                .collect();
+            gaining.sort_by(|&a, &b| candidates[b].gain_pct.total_cmp(&candidates[a].gain_pct));
+            if let [a, b, ..] = gaining[..] {
+                let (ea, eb) = (last_of(&candidates[a]), last_of(&candidates[b]));
+                let nests = family
+                    .nested()
+                    .iter()
+                    .any(|(s, r)| (*s == ea && *r == eb) || (*s == eb && *r == ea));
+                let find = |name: &str| family.effects().iter().copied().find(|e| *e == name);
+                if let (false, Some(na), Some(nb)) = (nests, find(&ea), find(&eb)) {
+                    let mut set = selected.clone();
+                    set.extend([na, nb]);
+                    index += 1;
+                    total += 1;
+                    if let Ok(pair) = fit(&set, Some(&candidates[a].fit), index, total) {
+                        let gain_pct = 100.0 * (current.rmse - pair.rmse) / current.rmse;
+                        let z = improvement_z(&e_cur, &pair.residual());
+                        let beats = |single: &Candidate| {
+                            100.0 * (single.fit.rmse - pair.rmse) / single.fit.rmse >= rules.min_gain_pct
+                                && improvement_z(&single.fit.residual(), &pair.residual()) >= rules.min_z
+                        };
+                        let eligible = gain_pct >= rules.min_gain_pct
+                            && z >= rules.min_z
+                            && beats(&candidates[a])
+                            && beats(&candidates[b]);
+                        evidence.push(format!(
+                            "neither effect alone is significant; `{ea}` and `{eb}` together lower the validation RMSE from {:.4} to {:.4} ({gain_pct:.1} %, z = {z:.1}){}",
+                            current.rmse,
+                            pair.rmse,
+                            if eligible { ", more than either alone: both added" } else { ": not added" }
+                        ));
+                        candidates.push(Candidate {
+                            fit: pair,
+                            gain_pct,
+                            z,
+                            eligible,
+                        });
+                        if eligible {
+                            let c = candidates.len() - 1;
+                            selected.extend([na, nb]);
+                            current = candidates[c].fit.clone();
+                            let f = family.noise_floor(val, &current);
+                            if f.rmse < floor.rmse {
+                                floor = NoiseFloor {
+                                    rmse: f.rmse,
+                                    method: format!("{} (from the model with {})", f.method, selected.join(" + ")),
+                                };
+                            }
+                            rounds.push(Round {
+                                base: selected[..selected.len() - 2].iter().map(|s| s.to_string()).collect(),
+                                candidates,
+                                added: Some(format!("{ea}+{eb}")),
+                            });
+                            continue;
+                        }
+                    }
+                }
+            }
+        }
         let added = best.map(|b| last_of(&candidates[b]));
         if let Some(b) = best {
             let c = &candidates[b];
@@ -658,6 +725,13 @@ fn diagnose_fits(
             selected.retain(|s| !family.nested().iter().any(|(simple, rich)| simple == s && *rich == new));
             selected.push(new);
             current = c.fit.clone();
+            let f = family.noise_floor(val, &current);
+            if f.rmse < floor.rmse {
+                floor = NoiseFloor {
+                    rmse: f.rmse,
+                    method: format!("{} (from the model with {})", f.method, selected.join(" + ")),
+                };
+            }
         }
         rounds.push(Round {
             base: round_base(&selected, added.is_some()),
@@ -672,6 +746,7 @@ fn diagnose_fits(
     let candidates = rounds.next().map(|r| r.candidates).unwrap_or_default();
     let rounds: Vec<Round> = rounds.collect();
 
+    let tests = ResidualTests::run(&e0, &regressors, lags, floor.rmse);
     tests.describe("baseline residual", &mut evidence);
     let causes: Vec<String> = selected.iter().map(|s| s.to_string()).collect();
     let extended = current;
@@ -792,9 +867,13 @@ impl ResidualTests {
         let mut white = whiteness(e, lags);
         // Colour that accounts for less than the material share beyond the noise is immaterial.
         white.pass = white.pass || excess <= 1.5 * MATERIAL_SHARE * floor;
+        // Structure is material when it accounts for more than the material share of the floor
+        // and the residual exceeds the floor by as much (what a perfect model leaves may have
+        // structure of its own, e.g. an equation-error formulation's filter artefacts).
+        let small = excess <= MATERIAL_SHARE * floor;
         let mut cross: Vec<CrossCheck> = regressors.iter().map(|(n, u)| cross_check(n, e, u, lags)).collect();
         for c in &mut cross {
-            c.pass = c.pass || c.max_abs * rmse_e <= MATERIAL_SHARE * floor;
+            c.pass = c.pass || small || c.max_abs * rmse_e <= MATERIAL_SHARE * floor;
         }
         let mut grouped: Vec<GroupCheck> = regressors.iter().map(|(n, u)| group_check(n, e, u)).collect();
         for g in &mut grouped {
@@ -802,7 +881,7 @@ impl ResidualTests {
             let mean = g.groups.iter().map(|m| m.mean * m.samples as f64).sum::<f64>() / all;
             // The RMS the group means account for.
             let between = (g.groups.iter().map(|m| (m.mean - mean).powi(2) * m.samples as f64).sum::<f64>() / all).sqrt();
-            g.pass = g.pass || between <= MATERIAL_SHARE * floor;
+            g.pass = g.pass || small || between <= MATERIAL_SHARE * floor;
         }
         ResidualTests {
             white,

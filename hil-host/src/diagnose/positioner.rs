@@ -14,7 +14,7 @@
 //! Coulomb coefficients per direction, M, Fv+, Fv−, Fc+, Fc− (EMPS description eq. (12)).
 
 use super::catalogue::{Effect, PositionerEffect};
-use super::{Family, Fit};
+use super::{noise_floor_of, Family, Fit, NoiseFloor};
 use crate::log::{Log, Plant};
 use crate::lsq::{invert_spd, linear_lsq};
 use crate::signal::{derivative, downsample, Butterworth};
@@ -128,6 +128,63 @@ impl PositionerFamily {
     }
 }
 
+impl PositionerFamily {
+    /// The RMS force error of the formulation itself (see `noise_floor`).
+    fn formulation_error(&self, val: &Log, fit: &Fit) -> Result<f64, String> {
+        let get = |k: &str| fit.params.iter().find(|(n, _)| n == k).map(|(_, v)| *v);
+        let mass = get("M_kg").filter(|m| *m > 0.0).ok_or("no positive mass")?;
+        let fv = |v: f64| {
+            if v >= 0.0 {
+                get("Fv_pos_Ns_per_m").or(get("Fv_Ns_per_m")).unwrap_or(0.0)
+            } else {
+                get("Fv_neg_Ns_per_m").or(get("Fv_Ns_per_m")).unwrap_or(0.0)
+            }
+        };
+        let fc = |v: f64| {
+            if v > self.v_still_m_s {
+                get("Fc_pos_N").or(get("Fc_N")).unwrap_or(0.0) + get("offset_N").unwrap_or(0.0)
+            } else if v < -self.v_still_m_s {
+                -get("Fc_neg_N").or(get("Fc_N")).unwrap_or(0.0) + get("offset_N").unwrap_or(0.0)
+            } else {
+                get("offset_N").unwrap_or(0.0)
+            }
+        };
+        let q = val.col("pos_m").ok_or("no pos_m column")?;
+        let f = val.col("force_N").ok_or("no force_N column")?;
+        let lsb = super::resolution(q);
+        let sub = 10;
+        let h = val.dt_s / sub as f64;
+        let (mut x, mut v) = (q.first().copied().unwrap_or(0.0), 0.0);
+        let mut synth = val.clone();
+        let mut pos = Vec::with_capacity(q.len());
+        for &force in f {
+            pos.push(if lsb > 0.0 { (x / lsb).round() * lsb } else { x });
+            for _ in 0..sub {
+                // Friction cannot reverse the motion within a step (a stuck load stays stuck).
+                let a = (force - fv(v) * v - fc(v)) / mass;
+                let v_new = v + a * h;
+                v = if v != 0.0 && v_new.signum() != v.signum() { 0.0 } else { v_new };
+                x += v * h;
+            }
+        }
+        synth.columns.insert("pos_m".into(), pos);
+        let m = self.motion(&synth)?;
+        let effect = if fit.effects.iter().any(|e| e == "asymmetric-friction") {
+            Some("asymmetric-friction")
+        } else if fit.effects.iter().any(|e| e == "coulomb-friction") {
+            Some("coulomb-friction")
+        } else {
+            None
+        };
+        let (cols, names, y) = self.columns(&m, effect, 1.0 / val.dt_s)?;
+        let theta: Vec<f64> = names.iter().map(|n| get(n).unwrap_or(0.0)).collect();
+        let e: Vec<f64> = (0..y.len())
+            .map(|i| y[i] - cols.iter().zip(&theta).map(|(c, t)| c[i] * t).sum::<f64>())
+            .collect();
+        Ok(crate::residuals::rmse(&e))
+    }
+}
+
 /// A linear regression problem: the regressor columns, their parameter names, the target (the
 /// measured force), all decimated alike.
 type Regression = (Vec<Vec<f64>>, Vec<String>, Vec<f64>);
@@ -209,6 +266,27 @@ impl Family for PositionerFamily {
             }
         }
         Ok(fit)
+    }
+
+    /// What a perfect model would leave in the equation-error formulation: the force noise
+    /// (second differences of the residual, as every family) and the formulation's own error,
+    /// measured on a log the fitted model itself writes: the model is run under the logged
+    /// force (10 sub-steps per sample), its position quantized like the encoder, and the same
+    /// filters, derivatives and decimation turn it back into a force with the same parameters.
+    /// What that reconstruction misses (filter roll-off at the acceleration's jumps, the
+    /// encoder's steps through two derivatives) a perfect model would miss too.
+    fn noise_floor(&self, val: &Log, fit: &Fit) -> NoiseFloor {
+        let noise = noise_floor_of(&fit.residual(), 0.0);
+        match self.formulation_error(val, fit) {
+            Ok(art) => NoiseFloor {
+                rmse: noise.rmse.hypot(art),
+                method: format!(
+                    "{}; with the equation-error formulation's own error on a log the fitted model writes itself (its position through the same filters and derivatives, encoder-quantized): {:.4}; floor = their root sum of squares",
+                    noise.method, art
+                ),
+            },
+            Err(_) => noise,
+        }
     }
 
     fn regressors(&self, val: &Log) -> Vec<(String, Vec<f64>)> {

@@ -1425,7 +1425,7 @@ mod tests {
         assert!(
             d.evidence
                 .iter()
-                .any(|e| e.contains("residual mean differs by supply voltage")),
+                .any(|e| e.contains("residual: mean differs by supply voltage")),
             "{:?}",
             d.evidence
         );
