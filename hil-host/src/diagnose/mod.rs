@@ -271,7 +271,7 @@ impl Default for Rules {
             penalty_per_param: 0.01,
             nested_margin_pct: 10.0,
             explained_ratio: 2.0,
-            stop_ratio: 1.1,
+            stop_ratio: 1.5,
             max_causes: 3,
         }
     }

@@ -740,8 +740,8 @@ impl VacuumFamily {
     /// Starts: an extension starts from `parent` (the model it extends, at its optimum) with the
     /// new effect at its starting magnitude, and, for a mechanical effect, also from the
     /// band-centre map of the prepared start (the baseline's rod is bent by the hysteresis it
-    /// could not describe); the clearance, whose cost is multimodal, also from a small and a
-    /// large clearance. If every start ends above the parent's position cost, the parent with
+    /// could not describe); the clearance, whose cost is multimodal, also from a large
+    /// clearance (10 %). If every start ends above the parent's position cost, the parent with
     /// the effect at its neutral value is refitted too: an extension never ends worse on the
     /// estimation data than the model it extends. Returns the model, the fitted parameter names,
     /// their 95 % half-widths, the iterations and the final position-stage solver run.
@@ -792,7 +792,7 @@ impl VacuumFamily {
                 starts.push(m);
             }
             if last == VacuumEffect::Backlash.name() {
-                for b in [1.5, 10.0] {
+                for b in [10.0] {
                     let mut m = parent_model(false)?;
                     m.backlash_pct = b;
                     starts.push(m);
