@@ -35,7 +35,11 @@ fn run(plant: Plant, effect: &str, seed: u64) -> Outcome {
 /// What counts as success for a hidden `effect` (see the module doc); `Err` says what failed.
 fn judge(plant: Plant, effect: &str, o: &Outcome) -> Result<(), String> {
     let outside = outside_effects(plant);
-    let parts: Vec<&str> = if effect == "none" { Vec::new() } else { effect.split('+').collect() };
+    let parts: Vec<&str> = if effect == "none" {
+        Vec::new()
+    } else {
+        effect.split('+').collect()
+    };
     if parts.iter().any(|p| outside.contains(p)) {
         if !o.causes.is_empty() {
             return Err(format!("outside physics named {:?}", o.causes));

@@ -21,7 +21,10 @@ fn other_units_table() {
         eprintln!("no {} here: nothing to check", root.display());
         return;
     };
-    let mut dirs: Vec<_> = dirs.filter_map(|d| d.ok().map(|d| d.path())).filter(|p| p.is_dir()).collect();
+    let mut dirs: Vec<_> = dirs
+        .filter_map(|d| d.ok().map(|d| d.path()))
+        .filter(|p| p.is_dir())
+        .collect();
     dirs.sort();
     println!("| unit | truth | causes | verdict | baseline RMSE | extended RMSE | floor | gain % |");
     println!("|---|---|---|---|---|---|---|---|");
@@ -32,7 +35,10 @@ fn other_units_table() {
         let truth_effect = truth["effect"].as_str().unwrap_or("?").to_string();
         let est = read_log(&dir.join("estimation.csv"), None);
         let val = read_log(&dir.join("validation.csv"), None);
-        let name = dir.file_name().map(|s| s.to_string_lossy().to_string()).unwrap_or_default();
+        let name = dir
+            .file_name()
+            .map(|s| s.to_string_lossy().to_string())
+            .unwrap_or_default();
         let (est, val) = match (est, val) {
             (Ok(e), Ok(v)) => (e, v),
             (Err(e), _) | (_, Err(e)) => {
@@ -55,7 +61,9 @@ fn other_units_table() {
                     j["verdict"].as_str().unwrap_or("-"),
                     d.baseline.rmse,
                     d.extended.rmse,
-                    j["noise_floor"]["rmse"].as_f64().map_or("-".into(), |f| format!("{f:.4}")),
+                    j["noise_floor"]["rmse"]
+                        .as_f64()
+                        .map_or("-".into(), |f| format!("{f:.4}")),
                     d.gain_pct
                 );
                 eprintln!("{}", diagnose::report::summary(&d));

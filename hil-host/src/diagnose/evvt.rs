@@ -671,7 +671,10 @@ impl Family for EvvtFamily {
     }
 
     fn fit(&self, effects: &[&str], parent: Option<&Fit>, est: &Log, val: &Log) -> Result<Fit, String> {
-        let effects: Vec<EvvtEffect> = effects.iter().map(|e| EvvtEffect::from_name(e)).collect::<Result<_, _>>()?;
+        let effects: Vec<EvvtEffect> = effects
+            .iter()
+            .map(|e| EvvtEffect::from_name(e))
+            .collect::<Result<_, _>>()?;
         let de = Data::from_log(est, self.open_loop_window_s, self.quantizer_ramp_lsb)?;
         let dv = Data::from_log(val, self.open_loop_window_s, self.quantizer_ramp_lsb)?;
         let ctx = Ctx {
@@ -690,7 +693,11 @@ impl Family for EvvtFamily {
         let internal_names: Vec<String> = ["alpha", "beta"]
             .iter()
             .map(|s| s.to_string())
-            .chain(effects.iter().flat_map(|e| e.params().iter().map(|(n, _)| n.to_string())))
+            .chain(
+                effects
+                    .iter()
+                    .flat_map(|e| e.params().iter().map(|(n, _)| n.to_string())),
+            )
             .collect();
         let r = match effects.split_last() {
             None => base_res.ok_or("baseline fit missing")?,
@@ -717,11 +724,16 @@ impl Family for EvvtFamily {
                 for (i, v) in x0.iter_mut().enumerate() {
                     *v = v.clamp(lo[i], hi[i]);
                 }
-                self.solve_model(&effects, &de, &ctx, &Spec {
-                    x0,
-                    lo: lo.clone(),
-                    hi: hi.clone(),
-                })?
+                self.solve_model(
+                    &effects,
+                    &de,
+                    &ctx,
+                    &Spec {
+                        x0,
+                        lo: lo.clone(),
+                        hi: hi.clone(),
+                    },
+                )?
             }
         };
         let x = r.x.clone();
@@ -749,8 +761,15 @@ impl Family for EvvtFamily {
             ci95[at + 2] = ci_p;
         }
         let labels: Vec<&str> = effects.iter().map(|e| e.name()).collect();
-        let mut fit = Fit::new(&Fit::label(&labels), params, ci95, dv.y.clone(), predicted, r.iterations)
-            .with_solver(&internal_names, &lo, &hi, &r);
+        let mut fit = Fit::new(
+            &Fit::label(&labels),
+            params,
+            ci95,
+            dv.y.clone(),
+            predicted,
+            r.iterations,
+        )
+        .with_solver(&internal_names, &lo, &hi, &r);
         fit.internal = internal_names.into_iter().zip(x).collect();
         Ok(fit)
     }

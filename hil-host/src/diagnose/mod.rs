@@ -135,7 +135,10 @@ impl Fit {
             f.push(format!("physically impossible: {}", self.impossible.join(", ")));
         }
         if !self.not_identifiable.is_empty() {
-            f.push(format!("not identifiable from these data: {}", self.not_identifiable.join(", ")));
+            f.push(format!(
+                "not identifiable from these data: {}",
+                self.not_identifiable.join(", ")
+            ));
         }
         f
     }
@@ -531,8 +534,7 @@ fn diagnose_fits(
         c.fit.rmse * (1.0 + rules.penalty_per_param * c.fit.n_params().saturating_sub(base.n_params()) as f64)
     };
     loop {
-        if selected.len() >= rules.max_causes || (!rounds.is_empty() && current.rmse <= rules.stop_ratio * floor.rmse)
-        {
+        if selected.len() >= rules.max_causes || (!rounds.is_empty() && current.rmse <= rules.stop_ratio * floor.rmse) {
             break;
         }
         // A simpler effect nested in a selected one adds nothing; a richer one may replace it.
@@ -802,7 +804,9 @@ fn diagnose_fits(
             }
         )
     });
-    for (what, f) in std::iter::once(("baseline", &baseline)).chain((!causes.is_empty()).then_some(("extended", &extended))) {
+    for (what, f) in
+        std::iter::once(("baseline", &baseline)).chain((!causes.is_empty()).then_some(("extended", &extended)))
+    {
         for flag in f.flags() {
             evidence.push(format!("{what} calibration: {flag}"));
         }
@@ -840,7 +844,11 @@ fn diagnose_fits(
 
 /// The effects a round extended (for the report), from the selection after it.
 fn round_base(selected: &[&str], added: bool) -> Vec<String> {
-    let k = if added { selected.len().saturating_sub(1) } else { selected.len() };
+    let k = if added {
+        selected.len().saturating_sub(1)
+    } else {
+        selected.len()
+    };
     selected[..k].iter().map(|s| s.to_string()).collect()
 }
 
@@ -880,7 +888,13 @@ impl ResidualTests {
             let all = g.groups.iter().map(|m| m.samples).sum::<usize>().max(1) as f64;
             let mean = g.groups.iter().map(|m| m.mean * m.samples as f64).sum::<f64>() / all;
             // The RMS the group means account for.
-            let between = (g.groups.iter().map(|m| (m.mean - mean).powi(2) * m.samples as f64).sum::<f64>() / all).sqrt();
+            let between = (g
+                .groups
+                .iter()
+                .map(|m| (m.mean - mean).powi(2) * m.samples as f64)
+                .sum::<f64>()
+                / all)
+                .sqrt();
             g.pass = g.pass || small || between <= MATERIAL_SHARE * floor;
         }
         ResidualTests {
@@ -954,7 +968,9 @@ fn locate(t: &ResidualTests, e: &[f64], floor: f64, dt_s: f64) -> Vec<String> {
             c.name,
             c.correlation
                 .get((c.correlation.len() / 2) as isize as usize)
-                .and_then(|_| c.correlation.get(((c.correlation.len() / 2) as isize + c.at_lag) as usize))
+                .and_then(|_| c
+                    .correlation
+                    .get(((c.correlation.len() / 2) as isize + c.at_lag) as usize))
                 .copied()
                 .unwrap_or(c.max_abs),
             if c.at_lag == 0 {
@@ -980,12 +996,23 @@ fn locate(t: &ResidualTests, e: &[f64], floor: f64, dt_s: f64) -> Vec<String> {
     }
     // Regimes where the remainder is much larger than elsewhere, even with a zero mean.
     for g in &t.grouped {
-        let (lo, hi) = g.groups.iter().fold((None::<&crate::residuals::Group>, None::<&crate::residuals::Group>), |(lo, hi), m| {
-            (
-                if lo.is_none_or(|l| m.rmse < l.rmse) { Some(m) } else { lo },
-                if hi.is_none_or(|h| m.rmse > h.rmse) { Some(m) } else { hi },
-            )
-        });
+        let (lo, hi) = g.groups.iter().fold(
+            (None::<&crate::residuals::Group>, None::<&crate::residuals::Group>),
+            |(lo, hi), m| {
+                (
+                    if lo.is_none_or(|l| m.rmse < l.rmse) {
+                        Some(m)
+                    } else {
+                        lo
+                    },
+                    if hi.is_none_or(|h| m.rmse > h.rmse) {
+                        Some(m)
+                    } else {
+                        hi
+                    },
+                )
+            },
+        );
         if let (Some(lo), Some(hi)) = (lo, hi) {
             if hi.rmse > 2.0 * lo.rmse.max(floor) && hi.rmse > 2.0 * floor {
                 out.push(format!(

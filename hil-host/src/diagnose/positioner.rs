@@ -163,7 +163,11 @@ impl PositionerFamily {
                 // Friction cannot reverse the motion within a step (a stuck load stays stuck).
                 let a = (force - fv(v) * v - fc(v)) / mass;
                 let v_new = v + a * h;
-                v = if v != 0.0 && v_new.signum() != v.signum() { 0.0 } else { v_new };
+                v = if v != 0.0 && v_new.signum() != v.signum() {
+                    0.0
+                } else {
+                    v_new
+                };
                 x += v * h;
             }
         }

@@ -155,7 +155,11 @@ pub fn summary(d: &Diagnosis) -> String {
             c.fit.rmse,
             c.gain_pct,
             c.z,
-            if d.causes.first() == Some(&c.fit.effect) { "  <- first cause" } else { "" }
+            if d.causes.first() == Some(&c.fit.effect) {
+                "  <- first cause"
+            } else {
+                ""
+            }
         ));
     }
     for (i, r) in d.rounds.iter().enumerate() {
@@ -167,14 +171,22 @@ pub fn summary(d: &Diagnosis) -> String {
                 c.fit.rmse,
                 c.gain_pct,
                 c.z,
-                if r.added.as_deref() == c.fit.effects.last().map(String::as_str) { "  <- added" } else { "" }
+                if r.added.as_deref() == c.fit.effects.last().map(String::as_str) {
+                    "  <- added"
+                } else {
+                    ""
+                }
             ));
         }
     }
     s.push_str(&format!(
         "\ncause: {}\ncauses: {}\n",
         d.cause,
-        if d.causes.is_empty() { "none".to_string() } else { d.causes.join(" + ") }
+        if d.causes.is_empty() {
+            "none".to_string()
+        } else {
+            d.causes.join(" + ")
+        }
     ));
     s.push_str("extended model parameters (± 95 %):\n");
     for ((k, v), c) in d.extended.params.iter().zip(&d.extended.ci95) {

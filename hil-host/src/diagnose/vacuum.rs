@@ -438,7 +438,11 @@ impl VacuumModel {
 
 /// The parameters an effect adds: the catalogue's.
 fn effect_names(effect: &str) -> Result<Vec<&'static str>, String> {
-    Ok(VacuumEffect::from_name(effect)?.params().iter().map(|(n, _)| *n).collect())
+    Ok(VacuumEffect::from_name(effect)?
+        .params()
+        .iter()
+        .map(|(n, _)| *n)
+        .collect())
 }
 
 /// Bounds of each parameter: physical signs and generous ranges around the paper's actuators.
@@ -538,7 +542,13 @@ enum Residuals {
 
 /// A calibrated model, its fitted parameter names, their 95 % half-widths, the iterations and
 /// the last (position) stage's solver run.
-type Calibrated = (VacuumModel, Vec<&'static str>, Vec<Option<f64>>, usize, crate::lsq::LsqResult);
+type Calibrated = (
+    VacuumModel,
+    Vec<&'static str>,
+    Vec<Option<f64>>,
+    usize,
+    crate::lsq::LsqResult,
+);
 
 /// Family settings.
 #[derive(Debug)]
@@ -792,11 +802,9 @@ impl VacuumFamily {
                 starts.push(m);
             }
             if last == VacuumEffect::Backlash.name() {
-                for b in [10.0] {
-                    let mut m = parent_model(false)?;
-                    m.backlash_pct = b;
-                    starts.push(m);
-                }
+                let mut m = parent_model(false)?;
+                m.backlash_pct = 10.0;
+                starts.push(m);
             }
         }
         let parent_cost = parent.map_or(f64::INFINITY, |f| f.est_cost);

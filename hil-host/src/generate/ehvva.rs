@@ -87,7 +87,11 @@ pub fn draw_params(effects: &[&str], rng: &mut Rng) -> Result<(EhvvaParams, Vec<
         ("area_top_switch_orifice_mm2".into(), p.area_top_switch_orifice_mm2),
         ("area_bottom_port_mm2".into(), p.area_bottom_port_mm2),
     ]);
-    for effect in effects.iter().copied().filter(|e| crate::diagnose::catalogue::check(Plant::Ehvva, e).is_ok()) {
+    for effect in effects
+        .iter()
+        .copied()
+        .filter(|e| crate::diagnose::catalogue::check(Plant::Ehvva, e).is_ok())
+    {
         let knob = effect_knob(effect)?;
         // The snubber shows only in the last half millimetre of each closing: drawn from the
         // paper's zone up to the model's largest (1-2), the others around the paper's 0.6-1.5.
@@ -322,7 +326,11 @@ pub fn generate(effect: &str, seed: u64) -> Result<Case, String> {
 
 /// A case with the given hidden effects (catalogue or outside).
 pub fn generate_effects(parts: &[&str], seed: u64) -> Result<Case, String> {
-    let effect = if parts.is_empty() { "none".to_string() } else { parts.join("+") };
+    let effect = if parts.is_empty() {
+        "none".to_string()
+    } else {
+        parts.join("+")
+    };
     let mut rng = Rng::new(seed);
     let (params, mut truth) = draw_params(parts, &mut rng)?;
     let sensors = Sensors {

@@ -100,35 +100,35 @@ fn draw_params(effects: &[&str], rng: &mut Rng) -> (EvvtParams, EvvtParams, Vec<
     ];
     let mut belt_phase_validation = 0.0;
     for effect in effects {
-    match *effect {
-        "supply-voltage" => {
-            p.nominal_engine_rpm = rng.uniform(1200.0, 1400.0);
-            p.voltage_effect_scale = rng.uniform(0.7, 1.0);
-            truth.push(("voltage_effect_scale".into(), p.voltage_effect_scale));
+        match *effect {
+            "supply-voltage" => {
+                p.nominal_engine_rpm = rng.uniform(1200.0, 1400.0);
+                p.voltage_effect_scale = rng.uniform(0.7, 1.0);
+                truth.push(("voltage_effect_scale".into(), p.voltage_effect_scale));
+            }
+            "engine-speed" => {
+                p.nominal_voltage_v = rng.uniform(9.5, 10.0);
+                p.engine_speed_effect_scale = rng.uniform(0.7, 1.0);
+                truth.push(("engine_speed_effect_scale".into(), p.engine_speed_effect_scale));
+            }
+            "direction" => {
+                p.advance_alpha_factor = rng.uniform(0.5, 0.75);
+                truth.push(("advance_alpha_factor".into(), p.advance_alpha_factor));
+            }
+            "belt-vibration" => {
+                p.belt_vibration_amplitude_deg = rng.uniform(0.6, 1.5);
+                p.belt_vibration_order = rng.uniform(0.5, 2.0);
+                p.belt_vibration_phase_rad = rng.uniform(-std::f64::consts::PI, std::f64::consts::PI);
+                belt_phase_validation = rng.uniform(-std::f64::consts::PI, std::f64::consts::PI);
+                truth.extend([
+                    ("belt_amplitude_deg".into(), p.belt_vibration_amplitude_deg),
+                    ("belt_order".into(), p.belt_vibration_order),
+                    ("belt_phase_rad".into(), p.belt_vibration_phase_rad),
+                    ("belt_phase_validation_rad".into(), belt_phase_validation),
+                ]);
+            }
+            _ => {}
         }
-        "engine-speed" => {
-            p.nominal_voltage_v = rng.uniform(9.5, 10.0);
-            p.engine_speed_effect_scale = rng.uniform(0.7, 1.0);
-            truth.push(("engine_speed_effect_scale".into(), p.engine_speed_effect_scale));
-        }
-        "direction" => {
-            p.advance_alpha_factor = rng.uniform(0.5, 0.75);
-            truth.push(("advance_alpha_factor".into(), p.advance_alpha_factor));
-        }
-        "belt-vibration" => {
-            p.belt_vibration_amplitude_deg = rng.uniform(0.6, 1.5);
-            p.belt_vibration_order = rng.uniform(0.5, 2.0);
-            p.belt_vibration_phase_rad = rng.uniform(-std::f64::consts::PI, std::f64::consts::PI);
-            belt_phase_validation = rng.uniform(-std::f64::consts::PI, std::f64::consts::PI);
-            truth.extend([
-                ("belt_amplitude_deg".into(), p.belt_vibration_amplitude_deg),
-                ("belt_order".into(), p.belt_vibration_order),
-                ("belt_phase_rad".into(), p.belt_vibration_phase_rad),
-                ("belt_phase_validation_rad".into(), belt_phase_validation),
-            ]);
-        }
-        _ => {}
-    }
     }
     // Without the speed or voltage effect the plant is LTI: one α and β, the scaled table at
     // the nominal point, written as a uniform table (what the baseline model assumes).
@@ -367,7 +367,11 @@ pub fn generate_effects(parts: &[&str], seed: u64) -> Result<Case, String> {
 }
 
 fn generate_parts(parts: &[&str], seed: u64, sizes: &Sizes) -> Result<Case, String> {
-    let effect = if parts.is_empty() { "none".to_string() } else { parts.join("+") };
+    let effect = if parts.is_empty() {
+        "none".to_string()
+    } else {
+        parts.join("+")
+    };
     let mut rng = Rng::new(seed);
     let (est_params, val_params, mut truth) = draw_params(parts, &mut rng);
     let est_points = estimation_points(&mut rng, sizes.estimation_points.max(1));

@@ -78,7 +78,9 @@ impl Case {
 /// The effects a plant's generator can hide one at a time: `none` and the plant's catalogue
 /// (from the typed catalogue, [`crate::diagnose::catalogue`]).
 pub fn effects(plant: Plant) -> Vec<&'static str> {
-    std::iter::once("none").chain(catalogue::names(plant).iter().copied()).collect()
+    std::iter::once("none")
+        .chain(catalogue::names(plant).iter().copied())
+        .collect()
 }
 
 /// Physics the generator can hide that is *not* in the catalogue (DATA-FORMAT.md): the

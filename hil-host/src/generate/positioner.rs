@@ -209,7 +209,11 @@ pub fn generate_effects(parts: &[&str], seed: u64) -> Result<Case, String> {
 }
 
 fn generate_parts(parts: &[&str], seed: u64, estimation_s: f64, validation_s: f64) -> Result<Case, String> {
-    let effect = if parts.is_empty() { "none".to_string() } else { parts.join("+") };
+    let effect = if parts.is_empty() {
+        "none".to_string()
+    } else {
+        parts.join("+")
+    };
     let mut rng = Rng::new(seed);
     let (params, mut truth) = draw_params(parts, &mut rng);
     // Outside the catalogue: a return spring about the middle of the travel.

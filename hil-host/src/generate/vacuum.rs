@@ -103,28 +103,28 @@ fn draw_params(effects_on: &[&str], rng: &mut Rng) -> (VacuumParams, &'static st
     p.damping_retract_kpa_s_per_pct *= damping * scale(rng, 0.85, 1.15);
     let mut effects = VacuumEffects::NONE;
     for effect in effects_on {
-    match *effect {
-        "supply-voltage" => effects.supply_voltage = true,
-        "pressure-direction" => {
-            effects.pressure_direction = true;
-            let ratio = rng.uniform(2.2, 3.5);
-            p.tau_fall_s = if rng.coin() {
-                p.tau_rise_s * ratio
-            } else {
-                p.tau_rise_s / ratio
-            };
+        match *effect {
+            "supply-voltage" => effects.supply_voltage = true,
+            "pressure-direction" => {
+                effects.pressure_direction = true;
+                let ratio = rng.uniform(2.2, 3.5);
+                p.tau_fall_s = if rng.coin() {
+                    p.tau_rise_s * ratio
+                } else {
+                    p.tau_rise_s / ratio
+                };
+            }
+            "coulomb-friction" => {
+                effects.coulomb_friction = true;
+                p.fc_kpa = rng.uniform(1.5, 4.0);
+                p.dahl_sigma_kpa_per_pct = p.fc_kpa / rng.uniform(0.2, 0.6);
+            }
+            "backlash" => {
+                effects.backlash = true;
+                p.backlash_pct = rng.uniform(3.0, 8.0);
+            }
+            _ => {}
         }
-        "coulomb-friction" => {
-            effects.coulomb_friction = true;
-            p.fc_kpa = rng.uniform(1.5, 4.0);
-            p.dahl_sigma_kpa_per_pct = p.fc_kpa / rng.uniform(0.2, 0.6);
-        }
-        "backlash" => {
-            effects.backlash = true;
-            p.backlash_pct = rng.uniform(3.0, 8.0);
-        }
-        _ => {}
-    }
     }
     (p.with_effects(effects), name, preset)
 }
@@ -349,7 +349,11 @@ pub fn generate_effects(parts: &[&str], seed: u64) -> Result<Case, String> {
 }
 
 fn generate_parts(parts: &[&str], seed: u64, estimation_repeats: usize, validation_s: f64) -> Result<Case, String> {
-    let effect = if parts.is_empty() { "none".to_string() } else { parts.join("+") };
+    let effect = if parts.is_empty() {
+        "none".to_string()
+    } else {
+        parts.join("+")
+    };
     let mut rng = Rng::new(seed);
     let (params, preset, nominal) = draw_params(parts, &mut rng);
     let nominal = VacuumStaticModel::<f64>::new(&nominal).map_err(|e| format!("{e:?}"))?;
