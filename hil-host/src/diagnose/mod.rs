@@ -404,6 +404,30 @@ pub struct Diagnosis {
     pub remainder_grouped: Vec<GroupCheck>,
     /// Sentences for the human summary.
     pub evidence: Vec<String>,
+    /// Input columns that never vary in the estimation or the validation data, with where when
+    /// only one is (`duty_pct`, `u_batt_V (validation data only)`): no excitation, so what depends on them cannot be
+    /// computed (the report says so instead of printing NaN or a perfect fit).
+    pub unexcited: Vec<String>,
+}
+
+/// The plant's input columns that are constant in `est` or `val` (see [`Diagnosis::unexcited`]).
+pub fn unexcited_inputs(est: &Log, val: &Log) -> Vec<String> {
+    let constant = |log: &Log, name: &str| {
+        log.columns
+            .get(name)
+            .is_some_and(|v| v.iter().all(|x| *x == v[0] || (x.is_nan() && v[0].is_nan())))
+    };
+    est.plant
+        .columns()
+        .iter()
+        .filter(|(_, role)| *role == crate::log::Role::Input)
+        .filter_map(|(name, _)| match (constant(est, name), constant(val, name)) {
+            (true, true) => Some(name.to_string()),
+            (true, false) => Some(format!("{name} (estimation data only)")),
+            (false, true) => Some(format!("{name} (validation data only)")),
+            (false, false) => None,
+        })
+        .collect()
 }
 
 /// Splits one log into estimation head and validation tail (`tail` fraction held out).
@@ -770,6 +794,11 @@ fn diagnose_fits(
     } else {
         f64::INFINITY
     };
+    let ratio_txt = if ratio.is_finite() {
+        format!("{ratio:.2}×")
+    } else {
+        "not comparable with".to_string()
+    };
     let material = rest.material_failures();
     let explained = ratio <= rules.explained_ratio && material.is_empty();
     let mut where_ = Vec::new();
@@ -777,19 +806,19 @@ fn diagnose_fits(
         where_ = locate(&rest, &e_ext, floor.rmse, dt_res);
         if where_.is_empty() {
             where_.push(format!(
-                "the remainder is {ratio:.2}× the noise floor with no single input, state or regime it follows; look at the residual plot for what the catalogue does not describe"
+                "the remainder is {ratio_txt} the noise floor with no single input, state or regime it follows; look at the residual plot for what the catalogue does not describe"
             ));
         }
     }
     let verdict = if explained { "explained" } else { "unexplained" }.to_string();
     evidence.push(if explained {
         format!(
-            "verdict explained: the remainder (RMSE {:.4}) is {ratio:.2}× the noise floor {:.4}, without material structure",
+            "verdict explained: the remainder (RMSE {:.4}) is {ratio_txt} the noise floor {:.4}, without material structure",
             extended.rmse, floor.rmse
         )
     } else {
         format!(
-            "verdict unexplained: the remainder (RMSE {:.4}) is {ratio:.2}× the noise floor {:.4}{}: physics outside the catalogue{}",
+            "verdict unexplained: the remainder (RMSE {:.4}) is {ratio_txt} the noise floor {:.4}{}: physics outside the catalogue{}",
             extended.rmse,
             floor.rmse,
             if material.is_empty() {
@@ -839,6 +868,7 @@ fn diagnose_fits(
         remainder_cross: rest.cross,
         remainder_grouped: rest.grouped,
         evidence,
+        unexcited: unexcited_inputs(est, val),
     })
 }
 
