@@ -67,7 +67,10 @@ fn names_coulomb_friction_with_the_published_parameters() {
         r["extended"]["rmse"].as_f64().unwrap(),
     );
     // The JSON carries 6 significant digits.
-    assert!((gain - 100.0 * (rb - re) / rb).abs() < 1e-3, "gain {gain}, RMSE {rb} -> {re}");
+    assert!(
+        (gain - 100.0 * (rb - re) / rb).abs() < 1e-3,
+        "gain {gain}, RMSE {rb} -> {re}"
+    );
     assert!(gain > 50.0, "gain {gain}");
     assert_eq!(r["residual_tests"]["whiteness_pass"], false);
     // Grouped by the direction of motion, the baseline residual force has a different mean

@@ -184,8 +184,13 @@ fn positioner_sweep_success_rate_per_effect() {
     sweep(Plant::Positioner);
 }
 
+/// 25 seeds per class (`SWEEP_SEEDS=n` for fewer, e.g. a quick look).
 fn sweep(plant: Plant) {
-    let seeds: Vec<u64> = (0..25).map(|k| 1000 + 7919 * k).collect();
+    let n: u64 = std::env::var("SWEEP_SEEDS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(25);
+    let seeds: Vec<u64> = (0..n).map(|k| 1000 + 7919 * k).collect();
     let mut classes: Vec<String> = effects(plant).iter().map(|s| s.to_string()).collect();
     classes.extend(effect_pairs(plant));
     classes.extend(outside_effects(plant).iter().map(|s| s.to_string()));

@@ -195,7 +195,9 @@ fn generate(a: GenerateArgs) -> Result<()> {
     let claim = Claim::new("generate", format!("{} {} --seed {seed}", plant.name(), a.effect));
     let known = hil_host::generate::effects(plant);
     let prbs_grid = plant == Plant::Evvt && a.effect == "prbs-grid";
-    if !(known.contains(&a.effect.as_str()) || prbs_grid) {
+    // One catalogue effect, several joined by `+`, or physics outside the catalogue.
+    if !(known.contains(&a.effect.as_str()) || hil_host::generate::parse_effects(plant, &a.effect).is_ok() || prbs_grid)
+    {
         use clap::CommandFactory;
         let mut cmd = Cli::command();
         cmd.build();

@@ -129,6 +129,15 @@ fn generate_help() -> String {
         s += &format!("  {:<11} {}\n", p.name(), effects.join(", "));
     }
     s += "  evvt        prbs-grid: the nine closed-loop PRBS identification logs instead\n";
+    s += "Several at once joined by `+` (e.g. supply-voltage+backlash); outside the catalogue:";
+    for p in Plant::ALL {
+        s += &format!(" {} {}", p.name(), hil_host::generate::outside_effects(p).join(", "));
+        s += if p == Plant::ALL[Plant::ALL.len() - 1] {
+            "\n"
+        } else {
+            ";"
+        };
+    }
     s += "\nExamples:\n  hil-host generate vacuum backlash --seed 3\n  hil-host generate positioner none --seed=7 --out cases/control\n  hil-host generate evvt prbs-grid --out prbs";
     s
 }

@@ -13,6 +13,9 @@ pub enum Neutral {
     Value(f64),
     /// Equal to the named baseline parameter (e.g. a second time constant equal to the first).
     SameAs(&'static str),
+    /// A shape parameter without a neutral value of its own: the effect is off by its
+    /// magnitude (e.g. Dahl's presliding distance when the friction level is 0).
+    Shape,
 }
 
 /// One plant's catalogue.
@@ -85,7 +88,7 @@ catalogue!(
     PressureDirection => "pressure-direction", "actuator pressure rises and falls with different time constants",
         [("tau_fall_s", Neutral::SameAs("tau_rise_s"))];
     CoulombFriction => "coulomb-friction", "position lags pressure with hysteresis (Coulomb or Dahl friction on the rod)",
-        [("fc_kPa", Neutral::Value(0.0)), ("dahl_x_pct", Neutral::Value(0.3))];
+        [("fc_kPa", Neutral::Value(0.0)), ("dahl_x_pct", Neutral::Shape)];
     Backlash => "backlash", "a clearance in the linkage: the valve stalls while the membrane reverses",
         [("backlash_pct", Neutral::Value(0.0))];
 ]);
@@ -113,7 +116,7 @@ catalogue!(
     Direction => "direction", "advancing is slower than retarding",
         [("advance_alpha_factor", Neutral::Value(1.0))];
     BeltVibration => "belt-vibration", "a periodic phase disturbance locked to crank angle",
-        [("belt_order", Neutral::Value(1.0)), ("belt_cos_deg", Neutral::Value(0.0)), ("belt_sin_deg", Neutral::Value(0.0))];
+        [("belt_order", Neutral::Shape), ("belt_cos_deg", Neutral::Value(0.0)), ("belt_sin_deg", Neutral::Value(0.0))];
 ]);
 
 catalogue!(
@@ -133,6 +136,38 @@ pub fn names(plant: Plant) -> &'static [&'static str] {
         Plant::Evvt => &EvvtEffect::NAMES,
         Plant::Positioner => &PositionerEffect::NAMES,
     }
+}
+
+/// The parameters `effect` adds, with their neutral values (empty for a name outside the
+/// plant's catalogue).
+pub fn params(plant: Plant, effect: &str) -> &'static [(&'static str, Neutral)] {
+    fn of<E: Effect>(name: &str) -> &'static [(&'static str, Neutral)] {
+        E::from_name(name).map_or(&[], |e| e.params())
+    }
+    match plant {
+        Plant::Vacuum => of::<VacuumEffect>(effect),
+        Plant::Ehvva => of::<EhvvaEffect>(effect),
+        Plant::Evvt => of::<EvvtEffect>(effect),
+        Plant::Positioner => of::<PositionerEffect>(effect),
+    }
+}
+
+/// Is `effect` switched off in a fit (every parameter with a neutral value at it, within
+/// 1e-6)? `values` are the fit's parameters by name. An extension whose effect ends off gains
+/// only by refitting the rest: it is no evidence for the effect.
+pub fn is_off(plant: Plant, effect: &str, values: &[(String, f64)]) -> bool {
+    let get = |n: &str| values.iter().find(|(k, _)| k == n).map(|(_, v)| *v);
+    let near = |a: f64, b: f64| (a - b).abs() <= 1e-6 * b.abs().max(1.0);
+    let ps = params(plant, effect);
+    !ps.is_empty()
+        && ps.iter().all(|(name, neutral)| match neutral {
+            Neutral::Shape => true,
+            Neutral::Value(v) => get(name).is_some_and(|x| near(x, *v)),
+            Neutral::SameAs(other) => match (get(name), get(other)) {
+                (Some(x), Some(y)) => near(x, y),
+                _ => false,
+            },
+        })
 }
 
 /// Checks a name against a plant's catalogue.
@@ -165,5 +200,35 @@ mod tests {
         // Every effect adds parameters, each with a neutral value.
         assert!(VacuumEffect::ALL.iter().all(|e| !e.params().is_empty()));
         assert!(EvvtEffect::ALL.iter().all(|e| !e.shows().is_empty()));
+    }
+
+    #[test]
+    fn an_effect_at_its_neutral_values_is_off() {
+        let v = |pairs: &[(&str, f64)]| pairs.iter().map(|(k, x)| (k.to_string(), *x)).collect::<Vec<_>>();
+        // Friction off at Fc = 0 whatever Dahl's (shape) distance; on at Fc > 0.
+        assert!(is_off(
+            Plant::Vacuum,
+            "coulomb-friction",
+            &v(&[("fc_kPa", 0.0), ("dahl_x_pct", 0.01)])
+        ));
+        assert!(!is_off(
+            Plant::Vacuum,
+            "coulomb-friction",
+            &v(&[("fc_kPa", 1.6), ("dahl_x_pct", 0.3)])
+        ));
+        // A second time constant equal to the first is the baseline.
+        assert!(is_off(
+            Plant::Vacuum,
+            "pressure-direction",
+            &v(&[("tau_rise_s", 0.05), ("tau_fall_s", 0.05)])
+        ));
+        assert!(!is_off(
+            Plant::Vacuum,
+            "pressure-direction",
+            &v(&[("tau_rise_s", 0.05), ("tau_fall_s", 0.12)])
+        ));
+        // A parameter missing from the fit is not taken as neutral; unknown effects are never off.
+        assert!(!is_off(Plant::Ehvva, "snubber", &v(&[])));
+        assert!(!is_off(Plant::Ehvva, "duty-delay", &v(&[])));
     }
 }

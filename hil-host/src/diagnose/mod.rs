@@ -611,7 +611,15 @@ fn diagnose_fits(
             let z = improvement_z(&e_cur, &fitted.residual());
             // Gains are judged against what the baseline got wrong beyond the noise: an effect
             // that only shaves noise is not a cause.
-            let eligible = gain_pct >= rules.min_gain_pct && z >= rules.min_z;
+            // An effect that ends switched off (at its neutral value) gains only by refitting
+            // the rest of the model: no evidence for it.
+            let off = catalogue::is_off(family.plant(), effect, &fitted.internal);
+            if off && gain_pct >= rules.min_gain_pct {
+                evidence.push(format!(
+                    "`{effect}` ends at its neutral value (switched off); its {gain_pct:.1} % come from refitting the rest of the model: not a cause"
+                ));
+            }
+            let eligible = gain_pct >= rules.min_gain_pct && z >= rules.min_z && !off;
             candidates.push(Candidate {
                 fit: fitted,
                 gain_pct,

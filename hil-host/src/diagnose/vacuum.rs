@@ -389,14 +389,13 @@ impl VacuumModel {
         let e = VacuumEffect::from_name(effect)?;
         let mut m = self.with_effect(effect)?;
         for (name, neutral) in e.params() {
+            // A shape parameter (Dahl's presliding distance) has no neutral of its own.
             let v = match neutral {
                 super::catalogue::Neutral::Value(v) => *v,
                 super::catalogue::Neutral::SameAs(other) => m.get(other),
+                super::catalogue::Neutral::Shape => continue,
             };
-            // Dahl's presliding distance has no neutral of its own (Fc = 0 switches it off).
-            if *name != "dahl_x_pct" {
-                m.set(name, v)?;
-            }
+            m.set(name, v)?;
         }
         Ok(m)
     }
