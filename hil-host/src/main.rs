@@ -3,16 +3,19 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use hil_host::diagnose::{self, report, Rules};
-use hil_host::log::{read_log, Plant};
+use hil_host::log::{read_log_mapped, Log, LogError, Plant};
+use hil_host::mf4::ChannelMap;
 
 const USAGE: &str = "usage: hil-host <command> [args]
 commands:
-  check <log.csv> [--plant P]
+  check <log.csv|log.mf4> [--plant P] [--channel-map map.toml]
       read a log strictly and summarise it
   diagnose <estimation.csv> [--validation <validation.csv>] [--plant P] [--json out.json] [--plots dir]
       calibrate the baseline model, test its residuals, fit every catalogue effect, name the
       cause and measure the gain on validation data (the last 30 % of the file when no
       --validation is given)
+  (every command that reads logs reads CSV or ASAM MDF 4 (.mf4) files; --channel-map map.toml
+  renames an MF4 file's channels to DATA-FORMAT columns and adds metadata: docs/data-format.md)
   run [scenario.toml] [--out dir]
       closed loop of all three actuators (model-core controllers against the plant models,
       natively); without a file, the built-in default scenario; logs and plots go to --out
@@ -110,6 +113,14 @@ impl Args {
             .find(|(k, _)| k == name)
             .map(|(_, v)| v.as_str())
     }
+    /// Reads a log (CSV or MF4) with the `--channel-map` option's map, when given.
+    fn read_log(&self, path: &str, plant: Option<Plant>) -> Result<Log, LogError> {
+        let map = self
+            .get("channel-map")
+            .map(|m| ChannelMap::read(Path::new(m)))
+            .transpose()?;
+        read_log_mapped(Path::new(path), plant, map.as_ref())
+    }
     fn plant(&self) -> Result<Option<Plant>, CliError> {
         match self.get("plant") {
             None => Ok(None),
@@ -121,11 +132,13 @@ impl Args {
 }
 
 fn check(args: &[String]) -> Result<(), CliError> {
-    let a = parse_args(args, &["plant"])?;
+    let a = parse_args(args, &["plant", "channel-map"])?;
     let [path] = a.positional.as_slice() else {
         return Err(CliError::Usage("check takes one log file".into()));
     };
-    let log = read_log(Path::new(path), a.plant()?).map_err(|e| CliError::Failed(e.to_string()))?;
+    let log = a
+        .read_log(path, a.plant()?)
+        .map_err(|e| CliError::Failed(e.to_string()))?;
     println!(
         "{}: plant {}, {} samples at {} s, columns {}",
         log.file,
@@ -141,7 +154,7 @@ fn check(args: &[String]) -> Result<(), CliError> {
 }
 
 fn run_diagnose(args: &[String]) -> Result<(), CliError> {
-    let a = parse_args(args, &["validation", "plant", "json", "plots"])?;
+    let a = parse_args(args, &["validation", "plant", "json", "plots", "channel-map"])?;
     let [est_path] = a.positional.as_slice() else {
         return Err(CliError::Usage(
             "diagnose takes one estimation log (and --validation for a second)".into(),
@@ -149,11 +162,11 @@ fn run_diagnose(args: &[String]) -> Result<(), CliError> {
     };
     let plant = a.plant()?;
     let failed = |e: hil_host::log::LogError| CliError::Failed(e.to_string());
-    let est_full = read_log(Path::new(est_path), plant).map_err(failed)?;
+    let est_full = a.read_log(est_path, plant).map_err(failed)?;
     let plant = est_full.plant;
     let (est, val, tail) = match a.get("validation") {
         Some(v) => {
-            let val = read_log(Path::new(v), Some(plant)).map_err(failed)?;
+            let val = a.read_log(v, Some(plant)).map_err(failed)?;
             (est_full, val, false)
         }
         None => {
@@ -386,7 +399,7 @@ fn run_identify(args: &[String]) -> Result<(), CliError> {
 
 fn identify_evvt(args: &[String]) -> Result<(), CliError> {
     use hil_host::identify::evvt;
-    let a = parse_args(args, &["json"])?;
+    let a = parse_args(args, &["json", "channel-map"])?;
     if a.positional.is_empty() {
         return Err(CliError::Usage(
             "identify evvt takes one or more closed-loop PRBS logs".into(),
@@ -395,7 +408,9 @@ fn identify_evvt(args: &[String]) -> Result<(), CliError> {
     let opts = evvt::EvvtIdentifyOptions::default();
     let mut points = Vec::new();
     for path in &a.positional {
-        let log = read_log(Path::new(path), Some(Plant::Evvt)).map_err(|e| CliError::Failed(e.to_string()))?;
+        let log = a
+            .read_log(path, Some(Plant::Evvt))
+            .map_err(|e| CliError::Failed(e.to_string()))?;
         for n in &log.notices {
             eprintln!("notice: {}: {n}", log.file);
         }
@@ -416,7 +431,7 @@ fn identify_evvt(args: &[String]) -> Result<(), CliError> {
 fn identify_ehvva(args: &[String]) -> Result<(), CliError> {
     use hil_host::diagnose::ehvva::Events;
     use hil_host::identify::ehvva;
-    let a = parse_args(args, &["json"])?;
+    let a = parse_args(args, &["json", "channel-map"])?;
     if a.positional.is_empty() {
         return Err(CliError::Usage(
             "identify ehvva takes one or more bench logs of valve events".into(),
@@ -424,7 +439,9 @@ fn identify_ehvva(args: &[String]) -> Result<(), CliError> {
     }
     let mut sets = Vec::new();
     for path in &a.positional {
-        let log = read_log(Path::new(path), Some(Plant::Ehvva)).map_err(|e| CliError::Failed(e.to_string()))?;
+        let log = a
+            .read_log(path, Some(Plant::Ehvva))
+            .map_err(|e| CliError::Failed(e.to_string()))?;
         for n in &log.notices {
             eprintln!("notice: {}: {n}", log.file);
         }
