@@ -63,9 +63,9 @@ fn has_mdf_signature(path: &Path) -> bool {
 pub struct ChannelMap {
     /// The map file, for messages.
     pub file: String,
-    /// (logger channel name, DATA-FORMAT column name), in file order.
+    /// (logger channel name, DATA-FORMAT column name), sorted by channel name.
     pub channels: Vec<(String, String)>,
-    /// Metadata `key = value` (numbers and booleans as their text), in file order.
+    /// Metadata `key = value` (numbers and booleans as their text), sorted by key.
     pub meta: Vec<(String, String)>,
 }
 
@@ -596,7 +596,7 @@ mod tests {
         .unwrap();
         assert_eq!(m.column_of("ECU.PhaseCam_deg"), "phase_deg");
         assert_eq!(m.column_of("engine_rpm"), "engine_rpm");
-        assert_eq!(m.meta, [("plant".into(), "evvt".into()), ("kp".into(), "25".into())]);
+        assert_eq!(m.meta, [("kp".into(), "25".into()), ("plant".into(), "evvt".into())]);
 
         let e = ChannelMap::parse("m.toml", "[channels]\n\"A\" = \"phase\"\n").unwrap_err();
         assert_eq!(e.column.as_deref(), Some("channels.\"A\""));
