@@ -20,6 +20,12 @@ if ! cmp -s tools/py/requirements.txt "$py_venv/requirements.txt" 2>/dev/null; t
   cp tools/py/requirements.txt "$py_venv/requirements.txt"
 fi
 export HIL_REQUIRE_PY=1
+# Headless Chromium (Debian's `chromium`) for the HTML report tests (hil-host/tests/report_html.rs):
+# installed when missing (as root, apt-get update first); the tests fail rather than skip without it.
+if ! command -v chromium >/dev/null 2>&1; then
+  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium
+fi
+export HIL_REQUIRE_CHROMIUM=1
 
 # The house rules (CONTRIBUTING.md): a tree that is not formatted or not lint-clean fails here,
 # before anything slow runs.

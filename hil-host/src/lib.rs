@@ -2,6 +2,7 @@
 //! identification and diagnosis.
 pub mod diagnose;
 pub mod generate;
+pub mod html;
 pub mod identify;
 pub mod log;
 pub mod lsq;

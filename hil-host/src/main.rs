@@ -11,15 +11,17 @@ commands:
   check <log.csv|log.mf4> [--plant P] [--channel-map map.toml]
       read a log strictly and summarise it
   diagnose <estimation.csv> [--validation <validation.csv>] [--plant P] [--json out.json] [--plots dir]
+           [--report report.html]
       calibrate the baseline model, test its residuals, fit every catalogue effect, name the
       cause and measure the gain on validation data (the last 30 % of the file when no
-      --validation is given)
+      --validation is given); --report writes one self-contained HTML page (verdict, evidence,
+      plots, parameters with confidence and flags, gain)
   (every command that reads logs reads CSV or ASAM MDF 4 (.mf4) files; --channel-map map.toml
   renames an MF4 file's channels to DATA-FORMAT columns and adds metadata: docs/data-format.md)
-  run [scenario.toml] [--out dir]
+  run [scenario.toml] [--out dir] [--report report.html]
       closed loop of all three actuators (model-core controllers against the plant models,
       natively); without a file, the built-in default scenario; logs and plots go to --out
-      (default: out/<scenario name>)
+      (default: out/<scenario name>); --report writes one self-contained HTML page (summary, plots)
   generate <plant> <effect|none> [--seed N] [--out dir]
       write a bench-like estimation and validation log pair from the plant model with one
       hidden effect (the truth goes to truth.json beside them, not into the logs);
@@ -154,7 +156,7 @@ fn check(args: &[String]) -> Result<(), CliError> {
 }
 
 fn run_diagnose(args: &[String]) -> Result<(), CliError> {
-    let a = parse_args(args, &["validation", "plant", "json", "plots", "channel-map"])?;
+    let a = parse_args(args, &["validation", "plant", "json", "plots", "channel-map", "report"])?;
     let [est_path] = a.positional.as_slice() else {
         return Err(CliError::Usage(
             "diagnose takes one estimation log (and --validation for a second)".into(),
@@ -198,11 +200,17 @@ fn run_diagnose(args: &[String]) -> Result<(), CliError> {
     }
     if let Some(dir) = a.get("plots") {
         let dir = PathBuf::from(dir);
-        let written = hil_host::plot::diagnosis_plots(&d, &dir)
+        let written = hil_host::plot::diagnosis_plots_timed(&d, val.col("t_s").unwrap_or(&[]), &dir)
             .map_err(|e| CliError::Failed(format!("{}: {e}", dir.display())))?;
         for w in written {
             eprintln!("plot written to {}", w.display());
         }
+    }
+    if let Some(out) = a.get("report") {
+        let plots = hil_host::plot::diagnosis_svgs(&d, val.col("t_s"));
+        let page = hil_host::html::diagnosis_page(&report::to_json(&d), &report::summary(&d), &plots);
+        std::fs::write(out, page).map_err(|e| CliError::Failed(format!("{out}: {e}")))?;
+        eprintln!("report written to {out}");
     }
     Ok(())
 }
@@ -250,8 +258,8 @@ fn run_generate(args: &[String]) -> Result<(), CliError> {
 }
 
 fn run_scenario(args: &[String]) -> Result<(), CliError> {
-    use hil_host::run::{run, Scenario};
-    let a = parse_args(args, &["out"])?;
+    use hil_host::run::{run, run_with, write_outputs, NativeLink, RunOptions, Scenario};
+    let a = parse_args(args, &["out", "report"])?;
     let scenario = match a.positional.as_slice() {
         [] => Scenario::default_scenario(),
         [file] => {
@@ -265,7 +273,19 @@ fn run_scenario(args: &[String]) -> Result<(), CliError> {
             .map(String::from)
             .unwrap_or_else(|| format!("out/{}", scenario.name)),
     );
-    let summary = run(&scenario, Some(&out)).map_err(CliError::Failed)?;
+    let summary = match a.get("report") {
+        None => run(&scenario, Some(&out)).map_err(CliError::Failed)?,
+        Some(report) => {
+            let mut link = NativeLink::new().map_err(CliError::Failed)?;
+            let o = run_with(&scenario, &mut link, &RunOptions::default()).map_err(CliError::Failed)?;
+            write_outputs(&scenario, &o, &out).map_err(|e| CliError::Failed(format!("{}: {e}", out.display())))?;
+            let plots = hil_host::plot::run_svgs(&scenario, &o);
+            let page = hil_host::html::run_page(&scenario.name, &o.summary.text(&scenario.name), &plots);
+            std::fs::write(report, page).map_err(|e| CliError::Failed(format!("{report}: {e}")))?;
+            eprintln!("report written to {report}");
+            o.summary
+        }
+    };
     print!("{}", summary.text(&scenario.name));
     println!("logs (DATA-FORMAT) and plots in {}", out.display());
     Ok(())

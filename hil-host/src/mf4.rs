@@ -305,9 +305,10 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
     let primary = plant.primary_output();
     let primary_ch = match by_column.get(primary).map(Vec::as_slice) {
         Some([ch]) => *ch,
-        Some(several) => return Err(err(
-            Some(primary.into()),
-            format!(
+        Some(several) => {
+            return Err(err(
+                Some(primary.into()),
+                format!(
                 "the primary output is in {} channel groups ({}); keep one, or rename the others in the channel map",
                 several.len(),
                 several
@@ -316,7 +317,8 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
                     .collect::<Vec<_>>()
                     .join(", ")
             ),
-        )),
+            ))
+        }
         None => return Err(missing(&file, &mdf, map, primary, plant)),
     };
     let group = (primary_ch.data_group_index, primary_ch.channel_group_index);
@@ -359,9 +361,10 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
                     ));
                     *ch
                 }
-                None => return Err(err(
-                    Some((*column).into()),
-                    format!(
+                None => {
+                    return Err(err(
+                        Some((*column).into()),
+                        format!(
                         "in {} channel groups, none the primary output's ({}); rename all but one in the channel map",
                         several.len(),
                         several
@@ -370,7 +373,8 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
                             .collect::<Vec<_>>()
                             .join(", ")
                     ),
-                )),
+                    ))
+                }
             },
         };
         let values = mdf.signal(ch).and_then(|s| s.values_f64()).map_err(|e| {
