@@ -7,6 +7,8 @@ pub mod identify;
 pub mod log;
 pub mod lsq;
 pub mod mf4;
+pub mod numbers;
+pub mod output;
 pub mod pil;
 pub mod plot;
 pub mod residuals;

@@ -505,7 +505,8 @@ fn write_all(svgs: Vec<(String, String)>, dir: &Path) -> std::io::Result<Vec<Pat
     let mut written = Vec::new();
     for (name, svg) in svgs {
         let p = dir.join(name);
-        fs::write(&p, svg)?;
+        // Whole files only (crate::output): a killed run leaves the old plot or none.
+        crate::output::write_atomic(&p, svg.as_bytes())?;
         written.push(p);
     }
     Ok(written)
