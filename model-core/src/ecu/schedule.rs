@@ -613,3 +613,281 @@ impl Default for Schedule {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::super::board::doubles::{FakeAnalog, FakeCapture, FakePwm, FakeSolenoid, FakeSwitch};
+    use super::super::board::SolenoidCmd;
+    use super::super::crank_sim::CrankSignal;
+    use super::super::ehvva_task::{CrankDecoder, EhvvaTaskConfig, TriggerWheel};
+    use super::super::supervisor::{SupervisorConfig, N_CHANNELS};
+    use super::*;
+
+    const STEP_US: u32 = 50;
+    const RPM: f64 = 1500.0;
+
+    /// The EHVVA part's board: queued edges in, recording doubles out.
+    #[derive(Default)]
+    struct EhvvaIo {
+        capture: FakeCapture,
+        pilot: FakeSolenoid,
+        lift: FakeSwitch,
+        snubber: FakeSwitch,
+    }
+    impl Capture for EhvvaIo {
+        fn next_edge(&mut self) -> Option<Edge> {
+            self.capture.next_edge()
+        }
+    }
+    impl EhvvaBoard for EhvvaIo {
+        type Pilot = FakeSolenoid;
+        type Switch = FakeSwitch;
+        fn pilot(&mut self) -> &mut FakeSolenoid {
+            &mut self.pilot
+        }
+        fn lift_valve(&mut self) -> &mut FakeSwitch {
+            &mut self.lift
+        }
+        fn snubber_valve(&mut self) -> &mut FakeSwitch {
+            &mut self.snubber
+        }
+    }
+
+    #[derive(Default)]
+    struct EvvtIo {
+        motor: FakePwm,
+        fault_pin: bool,
+    }
+    impl EvvtBoard for EvvtIo {
+        type Motor = FakePwm;
+        fn motor(&mut self) -> &mut FakePwm {
+            &mut self.motor
+        }
+        fn driver_fault(&mut self) -> bool {
+            self.fault_pin
+        }
+    }
+
+    #[derive(Default)]
+    struct VacuumIo {
+        valves: [FakePwm; 3],
+        pump: FakeSwitch,
+    }
+    impl VacuumBoard for VacuumIo {
+        type Valve = FakePwm;
+        type Pump = FakeSwitch;
+        fn valves(&mut self) -> &mut [FakePwm; 3] {
+            &mut self.valves
+        }
+        fn pump(&mut self) -> &mut FakeSwitch {
+            &mut self.pump
+        }
+    }
+
+    struct Adc([u16; N_CHANNELS]);
+    impl AnalogBank for Adc {
+        type In<'a> = FakeAnalog;
+        fn analog(&mut self, index: usize) -> FakeAnalog {
+            FakeAnalog { counts: self.0[index] }
+        }
+    }
+
+    /// The IWDG: expired once `WATCHDOG_TIMEOUT_US` passed without a pet.
+    #[derive(Default)]
+    struct Iwdg {
+        now_us: u32,
+        last_pet_us: u32,
+        pets: heapless::Vec<u32, 64>,
+    }
+    impl Watchdog for Iwdg {
+        fn pet(&mut self) {
+            self.last_pet_us = self.now_us;
+            self.pets.push(self.now_us).unwrap();
+        }
+    }
+    impl Iwdg {
+        fn expired(&self) -> bool {
+            self.now_us - self.last_pet_us >= WATCHDOG_TIMEOUT_US
+        }
+    }
+
+    /// Which part a test keeps from running (a task that hangs).
+    #[derive(Clone, Copy, Debug, PartialEq)]
+    enum Stall {
+        Supervisor,
+        Task(TaskId),
+    }
+
+    /// A board around the composition, driven on a 50 µs grid like the lockstep core, with a
+    /// turning engine and healthy sensors (13.8 V, 6 MPa, oil 80 °C, tank 40 kPa, ...).
+    struct Rig {
+        ecu: Ecu,
+        schedule: Schedule,
+        ehvva: EhvvaIo,
+        evvt: EvvtIo,
+        vacuum: VacuumIo,
+        adc: Adc,
+        iwdg: Iwdg,
+        engine: CrankSignal,
+        setpoints: Setpoints,
+        now_us: u32,
+    }
+
+    impl Rig {
+        fn new() -> Self {
+            let cfg = SupervisorConfig::default();
+            let values = [13.8, 6.0, 2.0, 80.0, 40.0, 100.0, 20.0, 40.0, 60.0, 50.0];
+            Self {
+                ecu: Ecu::new(EcuCoreConfig::default()).unwrap(),
+                schedule: Schedule::default(),
+                ehvva: EhvvaIo::default(),
+                evvt: EvvtIo::default(),
+                vacuum: VacuumIo::default(),
+                adc: Adc(core::array::from_fn(|k| cfg.scales[k].counts_for(values[k]))),
+                iwdg: Iwdg::default(),
+                engine: CrankSignal::new(TriggerWheel::sixty_minus_two(), 0.0),
+                setpoints: Setpoints {
+                    valve: ValveRequest {
+                        open_deg: 100.0,
+                        close_deg: 400.0,
+                        high_lift: true,
+                        soft_seat: true,
+                        enabled: true,
+                    },
+                    cam_phase_deg: 20.0,
+                    vacuum_x_pct: [20.0, 40.0, 60.0],
+                },
+                now_us: 0,
+            }
+        }
+
+        /// One 50 µs step with the parts in the composition's order, except `stall`.
+        fn tick(&mut self, stall: Option<Stall>) {
+            let t0 = self.now_us;
+            self.now_us += STEP_US;
+            let now = self.now_us;
+            self.iwdg.now_us = now;
+            self.ehvva.pilot.now_us = now;
+            let mut edges = [Edge {
+                source: super::super::board::EdgeSource::CrankTooth,
+                t_us: 0,
+            }; 8];
+            let n = self.engine.advance(RPM, STEP_US, 438.0, true, true, t0, &mut edges);
+            for e in &edges[..n.min(edges.len())] {
+                // A full queue drops the edge, as the ECU's capture queue does (a hung EHVVA
+                // part does not drain it).
+                let _ = self.ehvva.capture.pending.push_back(*e);
+            }
+            let sh = &mut self.ecu.shared;
+            let runs = |p: Stall| stall != Some(p);
+            if self.schedule.supervisor.due(now) && runs(Stall::Supervisor) {
+                self.ecu.supervisor.run(sh, &mut self.adc, &mut self.iwdg, now);
+            }
+            if runs(Stall::Task(TaskId::Ehvva)) {
+                self.ecu.ehvva.run(sh, &mut self.ehvva, &self.setpoints.valve, now);
+            }
+            if self.schedule.evvt.due(now) && runs(Stall::Task(TaskId::Evvt)) {
+                self.ecu.evvt.run(sh, &mut self.evvt, self.setpoints.cam_phase_deg, now);
+            }
+            if self.schedule.vacuum.due(now) && runs(Stall::Task(TaskId::Vacuum)) {
+                self.ecu
+                    .vacuum
+                    .run(sh, &mut self.vacuum, self.setpoints.vacuum_x_pct, now);
+            }
+        }
+
+        fn all_outputs_off(&self) -> bool {
+            self.ehvva.pilot.current() == SolenoidCmd::Off
+                && !self.ehvva.lift.on
+                && !self.ehvva.snubber.on
+                && self.evvt.motor.duty == 0.0
+                && self.vacuum.valves.iter().all(|v| v.duty == 0.0)
+                && !self.vacuum.pump.on
+        }
+    }
+
+    #[test]
+    fn boot_engine_view_is_the_decoders() {
+        let c = EhvvaTaskConfig::default();
+        let d = CrankDecoder::new(c.wheel, c.stall_timeout_us, c.run_rpm);
+        assert_eq!(EcuShared::BOOT.engine, d.snapshot());
+        assert_eq!(EcuShared::BOOT.measurements, Measurements::default());
+    }
+
+    #[test]
+    fn the_watchdog_is_petted_every_check_while_every_task_runs() {
+        let mut r = Rig::new();
+        for _ in 0..(1_000_000 / STEP_US) {
+            r.tick(None);
+        }
+        // 1 s: a pet at every fifth scan, 50 ms apart, none missed.
+        assert_eq!(r.iwdg.pets.len(), 20, "{:?}", r.iwdg.pets);
+        assert!(r.iwdg.pets.windows(2).all(|w| w[1] - w[0] == 50_000));
+        assert!(!r.iwdg.expired());
+        // And the ECU was working: valve events, phase control, valves and slow valves on.
+        assert!(r.ehvva.pilot.log.iter().any(|(_, c)| *c == SolenoidCmd::Full));
+        assert!(r.ehvva.lift.on && r.evvt.motor.duty > 0.0);
+        assert!(r.vacuum.valves.iter().all(|v| v.duty > 0.0));
+    }
+
+    /// A hung task stops the pets; the IWDG resets the ECU within 50 ms + its timeout; the
+    /// reset ECU starts with every output off and keeps the actuators safe until its first scan.
+    #[test]
+    fn a_stalled_task_is_not_petted_over_and_the_reset_ecu_starts_with_every_output_off() {
+        for stall in [
+            Stall::Supervisor,
+            Stall::Task(TaskId::Ehvva),
+            Stall::Task(TaskId::Evvt),
+            Stall::Task(TaskId::Vacuum),
+        ] {
+            let mut r = Rig::new();
+            for _ in 0..(600_000 / STEP_US) {
+                r.tick(None);
+            }
+            assert!(!r.all_outputs_off(), "{stall:?}: outputs idle before the stall");
+            let t_stall = r.now_us;
+            let pets_before = r.iwdg.pets.len();
+            while !r.iwdg.expired() {
+                r.tick(Some(stall));
+                assert!(
+                    r.now_us - t_stall < 400_000,
+                    "{stall:?}: no reset 400 ms after the stall"
+                );
+            }
+            let t_reset = r.now_us;
+            // The check at the next 50 ms may still see the beats from before the stall.
+            assert!(
+                r.iwdg.pets.len() - pets_before <= 1,
+                "{stall:?}: petted {} times while stalled",
+                r.iwdg.pets.len() - pets_before
+            );
+            assert!(
+                t_reset - t_stall <= WATCHDOG_CHECK_SCANS * SUPERVISOR_PERIOD_US + WATCHDOG_TIMEOUT_US,
+                "{stall:?}: reset {} µs after the stall",
+                t_reset - t_stall
+            );
+            // Reset: a new composition from the calibration, the board's outputs off first.
+            r.ecu = Ecu::new(EcuCoreConfig::default()).unwrap();
+            r.schedule = Schedule::default();
+            outputs_off(&mut r.ehvva, &mut r.evvt, &mut r.vacuum);
+            assert!(r.all_outputs_off(), "{stall:?}: an output on after the reset");
+            // Before its first scan every part holds its safe state (the engine still turns).
+            let sh = &mut r.ecu.shared;
+            let now = r.now_us + STEP_US;
+            let e = r.ecu.ehvva.run(sh, &mut r.ehvva, &r.setpoints.valve, now);
+            let v = r.ecu.vacuum.run(sh, &mut r.vacuum, r.setpoints.vacuum_x_pct, now);
+            r.ecu.evvt.run(sh, &mut r.evvt, r.setpoints.cam_phase_deg, now);
+            assert_eq!(e.pilot, SolenoidCmd::Off);
+            assert!(!e.lift_valve_on && !e.snubber_switch_on);
+            assert!(v.duty == [0.0; 3] && !v.pump_on, "{v:?}");
+            assert!(r.all_outputs_off(), "{stall:?}: an output on before the first scan");
+            // After it, the ECU runs again and pets the watchdog.
+            let pets = r.iwdg.pets.len();
+            for _ in 0..(300_000 / STEP_US) {
+                r.tick(None);
+            }
+            assert!(r.iwdg.pets.len() >= pets + 5, "{stall:?}: not petted after the reset");
+            assert!(r.vacuum.valves.iter().all(|v| v.duty > 0.0));
+        }
+    }
+}
