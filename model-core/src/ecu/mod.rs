@@ -30,7 +30,7 @@ pub mod supervisor;
 pub mod vacuum_task;
 
 /// Every fault reaction end to end on the test doubles: the whole ECU ([`lockstep::EcuCore`],
-/// the four state machines on the firmware's schedule) fed by a turning engine and the
+/// the composition [`schedule::Ecu`] the firmware runs) fed by a turning engine and the
 /// doubles' readings, its outputs written to the doubles, a fault injected through them, and
 /// the outputs checked against the fault's safe state.
 #[cfg(test)]
