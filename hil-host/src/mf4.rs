@@ -16,17 +16,17 @@
 //!   Columns recorded in other channel groups (other rates) are resampled onto it: linearly for
 //!   continuous signals, by zero-order hold (the last value at or before each instant) for 0/1
 //!   flags; a notice says which columns, from which rate, and how.
-//! - The columns then go through the CSV reader's checks (ranges, flags, uniform and increasing
-//!   time, required columns), so an MF4 log and a CSV log of the same samples give the same
-//!   [`Log`], bit for bit. Errors name the file and the channel (and the sample index and time
-//!   where one sample is at fault).
+//! - The columns then go through the CSV reader's checks (`crate::log::log_from_columns`:
+//!   typed metadata, ranges, flags, uniform and increasing time, required columns), so an MF4
+//!   log and a CSV log of the same samples give the same [`Log`], bit for bit. Errors name the
+//!   file and the channel (and the sample index where one sample is at fault).
 
 use std::collections::BTreeMap;
 use std::path::Path;
 
 use falcon_mdf::{Channel, Mf4File};
 
-use crate::log::{format_log, parse_log, Log, LogError, Plant, FLAGS};
+use crate::log::{log_from_columns, Log, LogError, Plant, FLAGS};
 
 /// True when `path` names an MF4 file: the `.mf4`/`.mdf` extension, or the MDF identification
 /// block's signature at the start of the file (a logger's file renamed to `.dat`).
@@ -434,9 +434,18 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
         .iter()
         .filter_map(|(col, chs)| chs.first().map(|c| (*col, describe(col, c))))
         .collect();
-    let mut log = log_from_columns(&file, &meta, &columns, plant).map_err(|mut e| {
+    // The same checks as a CSV file (crate::log::check): errors name the column and the
+    // sample; here they also name the logger's channel.
+    let mut log = log_from_columns(&file, meta, columns, Some(plant)).map_err(|mut e| {
         if let Some(c) = e.column.as_deref().and_then(|c| names.get(c)) {
             e.message = format!("{c}: {}", e.message);
+        }
+        // A sample's time helps find it in the logger's tool.
+        if let Some((head, tail)) = e.message.split_once(" (0-based)") {
+            let k = head.rsplit(' ').next().and_then(|k| k.parse::<usize>().ok());
+            if let Some(t) = k.and_then(|k| t_s.get(k)) {
+                e.message = format!("{head} (0-based, t = {t} s){tail}");
+            }
         }
         if e.message.contains("is missing") {
             return missing(&file, &mdf, map, e.column.as_deref().unwrap_or(""), plant);
@@ -470,48 +479,6 @@ fn missing(file: &str, mdf: &Mf4File, map: &ChannelMap, column: &str, plant: Pla
             have.join(", ")
         ),
     }
-}
-
-/// A log from whole columns, through the CSV reader's checks so that both formats are held to
-/// one contract. A check that names a data line is turned back into the sample index and time.
-fn log_from_columns(
-    file: &str,
-    meta: &[(String, String)],
-    columns: &[(String, Vec<f64>)],
-    plant: Plant,
-) -> Result<Log, LogError> {
-    let cols: Vec<(&str, &[f64])> = columns.iter().map(|(n, v)| (n.as_str(), v.as_slice())).collect();
-    let text = format_log(meta, &cols);
-    // Line numbers of the text: metadata lines, the header, then one line per sample.
-    let first_data_line = meta.len() + 2;
-    let t = columns.first().map(|(_, v)| v.as_slice()).unwrap_or(&[]);
-    let mut log = parse_log(file, &text, Some(plant)).map_err(|mut e| {
-        match e.line {
-            Some(l) if l >= first_data_line => {
-                let k = l - first_data_line;
-                let at = t.get(k).map_or(String::new(), |t| format!(" (t = {t} s)"));
-                e.message = format!("sample {k}{at}: {}", e.message);
-            }
-            Some(l) if l + 1 == first_data_line => e.message = format!("channel list: {}", e.message),
-            Some(l) => {
-                if let Some((k, _)) = meta.get(l - 1) {
-                    e.message = format!("metadata `{k}`: {}", e.message);
-                }
-            }
-            None => {}
-        }
-        e.line = None;
-        e
-    })?;
-    // The text's line numbers mean nothing to the user: metadata notices name the key instead.
-    for n in &mut log.notices {
-        if let Some(rest) = n.strip_prefix("line ") {
-            if let Some((_, msg)) = rest.split_once(": ") {
-                *n = format!("header comment: {msg}");
-            }
-        }
-    }
-    Ok(log)
 }
 
 /// `values` recorded at `t_from` onto the instants `t_to`: linear, or the last value at or

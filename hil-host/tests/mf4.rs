@@ -303,7 +303,7 @@ fn errors_name_the_file_and_the_channel() {
     assert_eq!(e.column.as_deref(), Some("pos_m"));
     assert!(e.message.contains("channel `Axis1.Pos_m`"), "{e}");
     assert!(
-        e.message.contains("sample 37 (t = 0.037 s)") && e.message.contains("range"),
+        e.message.contains("sample 37 (0-based, t = 0.037 s)") && e.message.contains("range"),
         "{e}"
     );
     assert!(e.to_string().starts_with(&mf4.display().to_string()), "{e}");
