@@ -10,12 +10,13 @@
 //! ECU where the scan completes before the slower tasks' ticks.
 
 use super::board::{elapsed_us, SolenoidCmd};
+use super::calibration::CALIBRATION_FAULT_BIT;
 use super::ehvva_task::{EhvvaStepInputs, EhvvaTask, EhvvaTaskConfig, EngineSnapshot};
 use super::evvt_task::{EvvtTask, EvvtTaskConfig, EvvtTaskInputs, EvvtTaskOutputs};
 use super::frame::{ActuatorFrame, SensorFrame};
 use super::supervisor::{FaultSet, Measurements, SafeState, Supervisor, SupervisorConfig, TaskReports};
 use super::vacuum_task::{VacuumTask, VacuumTaskConfig, VacuumTaskInputs, VacuumTaskOutputs};
-use crate::ehvva::{EhvvaParams, EhvvaTables};
+use crate::ehvva::{EhvvaParams, EhvvaTables, ValveMotionData};
 
 /// The lockstep period.
 pub const STEP_US: u32 = 50;
@@ -30,8 +31,13 @@ pub struct EcuCoreConfig {
     pub ehvva: EhvvaTaskConfig,
     /// The valve model whose delay tables td(Ph, T) advance the pilot command.
     pub ehvva_model: EhvvaParams,
+    /// The valve's own motion after td (added to the pilot edges' advance).
+    pub ehvva_motion: ValveMotionData,
     pub evvt: EvvtTaskConfig,
     pub vacuum: VacuumTaskConfig,
+    /// The calibration image was refused and this is the paper defaults' fall-back: every
+    /// actuator frame carries [`CALIBRATION_FAULT_BIT`] (see [`super::calibration`]).
+    pub calibration_fault: bool,
 }
 
 impl Default for EcuCoreConfig {
@@ -40,8 +46,10 @@ impl Default for EcuCoreConfig {
             supervisor: SupervisorConfig::default(),
             ehvva: EhvvaTaskConfig::default(),
             ehvva_model: EhvvaParams::paper_default(),
+            ehvva_motion: ValveMotionData::paper_default(),
             evvt: EvvtTaskConfig::default(),
             vacuum: VacuumTaskConfig::default(),
+            calibration_fault: false,
         }
     }
 }
@@ -109,11 +117,14 @@ pub struct EcuCore {
     last_evvt: Option<EvvtTaskOutputs>,
     last_vacuum: Option<VacuumTaskOutputs>,
     motor_duty: f32,
+    /// Fault bits outside the supervisor's ([`CALIBRATION_FAULT_BIT`]).
+    extra_faults: u32,
 }
 
 impl EcuCore {
     pub fn new(cfg: EcuCoreConfig) -> Result<Self, &'static str> {
-        let tables = EhvvaTables::<f32>::new(&cfg.ehvva_model).map_err(|_| "EHVVA delay tables")?;
+        let tables = EhvvaTables::<f32>::with_valve_motion(&cfg.ehvva_model, &cfg.ehvva_motion)
+            .map_err(|_| "EHVVA delay tables")?;
         Ok(Self {
             sup: Supervisor::new(cfg.supervisor),
             ehvva: EhvvaTask::new(cfg.ehvva, tables)?,
@@ -129,6 +140,11 @@ impl EcuCore {
             last_evvt: None,
             last_vacuum: None,
             motor_duty: 0.0,
+            extra_faults: if cfg.calibration_fault {
+                CALIBRATION_FAULT_BIT
+            } else {
+                0
+            },
         })
     }
 
@@ -233,7 +249,7 @@ impl EcuCore {
             motor_duty: self.motor_duty,
             vacuum_duty: vac.map_or([0.0; 3], |v| v.duty),
             pump_on: vac.is_some_and(|v| v.pump_on),
-            faults: self.faults.0,
+            faults: self.faults.0 | self.extra_faults,
             bad_frames: 0,
         }
     }
