@@ -31,7 +31,7 @@ use crate::ecu::lockstep::EcuCoreConfig;
 use crate::ecu::vacuum_task::{VacuumTask, VacuumTaskConfig};
 use crate::ehvva::{EhvvaParams, EhvvaTableData, EhvvaTables, ValveMotionData};
 use crate::evvt::EvvtLpvTable;
-use crate::vacuum::{PositionMap, StaticPressureMap, VacuumParams};
+use crate::vacuum::{PositionMap, StaticPressureMap, VacuumEffects, VacuumParams};
 
 /// The image's first four bytes.
 pub const MAGIC: [u8; 4] = *b"ECAL";
@@ -148,7 +148,7 @@ const EV_N: &str = "evvt.engine_speed_rpm";
 const EV_U: &str = "evvt.battery_voltage_v";
 
 /// Number of characteristics (A2L objects) in the image.
-pub const N_CHARACTERISTICS: usize = 56;
+pub const N_CHARACTERISTICS: usize = 59;
 
 /// Every value of the image, in image order.
 pub const CHARACTERISTICS: [Characteristic; N_CHARACTERISTICS] = [
@@ -608,7 +608,12 @@ pub const CHARACTERISTICS: [Characteristic; N_CHARACTERISTICS] = [
         120.0,
         "HPC: ambient pressure the position map was identified at",
     ),
+    c("vacuum.lpt.effects", Shape::Array(4), "-", 0.0, 1.0, EFFECTS_DOC),
+    c("vacuum.hpt.effects", Shape::Array(4), "-", 0.0, 1.0, EFFECTS_DOC),
+    c("vacuum.hpc.effects", Shape::Array(4), "-", 0.0, 1.0, EFFECTS_DOC),
 ];
+
+const EFFECTS_DOC: &str = "the ECU's actuator model (observer, stuck check): supply-voltage, pressure-direction, coulomb-friction, backlash, each 0 (off) or 1 (on)";
 
 /// Number of f32 values in the image.
 pub const N_VALUES: usize = {
@@ -716,6 +721,9 @@ pub struct VacuumActuatorCalibration {
     pub fc_kpa: f64,
     pub backlash_pct: f64,
     pub p_amb_ref_kpa: f64,
+    /// The effects the ECU's model of the actuator has: `[supply-voltage, pressure-direction,
+    /// coulomb-friction, backlash]`, 0 or 1.
+    pub effects: [f64; 4],
 }
 
 impl VacuumActuatorCalibration {
@@ -753,6 +761,13 @@ impl VacuumActuatorCalibration {
             fc_kpa: p.fc_kpa,
             backlash_pct: p.backlash_pct,
             p_amb_ref_kpa: p.p_amb_ref_kpa,
+            effects: [
+                p.effects.supply_voltage,
+                p.effects.pressure_direction,
+                p.effects.coulomb_friction,
+                p.effects.backlash,
+            ]
+            .map(|on| if on { 1.0 } else { 0.0 }),
         }
     }
 
@@ -795,6 +810,12 @@ impl VacuumActuatorCalibration {
             fc_kpa: self.fc_kpa,
             backlash_pct: self.backlash_pct,
             p_amb_ref_kpa: self.p_amb_ref_kpa,
+            effects: VacuumEffects {
+                supply_voltage: self.effects[0] == 1.0,
+                pressure_direction: self.effects[1] == 1.0,
+                coulomb_friction: self.effects[2] == 1.0,
+                backlash: self.effects[3] == 1.0,
+            },
             ..*base
         }
     }
@@ -932,11 +953,7 @@ impl EcuCalibration {
         cfg.vacuum.comp_u_min_v = self.vacuum_comp_u_min_v;
         let base = VacuumTaskConfig::default().actuators;
         for k in 0..3 {
-            let effects = cfg.vacuum.actuators[k].effects;
-            cfg.vacuum.actuators[k] = VacuumParams {
-                effects,
-                ..self.vacuum[k].apply(&base[k])
-            };
+            cfg.vacuum.actuators[k] = self.vacuum[k].apply(&base[k]);
         }
     }
 
@@ -1013,6 +1030,9 @@ impl EcuCalibration {
             one(&mut lpt.p_amb_ref_kpa),
             one(&mut hpt.p_amb_ref_kpa),
             one(&mut hpc.p_amb_ref_kpa),
+            &mut lpt.effects,
+            &mut hpt.effects,
+            &mut hpc.effects,
         ]
     }
 
@@ -1043,6 +1063,35 @@ impl EcuCalibration {
         let mut buf = [0u8; IMAGE_BYTES];
         CalibrationImage::serialize(self, &mut buf)?;
         CalibrationImage::parse(&buf).map(|_| ())
+    }
+}
+
+/// What the ECU found in its calibration sector at boot ([`boot_config`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum BootCalibration {
+    /// A valid image: its values run.
+    Image,
+    /// No image (an erased sector): the paper defaults run, no fault.
+    Absent,
+    /// An image that was refused: the paper defaults run and every actuator frame carries
+    /// [`CALIBRATION_FAULT_BIT`].
+    Refused(CalibrationError),
+}
+
+/// The ECU's configuration from the bytes of its calibration sector: the image's values when it
+/// passes every check of [`CalibrationImage::parse`], else the paper defaults (with the fault
+/// flag when an image was there but refused). Never a mix of the two.
+pub fn boot_config(sector: &[u8]) -> (EcuCoreConfig, BootCalibration) {
+    match CalibrationImage::parse(sector) {
+        Ok(cal) => (cal.config(), BootCalibration::Image),
+        Err(CalibrationError::NoImage) => (EcuCoreConfig::default(), BootCalibration::Absent),
+        Err(e) => (
+            EcuCoreConfig {
+                calibration_fault: true,
+                ..EcuCoreConfig::default()
+            },
+            BootCalibration::Refused(e),
+        ),
     }
 }
 
@@ -1147,6 +1196,15 @@ impl CalibrationImage {
 
 /// The checks that need several values at once: the derived kp, and the tasks accept it.
 fn check_derived(cal: &EcuCalibration) -> Result<(), CalibrationError> {
+    const NAMES: [&str; 3] = ["vacuum.lpt.effects", "vacuum.hpt.effects", "vacuum.hpc.effects"];
+    for (a, name) in cal.vacuum.iter().zip(NAMES) {
+        if a.effects.iter().any(|e| *e != 0.0 && *e != 1.0) {
+            return Err(CalibrationError::Inconsistent {
+                name,
+                what: "each effect is 0 (off) or 1 (on)",
+            });
+        }
+    }
     let kp = cal.implied_kp()?;
     for i in 0..3 {
         for j in 0..3 {
@@ -1371,6 +1429,47 @@ mod tests {
             })
         ));
         assert!(cal.check().is_ok());
+    }
+
+    #[test]
+    fn boot_falls_back_to_the_paper_defaults_with_the_fault_flag() {
+        let mut cal = EcuCalibration::paper_defaults();
+        cal.ehvva_tables.td_open_ms[1][1] = 3.0;
+        let good = image(&cal);
+        let (cfg, status) = boot_config(&good);
+        assert_eq!(status, BootCalibration::Image);
+        assert_eq!(cfg.ehvva_model.tables.td_open_ms[1][1], 3.0);
+        assert!(!cfg.calibration_fault);
+        let (cfg, status) = boot_config(&[0xFF; IMAGE_BYTES]);
+        assert_eq!(status, BootCalibration::Absent);
+        assert!(!cfg.calibration_fault);
+        let mut bad = good;
+        bad[IMAGE_BYTES - 1] ^= 0x80;
+        let (cfg, status) = boot_config(&bad);
+        assert!(matches!(status, BootCalibration::Refused(CalibrationError::Crc { .. })));
+        assert!(cfg.calibration_fault);
+        // Nothing of the refused image: the paper's td.
+        assert_eq!(cfg.ehvva_model.tables, EhvvaTableData::paper_default());
+        // The flag reaches every actuator frame.
+        let mut core = crate::ecu::lockstep::EcuCore::new(cfg).unwrap();
+        let frame = crate::ecu::frame::SensorFrame {
+            seq: 1,
+            t_us: 50,
+            n_edges: 0,
+            edges: [crate::ecu::frame::SensorFrame::NO_EDGE; crate::ecu::frame::MAX_EDGES],
+            adc_counts: [2000; crate::ecu::supervisor::N_CHANNELS],
+            valve: crate::ecu::ehvva_task::ValveRequest {
+                open_deg: 100.0,
+                close_deg: 400.0,
+                high_lift: true,
+                soft_seat: true,
+                enabled: false,
+            },
+            cam_phase_set_deg: 10.0,
+            vacuum_x_set_pct: [0.0; 3],
+            motor_driver_fault: false,
+        };
+        assert_ne!(core.step(&frame).faults & CALIBRATION_FAULT_BIT, 0);
     }
 
     #[test]
