@@ -13,10 +13,14 @@ commands:
       calibrate the baseline model, test its residuals, fit every catalogue effect, name the
       cause and measure the gain on validation data (the last 30 % of the file when no
       --validation is given)
-  run [scenario.toml] [--out dir]
+  calibrate <log>... --out DIR [--flash-base ADDR]
+      the ECU calibration image from a unit's bench logs (any mix of plants): DIR/calibration.bin
+      (the image), calibration.a2l (ASAM MCD-2 MC), calibration.json (values and their sources)
+  run [scenario.toml] [--out dir] [--calibration calibration.bin] [--unit truth.json] [--json summary.json]
       closed loop of all three actuators (model-core controllers against the plant models,
       natively); without a file, the built-in default scenario; logs and plots go to --out
-      (default: out/<scenario name>)
+      (default: out/<scenario name>); --calibration: the ECU runs that image; --unit: the plants
+      are the unit `generate` described; --json: the error figures per actuator
   generate <plant> <effect|none> [--seed N] [--out dir]
       write a bench-like estimation and validation log pair from the plant model with one
       hidden effect (the truth goes to truth.json beside them, not into the logs);
@@ -30,6 +34,7 @@ commands:
       condition td (VO, VC) from the command edges to the lift response, τp and Cd by
       trust-region least squares on the lift; the tables td(Ph, T), τp(Ph, T), Cd(T)
   pil [scenario.toml] [--elf path] [--out dir] [--until s] [--corrupt-every n] [--drop-every m] [--compare-native]
+      [--calibration calibration.bin] [--unit truth.json] [--json summary.json]
       processor in the loop: the same closed loop as `run`, with the ECU core as firmware on
       QEMU's emulated STM32F405 (netduinoplus2) in lockstep over its UART; builds firmware-qemu
       when no --elf is given; prints PIL steps per second and the link's bad-frame counters;
@@ -46,6 +51,7 @@ fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let result = match args.first().map(String::as_str) {
         Some("check") => check(&args[1..]),
+        Some("calibrate") => hil_host::calibrate::run(&args[1..]).map_err(CliError::Failed),
         Some("diagnose") => run_diagnose(&args[1..]),
         Some("generate") => run_generate(&args[1..]),
         Some("run") => run_scenario(&args[1..]),
@@ -237,8 +243,8 @@ fn run_generate(args: &[String]) -> Result<(), CliError> {
 }
 
 fn run_scenario(args: &[String]) -> Result<(), CliError> {
-    use hil_host::run::{run, Scenario};
-    let a = parse_args(args, &["out"])?;
+    use hil_host::run::Scenario;
+    let a = parse_args(args, &["out", "calibration", "unit", "json"])?;
     let scenario = match a.positional.as_slice() {
         [] => Scenario::default_scenario(),
         [file] => {
@@ -252,8 +258,10 @@ fn run_scenario(args: &[String]) -> Result<(), CliError> {
             .map(String::from)
             .unwrap_or_else(|| format!("out/{}", scenario.name)),
     );
-    let summary = run(&scenario, Some(&out)).map_err(CliError::Failed)?;
+    let (ecu, unit) = calibrate_inputs(&a)?;
+    let summary = hil_host::run::run_unit(&scenario, Some(&out), ecu, unit).map_err(CliError::Failed)?;
     print!("{}", summary.text(&scenario.name));
+    write_summary_json(&a, &summary, &scenario.name)?;
     println!("logs (DATA-FORMAT) and plots in {}", out.display());
     Ok(())
 }
@@ -265,7 +273,19 @@ fn run_pil(args: &[String]) -> Result<(), CliError> {
     // --compare-native takes no value: strip it before the `--name value` parser.
     let compare_native = args.iter().any(|a| a == "--compare-native");
     let rest: Vec<String> = args.iter().filter(|a| *a != "--compare-native").cloned().collect();
-    let a = parse_args(&rest, &["elf", "out", "until", "corrupt-every", "drop-every"])?;
+    let a = parse_args(
+        &rest,
+        &[
+            "elf",
+            "out",
+            "until",
+            "corrupt-every",
+            "drop-every",
+            "calibration",
+            "unit",
+            "json",
+        ],
+    )?;
     let scenario = match a.positional.as_slice() {
         [] => Scenario::default_scenario(),
         [file] => {
@@ -302,8 +322,12 @@ fn run_pil(args: &[String]) -> Result<(), CliError> {
         Some(e) => PathBuf::from(e),
         None => pil::build_firmware().map_err(CliError::Failed)?,
     };
-    let r = pil::run_scenario(&scenario, &elf, faults, until_s, compare_native, &out).map_err(CliError::Failed)?;
+    let (_, unit) = calibrate_inputs(&a)?;
+    let image = a.get("calibration").map(Path::new);
+    let r = pil::run_scenario_calibrated(&scenario, &elf, faults, until_s, compare_native, &out, image, &unit)
+        .map_err(CliError::Failed)?;
     print!("{}", r.output.summary.text(&scenario.name));
+    write_summary_json(&a, &r.output.summary, &scenario.name)?;
     print!("{}", r.text());
     let written = hil_host::run::write_outputs(&scenario, &r.output, &out)
         .map_err(|e| CliError::Failed(format!("{}: {e}", out.display())))?;
@@ -439,6 +463,28 @@ fn identify_ehvva(args: &[String]) -> Result<(), CliError> {
         let text = serde_json::to_string_pretty(&id.json()).map_err(|e| CliError::Failed(e.to_string()))?;
         std::fs::write(out, text + "\n").map_err(|e| CliError::Failed(format!("{out}: {e}")))?;
         eprintln!("tables written to {out}");
+    }
+    Ok(())
+}
+
+/// `--calibration` (the ECU's image, refused whole when bad) and `--unit` (a generated unit's
+/// truth.json) of `run` and `pil`.
+fn calibrate_inputs(a: &Args) -> Result<(model_core::ecu::lockstep::EcuCoreConfig, hil_host::run::Unit), CliError> {
+    use hil_host::calibrate::{ecu_config_from_image, unit_from_truth};
+    let ecu = a.get("calibration").map(|p| ecu_config_from_image(Path::new(p)));
+    let unit = a.get("unit").map(|p| unit_from_truth(Path::new(p)));
+    Ok((
+        ecu.transpose().map_err(CliError::Failed)?.unwrap_or_default(),
+        unit.transpose().map_err(CliError::Failed)?.unwrap_or_default(),
+    ))
+}
+
+/// `--json`: the run's error figures per actuator.
+fn write_summary_json(a: &Args, s: &hil_host::run::Summary, name: &str) -> Result<(), CliError> {
+    if let Some(path) = a.get("json") {
+        let text = serde_json::to_string_pretty(&s.json(name)).map_err(|e| CliError::Failed(e.to_string()))?;
+        std::fs::write(path, text + "\n").map_err(|e| CliError::Failed(format!("{path}: {e}")))?;
+        println!("error figures written to {path}");
     }
     Ok(())
 }
