@@ -9,6 +9,7 @@
 #![no_main]
 
 mod board;
+mod calibration;
 mod shared;
 mod tasks;
 
@@ -19,11 +20,11 @@ use embassy_executor::{InterruptExecutor, Spawner};
 use embassy_stm32::interrupt;
 use embassy_stm32::interrupt::{InterruptExt, Priority};
 use embassy_stm32::pac;
-use model_core::ecu::ehvva_task::{EhvvaTask, EhvvaTaskConfig};
-use model_core::ecu::evvt_task::{EvvtTask, EvvtTaskConfig};
-use model_core::ecu::supervisor::{Supervisor, SupervisorConfig};
-use model_core::ecu::vacuum_task::{VacuumTask, VacuumTaskConfig};
-use model_core::ehvva::{EhvvaParams, EhvvaTables};
+use model_core::ecu::ehvva_task::EhvvaTask;
+use model_core::ecu::evvt_task::EvvtTask;
+use model_core::ecu::supervisor::Supervisor;
+use model_core::ecu::vacuum_task::VacuumTask;
+use model_core::ehvva::EhvvaTables;
 
 use board::ecu::{EcuAdc, EcuBoard, EcuEhvvaIo, EcuEvvtIo, EcuVacuumIo};
 use board::EmbassyClock;
@@ -81,11 +82,14 @@ async fn main(spawner: Spawner) {
     pac::RCC.csr().modify(|w| w.set_rmvf(true));
     let board = EcuBoard::new(p);
 
-    let tables = EhvvaTables::<f32>::new(&EhvvaParams::paper_default()).unwrap_or_else(|_| halt("EHVVA delay tables"));
-    let ehvva = EhvvaTask::new(EhvvaTaskConfig::default(), tables).unwrap_or_else(|e| halt(e));
-    let evvt = EvvtTask::new(EvvtTaskConfig::default()).unwrap_or_else(|_| halt("EVVT controller"));
-    let vacuum = VacuumTask::new(VacuumTaskConfig::default()).unwrap_or_else(|_| halt("vacuum models"));
-    let sup = Supervisor::new(SupervisorConfig::default());
+    // The unit's calibration image, or the paper defaults (calibration.rs).
+    let cfg = calibration::load();
+    let tables = EhvvaTables::<f32>::with_valve_motion(&cfg.ehvva_model, &cfg.ehvva_motion)
+        .unwrap_or_else(|_| halt("EHVVA delay tables"));
+    let ehvva = EhvvaTask::new(cfg.ehvva, tables).unwrap_or_else(|e| halt(e));
+    let evvt = EvvtTask::new(cfg.evvt).unwrap_or_else(|_| halt("EVVT controller"));
+    let vacuum = VacuumTask::new(cfg.vacuum).unwrap_or_else(|_| halt("vacuum models"));
+    let sup = Supervisor::new(cfg.supervisor);
 
     interrupt::UART5.set_priority(Priority::P6);
     let high = EXECUTOR_HIGH.start(interrupt::UART5);

@@ -662,6 +662,25 @@ pub enum CalibrationError {
     Inconsistent { name: &'static str, what: &'static str },
 }
 
+impl CalibrationError {
+    /// The check that failed and the value it failed on, without number formatting (for the
+    /// firmware's log, where float formatting would cost flash).
+    pub fn names(&self) -> (&'static str, &'static str) {
+        match *self {
+            Self::TooShort { .. } => ("incomplete", "image"),
+            Self::BufferTooSmall { .. } => ("buffer too small", "image"),
+            Self::NoImage => ("missing", "image"),
+            Self::Version { .. } => ("version", "image"),
+            Self::Layout { .. } => ("layout", "image"),
+            Self::Crc { .. } => ("CRC", "image"),
+            Self::NotFinite { name, .. } => ("not finite", name),
+            Self::OutOfLimits { name, .. } => ("outside limits", name),
+            Self::AxisNotIncreasing { name, .. } => ("axis not increasing", name),
+            Self::Inconsistent { name, .. } => ("inconsistent", name),
+        }
+    }
+}
+
 impl fmt::Display for CalibrationError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match *self {
@@ -913,14 +932,20 @@ impl EcuCalibration {
     /// The scheduled kp at each grid point of the α/β tables (the controller's own
     /// computation, [`EvvtPhaseController::gains_at`]), or why the controller refuses them.
     pub fn implied_kp(&self) -> Result<[[f64; 3]; 3], CalibrationError> {
+        // f32: the controller the ECU runs (and no f64 soft-float code on the target).
         let ctl =
-            EvvtPhaseController::<f64>::new(&self.evvt_controller()).map_err(|_| CalibrationError::Inconsistent {
+            EvvtPhaseController::<f32>::new(&self.evvt_controller()).map_err(|_| CalibrationError::Inconsistent {
                 name: "evvt.alpha_deg_per_s2_rpm",
                 what: "the EVVT controller refuses these tables and gains",
             })?;
         let t = &self.evvt_lpv;
         Ok(core::array::from_fn(|i| {
-            core::array::from_fn(|j| ctl.gains_at(t.engine_speed_rpm[i], t.battery_voltage_v[j]).0)
+            core::array::from_fn(|j| {
+                f64::from(
+                    ctl.gains_at(t.engine_speed_rpm[i] as f32, t.battery_voltage_v[j] as f32)
+                        .0,
+                )
+            })
         }))
     }
 
