@@ -6,6 +6,8 @@ pub mod generate;
 pub mod identify;
 pub mod log;
 pub mod lsq;
+pub mod numbers;
+pub mod output;
 pub mod pil;
 pub mod plot;
 pub mod residuals;

@@ -1115,7 +1115,8 @@ pub fn write_outputs(sc: &Scenario, o: &RunOutput, dir: &Path) -> std::io::Resul
     let mut written = Vec::new();
     let mut put = |name: &str, text: String| -> std::io::Result<()> {
         let p = dir.join(name);
-        std::fs::write(&p, text)?;
+        // Whole files only (a killed run leaves the old file or none), never over an input.
+        crate::output::write_atomic(&p, text.as_bytes())?;
         written.push(p);
         Ok(())
     };

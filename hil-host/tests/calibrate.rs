@@ -362,3 +362,66 @@ fn bad_images_logs_and_units_are_refused_by_name() {
     assert!(e.contains("evvt"), "{e}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn the_command_line_calibrates_and_runs_the_unit_with_its_image() {
+    let dir = workdir("cli");
+    let bin = env!("CARGO_BIN_EXE_hil-host");
+    let case = generate::generate(Plant::Ehvva, "pressure-delay", 21).unwrap();
+    let (est, truth) = write_case(&case, &dir.join("unit"));
+    let help = std::process::Command::new(bin)
+        .args(["calibrate", "--help"])
+        .output()
+        .unwrap();
+    let help = String::from_utf8_lossy(&help.stdout).to_string();
+    assert!(
+        help.contains("Usage: hil-host calibrate") && help.contains("Examples:\n  hil-host "),
+        "{help}"
+    );
+    let cal = dir.join("cal");
+    let o = std::process::Command::new(bin)
+        .arg("calibrate")
+        .arg(&est)
+        .arg("--out")
+        .arg(&cal)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for f in ["calibration.bin", "calibration.a2l", "calibration.json"] {
+        assert!(cal.join(f).is_file(), "{f}");
+    }
+    let sweep = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/calibration-sweep.toml");
+    let run = |extra: &[&Path], json: &Path| {
+        let mut c = std::process::Command::new(bin);
+        c.arg("run")
+            .arg(&sweep)
+            .arg("--out")
+            .arg(dir.join("out"))
+            .arg("--force");
+        c.arg("--unit").arg(&truth).arg("--json").arg(json);
+        if let Some(image) = extra.first() {
+            c.arg("--calibration").arg(image);
+        }
+        c.output().unwrap()
+    };
+    let figure = |p: &Path| -> f64 {
+        let j: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap();
+        j["ehvva"]["timing_error_deg_rms"].as_f64().unwrap()
+    };
+    let o = run(&[], &dir.join("before.json"));
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = run(&[&cal.join("calibration.bin")], &dir.join("after.json"));
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (b, a) = (figure(&dir.join("before.json")), figure(&dir.join("after.json")));
+    assert!(a <= 0.7 * b, "{a} deg vs {b} deg");
+    // A corrupted image: refused, exit status 1, the error says calibration.
+    let mut bytes = std::fs::read(cal.join("calibration.bin")).unwrap();
+    bytes[64] ^= 0xFF;
+    let bad = dir.join("bad.bin");
+    std::fs::write(&bad, &bytes).unwrap();
+    let o = run(&[&bad], &dir.join("bad.json"));
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("calibration image corrupted"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

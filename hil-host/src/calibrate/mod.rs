@@ -366,7 +366,7 @@ pub fn write_outputs(o: &Outcome, dir: &Path, flash_base: u32) -> Result<Vec<Pat
     let mut written = Vec::new();
     for (name, bytes) in files {
         let p = dir.join(name);
-        std::fs::write(&p, bytes).map_err(|e| format!("{}: {e}", p.display()))?;
+        crate::output::write_atomic(&p, &bytes).map_err(|e| format!("{}: {e}", p.display()))?;
         written.push(p);
     }
     Ok(written)
@@ -436,36 +436,8 @@ pub fn unit_from_truth(path: &Path) -> Result<Unit, String> {
     Ok(unit)
 }
 
-/// The `calibrate` command: `calibrate <log>... --out DIR [--flash-base ADDR]`.
-pub fn run(args: &[String]) -> Result<(), String> {
-    let mut logs = Vec::new();
-    let mut dir = None;
-    let mut flash_base = FLASH_BASE;
-    let mut it = args.iter();
-    while let Some(a) = it.next() {
-        match a.as_str() {
-            "--out" => dir = Some(PathBuf::from(it.next().ok_or("--out needs a directory")?)),
-            "--flash-base" => {
-                let v = it.next().ok_or("--flash-base needs an address")?;
-                flash_base = u32::from_str_radix(v.trim_start_matches("0x"), 16)
-                    .map_err(|_| format!("--flash-base {v}: not a hexadecimal address"))?;
-            }
-            o if o.starts_with("--") => return Err(format!("calibrate: unknown option {o}")),
-            _ => logs.push(PathBuf::from(a)),
-        }
-    }
-    let dir = dir.ok_or("calibrate needs --out DIR")?;
-    let o = calibrate(&logs, &mut |s| eprintln!("{s} ..."))?;
-    for n in &o.notes {
-        println!("{n}");
-    }
-    let learned = o.sources.iter().filter(|s| !s.logs.is_empty()).count();
-    for p in write_outputs(&o, &dir, flash_base)? {
-        println!("wrote {}", p.display());
-    }
-    println!(
-        "{learned} of {} characteristics learned from the logs, the rest paper defaults; image {IMAGE_BYTES} bytes for 0x{flash_base:08X}",
-        CHARACTERISTICS.len()
-    );
-    Ok(())
+/// A `--flash-base` value: hexadecimal, with or without `0x`.
+pub fn parse_flash_base(v: &str) -> Result<u32, String> {
+    let h = v.strip_prefix("0x").or_else(|| v.strip_prefix("0X")).unwrap_or(v);
+    u32::from_str_radix(h, 16).map_err(|_| format!("--flash-base {v}: not a hexadecimal address"))
 }
