@@ -207,6 +207,9 @@ fn ehvva_unit_gives_an_image_json_and_a2l_that_agree() {
         .unwrap()
         .ends_with("estimation.csv"));
     assert_eq!(from("ehvva.motion_open_low_ms"), "log");
+    // The diagnosis named the extension the td tables carry.
+    let method = chars["ehvva.td_open_ms"]["source"]["method"].as_str().unwrap();
+    assert!(method.contains("cause `pressure-delay`"), "{method}");
     assert_eq!(from("evvt.alpha_deg_per_s2_rpm"), "paper default");
     assert_eq!(from("vacuum.hpc.fc_kpa"), "paper default");
 

@@ -141,10 +141,17 @@ fn ehvva(logs: &[Log], out: &mut Outcome, progress: &mut dyn FnMut(&str)) -> Res
         found.conditions.len(),
         files.join(", ")
     ));
+    // The diagnosis names the extension the tables carry (e.g. td against supply pressure).
+    progress("diagnose ehvva");
+    let extension = ehvva_extension(logs)?;
+    out.notes
+        .push(format!("EHVVA: diagnose on {}: {extension}", logs[0].file));
     out.set_source(
         "ehvva.",
         &files,
-        "identify ehvva: per test condition td VO/VC (joint fit), tau_p, Cd; tables on the ECU's grid",
+        &format!(
+            "identify ehvva: per test condition td VO/VC (joint fit), tau_p, Cd; tables on the ECU's grid (diagnose: {extension})"
+        ),
     );
     for gain in [
         "ehvva.pressure_delay_gain",
@@ -172,6 +179,40 @@ fn ehvva(logs: &[Log], out: &mut Outcome, progress: &mut dyn FnMut(&str)) -> Res
         );
     }
     Ok(())
+}
+
+/// `diagnose` on the EHVVA logs (the second log as validation data, else the first one's last
+/// 30 %): the named cause and its fitted gain, as a phrase for the sources.
+fn ehvva_extension(logs: &[Log]) -> Result<String, String> {
+    use crate::diagnose::{self, Rules};
+    let family = diagnose::family_for(Plant::Ehvva)?;
+    let (est, val, tail) = match logs {
+        [a, b, ..] => (a.clone(), b.clone(), false),
+        [a] => {
+            let (e, v) = diagnose::split_tail(a, 0.3);
+            (e, v, true)
+        }
+        [] => return Err("no EHVVA log".into()),
+    };
+    let d = diagnose::diagnose(family.as_ref(), &est, &val, tail, &Rules::default(), &mut |_| {})
+        .map_err(|e| format!("diagnose ehvva ({}): {e}", est.file))?;
+    if d.cause == "none" {
+        return Ok("no extension named: the tables as identified".into());
+    }
+    let gains: Vec<String> = d
+        .extended
+        .params
+        .iter()
+        .filter(|(k, _)| k.ends_with("_gain"))
+        .map(|(k, v)| format!("{k} {v:.3}"))
+        .collect();
+    let carried = match d.cause.as_str() {
+        "pressure-delay" => "the td tables' fall with supply pressure, measured per condition",
+        "direction-delay" => "td VO and VC, measured apart",
+        "viscosity" => "Cd against temperature, measured per condition",
+        _ => "no ECU table for it",
+    };
+    Ok(format!("cause `{}` ({}): {carried}", d.cause, gains.join(", ")))
 }
 
 fn set_source_exact(out: &mut Outcome, name: &str, logs: &[String], method: &str) {
