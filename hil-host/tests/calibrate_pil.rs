@@ -33,11 +33,15 @@ fn firmware() -> Option<PathBuf> {
     }
 }
 
-/// 0.06 s at 4000 rpm: the crank decoder syncs and valve events run.
+/// A 0.1 s scenario (the shortest a scenario may be) at 4000 rpm, run for [`UNTIL_S`]: the
+/// crank decoder syncs and valve events run.
+/// Simulated seconds of each run (1200 lockstep steps).
+const UNTIL_S: Option<f64> = Some(0.06);
+
 fn scenario() -> Scenario {
     let text = r#"
 name = "pil-calibration"
-duration_s = 0.06
+duration_s = 0.1
 engine_rpm = [[0.0, 4000.0]]
 p_supply_mpa = [[0.0, 6.0]]
 cam_phase_setpoint_deg = [[0.0, 10.0], [0.03, 10.0], [0.0301, 30.0]]
@@ -78,7 +82,7 @@ fn the_emulated_ecu_runs_its_calibration_image_or_falls_back_with_the_fault_bit(
         &scenario(),
         &elf,
         LinkFaults::default(),
-        None,
+        UNTIL_S,
         true,
         &dir.join("good"),
         Some(&good),
@@ -102,7 +106,7 @@ fn the_emulated_ecu_runs_its_calibration_image_or_falls_back_with_the_fault_bit(
         &scenario(),
         &mut hil_host::run::NativeLink::new().unwrap(),
         &hil_host::run::RunOptions {
-            until_s: None,
+            until_s: UNTIL_S,
             keep_frames: true,
         },
     )
@@ -122,7 +126,7 @@ fn the_emulated_ecu_runs_its_calibration_image_or_falls_back_with_the_fault_bit(
         &scenario(),
         &elf,
         LinkFaults::default(),
-        None,
+        UNTIL_S,
         false,
         &dir.join("refused"),
         Some(&bad_path),
@@ -142,7 +146,7 @@ fn the_emulated_ecu_runs_its_calibration_image_or_falls_back_with_the_fault_bit(
         &scenario(),
         &elf,
         LinkFaults::default(),
-        (None, true),
+        (UNTIL_S, true),
         &dir.join("fallback"),
         (Some(&bad_path), fallback),
         &unit,
