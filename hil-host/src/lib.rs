@@ -3,9 +3,11 @@
 pub mod calibrate;
 pub mod diagnose;
 pub mod generate;
+pub mod html;
 pub mod identify;
 pub mod log;
 pub mod lsq;
+pub mod mf4;
 pub mod numbers;
 pub mod output;
 pub mod pil;

@@ -42,7 +42,6 @@ use model_core::vacuum::{VacuumParams, VacuumSystem, VacuumTankParams};
 use serde::Deserialize;
 
 use crate::log::format_log;
-use crate::plot::{line_plot, Series};
 
 /// A profile: (time s, value) breakpoints, linear in between, constant beyond the ends.
 #[derive(Clone, Debug, Deserialize)]
@@ -1321,101 +1320,10 @@ pub fn write_outputs(sc: &Scenario, o: &RunOutput, dir: &Path) -> std::io::Resul
         ),
     )?;
 
-    put(
-        "evvt.svg",
-        line_plot(
-            "EVVT cam phase",
-            "time (s)",
-            "phase (crank deg)",
-            &[
-                Series {
-                    label: "setpoint",
-                    colour: "black",
-                    x: &et,
-                    y: &e_ref,
-                },
-                Series {
-                    label: "plant",
-                    colour: "#1f77b4",
-                    x: &et,
-                    y: &e_ph,
-                },
-            ],
-            &[],
-        ),
-    )?;
-    let (wg_set, wg_x, wg_duty) = (
-        vcol(&|r| r.x_set_pct[0]),
-        vcol(&|r| r.x_pct[0]),
-        vcol(&|r| r.duty_pct[0]),
-    );
-    put(
-        "vacuum.svg",
-        line_plot(
-            "wastegate (LPT) position",
-            "time (s)",
-            "position (%), duty (%), kPa, V",
-            &[
-                Series {
-                    label: "setpoint",
-                    colour: "black",
-                    x: &vt,
-                    y: &wg_set,
-                },
-                Series {
-                    label: "position",
-                    colour: "#1f77b4",
-                    x: &vt,
-                    y: &wg_x,
-                },
-                Series {
-                    label: "duty (%)",
-                    colour: "#2ca02c",
-                    x: &vt,
-                    y: &wg_duty,
-                },
-                Series {
-                    label: "tank (kPa)",
-                    colour: "#9467bd",
-                    x: &vt,
-                    y: &v_tank,
-                },
-                Series {
-                    label: "battery (V)",
-                    colour: "#d62728",
-                    x: &vt,
-                    y: &v_u,
-                },
-            ],
-            &[],
-        ),
-    )?;
-    // The first 0.3 s of lift: the whole run would be a solid band.
-    let one = wt.len().min((0.3 / STEP_S) as usize);
-    let w_duty = wcol(&|r| r.pilot_duty);
-    put(
-        "ehvva.svg",
-        line_plot(
-            "EHVVA valve lift (first 0.3 s)",
-            "time (s)",
-            "lift (mm), pilot duty",
-            &[
-                Series {
-                    label: "lift",
-                    colour: "#1f77b4",
-                    x: &wt[..one],
-                    y: &w_lift[..one],
-                },
-                Series {
-                    label: "pilot duty",
-                    colour: "black",
-                    x: &wt[..one],
-                    y: &w_duty[..one],
-                },
-            ],
-            &[],
-        ),
-    )?;
+    // Plots (crate::plot): every actuator, one axis per unit, fault and mode-change markers.
+    for (name, svg) in crate::plot::run_svgs(sc, o) {
+        put(&name, svg)?;
+    }
     Ok(written)
 }
 

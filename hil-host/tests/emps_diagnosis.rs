@@ -98,9 +98,9 @@ fn names_coulomb_friction_with_the_published_parameters() {
     ] {
         assert!(dir.join("plots").join(f).exists(), "{f} missing");
     }
-    // The cross-correlation plot shows the 99 % band (two dashed lines) and the velocity sign.
+    // The cross-correlation plot shows the 99 % band (a shaded band) and the velocity sign.
     let svg = std::fs::read_to_string(dir.join("plots/cross_correlation.svg")).unwrap();
-    assert_eq!(svg.matches("stroke-dasharray").count(), 2);
+    assert_eq!(svg.matches("class=\"band\"").count(), 1);
     assert!(
         svg.contains("velocity sign"),
         "the most correlated regressors should include the velocity sign"

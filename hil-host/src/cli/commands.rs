@@ -4,7 +4,8 @@
 use std::path::{Path, PathBuf};
 
 use hil_host::diagnose::{self, report, Rules};
-use hil_host::log::{read_log, Log, Plant};
+use hil_host::log::{read_log_mapped, Log, Plant};
+use hil_host::mf4::ChannelMap;
 use hil_host::numbers::{sig, tidy_json};
 use hil_host::output::{self, Claim, OutputDir};
 use hil_host::run::Scenario;
@@ -60,10 +61,16 @@ pub fn run(cli: Cli) -> Result<()> {
     }
 }
 
-/// Reads a log with a spinner (big logs take seconds).
-fn read(path: &Path, plant: Option<Plant>) -> Result<Log> {
+/// Reads a log (CSV or MF4) with a spinner (big logs take seconds), renamed by the channel
+/// map when one is given.
+fn read(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> Result<Log> {
     let _spinner = progress::reading(path);
-    Ok(read_log(path, plant)?)
+    Ok(read_log_mapped(path, plant, map)?)
+}
+
+/// The `--channel-map` file, read and checked.
+fn channel_map(path: Option<&Path>) -> Result<Option<ChannelMap>> {
+    Ok(path.map(ChannelMap::read).transpose()?)
 }
 
 /// A JSON report, rounded and free of nulls, written atomically (never over an input).
@@ -74,7 +81,8 @@ fn write_json(path: &Path, mut value: serde_json::Value) -> Result<()> {
 }
 
 fn check(a: CheckArgs) -> Result<()> {
-    let log = read(&a.log, a.plant.map(Plant::from))?;
+    let map = channel_map(a.channel_map.as_deref())?;
+    let log = read(&a.log, a.plant.map(Plant::from), map.as_ref())?;
     println!(
         "{}: plant {}, {} samples at {} s, columns {}",
         log.file,
@@ -96,11 +104,15 @@ fn diagnose(a: DiagnoseArgs) -> Result<()> {
     if let Some(json) = &a.json {
         output::check_not_input(json)?;
     }
+    if let Some(page) = &a.report {
+        output::check_not_input(page)?;
+    }
+    let map = channel_map(a.channel_map.as_deref())?;
     let plant = a.plant.map(Plant::from);
-    let est_full = read(&a.estimation, plant)?;
+    let est_full = read(&a.estimation, plant, map.as_ref())?;
     let plant = est_full.plant;
     let (est, val, tail) = match &a.validation {
-        Some(v) => (est_full, read(v, Some(plant))?, false),
+        Some(v) => (est_full, read(v, Some(plant), map.as_ref())?, false),
         None => {
             let (e, v) = diagnose::split_tail(&est_full, 0.3);
             (e, v, true)
@@ -134,13 +146,21 @@ fn diagnose(a: DiagnoseArgs) -> Result<()> {
         eprintln!("report written to {}", out.display());
     }
     if let Some(mut dir) = plots {
-        let written = hil_host::plot::diagnosis_plots(&d, dir.dir())
+        let written = hil_host::plot::diagnosis_plots_timed(&d, val.col("t_s").unwrap_or(&[]), dir.dir())
             .map_err(|e| fail(format!("{}: {e}", dir.dir().display())))?;
         for w in &written {
             dir.record(w);
             eprintln!("plot written to {}", w.display());
         }
         dir.finish()?;
+    }
+    if let Some(page) = &a.report {
+        let plots = hil_host::plot::diagnosis_svgs(&d, val.col("t_s"));
+        let mut json = report::to_json(&d);
+        tidy_json(&mut json);
+        let html = hil_host::html::diagnosis_page(&json, &report::summary(&d), &plots);
+        output::write_atomic(page, html.as_bytes()).map_err(|e| fail(format!("{}: {e}", page.display())))?;
+        eprintln!("report written to {}", page.display());
     }
     Ok(())
 }
@@ -180,6 +200,12 @@ fn run_scenario(a: RunArgs) -> Result<()> {
         dir.record(w);
     }
     dir.finish()?;
+    if let Some(page) = &a.report {
+        let plots = hil_host::plot::run_svgs(&scenario, &o);
+        let html = hil_host::html::run_page(&scenario.name, &o.summary.text(&scenario.name), &plots);
+        output::write_atomic(page, html.as_bytes()).map_err(|e| fail(format!("{}: {e}", page.display())))?;
+        eprintln!("report written to {}", page.display());
+    }
     print!("{}", o.summary.text(&scenario.name));
     println!("logs (DATA-FORMAT) and plots in {}", out.display());
     summary_json(&a.calibration, &o.summary, &scenario.name)
@@ -262,12 +288,13 @@ fn identify_evvt(a: IdentifyArgs) -> Result<()> {
     if let Some(json) = &a.json {
         output::check_not_input(json)?;
     }
+    let map = channel_map(a.channel_map.as_deref())?;
     let opts = evvt::EvvtIdentifyOptions::default();
     let counter = Counter::new("identify evvt: log", a.logs.len() as u64);
     let mut points = Vec::new();
     for (k, path) in a.logs.iter().enumerate() {
         counter.step(k as u64 + 1, a.logs.len() as u64);
-        let log = read(path, Some(Plant::Evvt))?;
+        let log = read(path, Some(Plant::Evvt), map.as_ref())?;
         for n in &log.notices {
             eprintln!("notice: {}: {n}", log.file);
         }
@@ -291,9 +318,10 @@ fn identify_ehvva(a: IdentifyArgs) -> Result<()> {
     if let Some(json) = &a.json {
         output::check_not_input(json)?;
     }
+    let map = channel_map(a.channel_map.as_deref())?;
     let mut sets = Vec::new();
     for path in &a.logs {
-        let log = read(path, Some(Plant::Ehvva))?;
+        let log = read(path, Some(Plant::Ehvva), map.as_ref())?;
         for n in &log.notices {
             eprintln!("notice: {}: {n}", log.file);
         }

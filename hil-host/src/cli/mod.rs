@@ -68,7 +68,8 @@ Without --validation the last 30 % of the estimation log is held out as validati
 
 Examples:
   hil-host diagnose est.csv --validation val.csv
-  hil-host diagnose est.csv --json report.json --plots plots/
+  hil-host diagnose est.csv --json report.json --plots plots/ --report report.html
+  hil-host diagnose est.mf4 --validation val.mf4 --channel-map ecu.toml
   hil-host diagnose emps-estimation.csv --validation emps-validation.csv")]
     Diagnose(DiagnoseArgs),
     /// Closed loop of all three actuators natively: the ECU core against the plant models;
@@ -78,7 +79,7 @@ Without a scenario file the built-in default scenario runs.
 
 Examples:
   hil-host run
-  hil-host run scenarios/fault-crank-lost.toml --out out/crank")]
+  hil-host run scenarios/fault-crank-lost.toml --out out/crank --report crank.html")]
     Run(RunArgs),
     /// Write a bench-like estimation and validation log pair with one hidden effect (the truth
     /// goes to truth.json beside them)
@@ -148,11 +149,15 @@ fn generate_help() -> String {
 
 #[derive(Debug, Args)]
 pub struct CheckArgs {
-    /// The log (DATA-FORMAT.md)
+    /// The log (DATA-FORMAT.md: CSV, or ASAM MDF 4 .mf4)
     pub log: PathBuf,
     /// The plant, when the log does not say
     #[arg(long, value_enum)]
     pub plant: Option<PlantArg>,
+    /// Rename an MF4 file's channels to DATA-FORMAT columns and add metadata (TOML:
+    /// [channels] "Logger.Name" = "column", [meta] key = value; docs/data-format.md)
+    #[arg(long, value_name = "FILE")]
+    pub channel_map: Option<PathBuf>,
 }
 
 #[derive(Debug, Args)]
@@ -171,6 +176,13 @@ pub struct DiagnoseArgs {
     /// Write SVG plots into this directory
     #[arg(long, value_name = "DIR")]
     pub plots: Option<PathBuf>,
+    /// Write one self-contained HTML page: verdict, evidence, plots, parameters, gain
+    #[arg(long, value_name = "FILE")]
+    pub report: Option<PathBuf>,
+    /// Rename an MF4 file's channels to DATA-FORMAT columns and add metadata (TOML:
+    /// [channels] "Logger.Name" = "column", [meta] key = value; docs/data-format.md)
+    #[arg(long, value_name = "FILE")]
+    pub channel_map: Option<PathBuf>,
     /// Write the plots into a directory that holds other files or another run's outputs
     #[arg(long)]
     pub force: bool,
@@ -183,6 +195,9 @@ pub struct RunArgs {
     /// Directory for the logs and plots [default: out/<scenario name>]
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
+    /// Write one self-contained HTML page: summary and plots
+    #[arg(long, value_name = "FILE")]
+    pub report: Option<PathBuf>,
     /// Write into a directory that holds other files or another run's outputs
     #[arg(long)]
     pub force: bool,
@@ -263,6 +278,10 @@ pub struct IdentifyArgs {
     /// Write the tables as JSON here
     #[arg(long, value_name = "FILE")]
     pub json: Option<PathBuf>,
+    /// Rename an MF4 file's channels to DATA-FORMAT columns and add metadata (TOML:
+    /// [channels] "Logger.Name" = "column", [meta] key = value; docs/data-format.md)
+    #[arg(long, value_name = "FILE")]
+    pub channel_map: Option<PathBuf>,
 }
 
 #[derive(Debug, Args)]
