@@ -8,6 +8,24 @@ cd "$(dirname "$0")/.."
 rustup target add thumbv7em-none-eabihf thumbv6m-none-eabi >/dev/null
 # QEMU >= 10 and its instruction-counting plugin for the emulated-board (PIL) tests.
 ./tools/setup-qemu.sh
+# Python venv for the MF4 reader's tests (hil-host/tests/mf4.rs): asammdf writes the .mf4 files
+# the reader must read, as logger tools export them. Made once, then quick: it is remade only
+# when tools/py/requirements.txt changes. The tests fail rather than skip without it.
+py_venv="${CARGO_TARGET_DIR:-target}/py-venv"
+if ! cmp -s tools/py/requirements.txt "$py_venv/requirements.txt" 2>/dev/null; then
+  python3 -c 'import ensurepip' 2>/dev/null || { apt-get update -qq && apt-get install -y -qq python3-venv; }
+  rm -rf "$py_venv"
+  python3 -m venv "$py_venv"
+  "$py_venv/bin/pip" install --quiet --disable-pip-version-check -r tools/py/requirements.txt
+  cp tools/py/requirements.txt "$py_venv/requirements.txt"
+fi
+export HIL_REQUIRE_PY=1
+# Headless Chromium (Debian's `chromium`) for the HTML report tests (hil-host/tests/report_html.rs):
+# installed when missing (as root, apt-get update first); the tests fail rather than skip without it.
+if ! command -v chromium >/dev/null 2>&1; then
+  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium
+fi
+export HIL_REQUIRE_CHROMIUM=1
 
 # The house rules (CONTRIBUTING.md): a tree that is not formatted or not lint-clean fails here,
 # before anything slow runs.

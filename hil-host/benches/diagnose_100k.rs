@@ -45,7 +45,8 @@ fn ehvva_long_case(effect: &str) -> Result<Case, String> {
     use generate::ehvva::{draw_params, estimation_tests, log_text, run_bench, validation_tests, Sensors, DT_MS};
     use model_core::ehvva::{EhvvaInputs, EhvvaReduced};
     let mut rng = generate::Rng::new(SEED);
-    let (params, truth) = draw_params(effect, &mut rng)?;
+    let parts = generate::parse_effects(Plant::Ehvva, effect)?;
+    let (params, truth) = draw_params(&parts, &mut rng)?;
     let sensors = Sensors {
         lift_sigma_mm: 0.004,
         lift_lsb_mm: 0.002,

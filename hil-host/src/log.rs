@@ -18,6 +18,8 @@ use std::path::Path;
 pub use check::log_from_columns;
 pub use csv::read_csv;
 
+use crate::mf4::ChannelMap;
+
 /// The plants a log can belong to, and their columns.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Plant {
@@ -101,7 +103,7 @@ impl fmt::Display for Plant {
 }
 
 /// The columns that are 0/1 flags (no unit suffix).
-const FLAGS: [&str; 3] = ["u_pilot", "lift_high", "snubber_on"];
+pub const FLAGS: [&str; 3] = ["u_pilot", "lift_high", "snubber_on"];
 
 /// The accepted range of a column (DATA-FORMAT.md range table), `None` when unconstrained.
 pub fn column_range(name: &str) -> Option<(f64, f64)> {
@@ -242,7 +244,39 @@ impl Log {
 }
 
 /// Reads and checks a log file. `plant` overrides the file's `# plant:` metadata.
+/// An ASAM MDF 4 file (`.mf4`, or the MDF signature) is read by `crate::mf4` with its channels
+/// under their DATA-FORMAT names; `read_log_mapped` takes a channel map for other names.
 pub fn read_log(path: &Path, plant: Option<Plant>) -> Result<Log, LogError> {
+    read_log_mapped(path, plant, None)
+}
+
+/// `read_log` with a channel map (`--channel-map`) that renames an MF4 file's channels and adds
+/// metadata; a CSV log takes the map's metadata only when the file lacks the key.
+pub fn read_log_mapped(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> Result<Log, LogError> {
+    if crate::mf4::is_mf4(path) {
+        return crate::mf4::read_mf4(path, plant, map);
+    }
+    let map_plant = map
+        .and_then(|m| m.meta.iter().find(|(k, _)| k == "plant"))
+        .and_then(|(_, v)| Plant::from_name(v));
+    let mut log = read_csv_log(path, plant.or(map_plant))?;
+    if let Some(map) = map {
+        for (k, v) in &map.meta {
+            if log.meta(k).is_none() {
+                log.meta.push((k.clone(), v.clone()));
+            }
+        }
+        if !map.channels.is_empty() {
+            log.notices.push(format!(
+                "channel map {}: its [channels] apply to MF4 files only",
+                map.file
+            ));
+        }
+    }
+    Ok(log)
+}
+
+fn read_csv_log(path: &Path, plant: Option<Plant>) -> Result<Log, LogError> {
     let file = path.display().to_string();
     let input = fs::File::open(path).map_err(|e| LogError {
         file: file.clone(),

@@ -451,6 +451,50 @@ pub fn linear_lsq(a_cols: &[Vec<f64>], y: &[f64]) -> Option<Vec<f64>> {
     linear_lsq_qr(&a, n, p, y, 1)
 }
 
+/// The stop reason and effort of a solver run, for a report ("converged (cost) after 12
+/// iterations", "iteration limit (30) reached": not converged).
+pub fn convergence_text(r: &LsqResult) -> String {
+    let how = match r.stop {
+        StopReason::CostConverged => "converged (cost)",
+        StopReason::StepConverged => "converged (step)",
+        StopReason::MaxIterations => "not converged: iteration limit reached",
+        StopReason::RegionCollapsed => "converged (trust region collapsed: no further decrease)",
+    };
+    format!("{how} after {} iterations", r.iterations)
+}
+
+/// Indices of the parameters that ended on (within 1e-6 of the range of) a bound.
+pub fn at_bounds(x: &[f64], lo: &[f64], hi: &[f64]) -> Vec<usize> {
+    (0..x.len().min(lo.len()).min(hi.len()))
+        .filter(|&j| {
+            let range = if (hi[j] - lo[j]).is_finite() {
+                hi[j] - lo[j]
+            } else {
+                x[j].abs().max(1.0)
+            };
+            let tol = 1e-6 * range;
+            x[j] <= lo[j] + tol || x[j] >= hi[j] - tol
+        })
+        .collect()
+}
+
+/// Indices of the parameters the data cannot identify at the optimum: off their bounds but
+/// without a confidence interval (singular information matrix), or with a 95 % half-width
+/// wider than half their search range (the data move the cost too little to tell).
+pub fn not_identifiable(r: &LsqResult, lo: &[f64], hi: &[f64]) -> Vec<usize> {
+    let bound = at_bounds(&r.x, lo, hi);
+    (0..r.x.len())
+        .filter(|j| !bound.contains(j))
+        .filter(|&j| match r.ci95.get(j).copied().flatten() {
+            None => true,
+            Some(c) => {
+                let range = hi.get(j).zip(lo.get(j)).map_or(f64::INFINITY, |(h, l)| h - l);
+                range.is_finite() && c > 0.5 * range
+            }
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

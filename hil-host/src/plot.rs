@@ -1,13 +1,18 @@
-//! Plain SVG line plots: no dependencies, readable in any browser, diffable as text.
+//! SVG plots drawn with `plotters` (its SVG backend; text as SVG `<text>` elements, so no
+//! system fonts are needed): time axes in seconds with round ticks, one y axis per unit
+//! (stacked panels sharing the time axis), legends in a column right of the data, numbered
+//! markers for faults and mode changes with their key in that column.
 
-use std::fmt::Write as _;
 use std::fs;
 use std::path::{Path, PathBuf};
 
+use plotters::prelude::*;
+
 use crate::diagnose::Diagnosis;
 use crate::residuals::autocorrelation;
+use crate::run::{RunOutput, Scenario};
 
-/// One line: label, colour, (x, y) points.
+/// One line: label (empty: not in the legend), colour (`#rrggbb` or a basic name), points.
 pub struct Series<'a> {
     pub label: &'a str,
     pub colour: &'a str,
@@ -15,8 +20,33 @@ pub struct Series<'a> {
     pub y: &'a [f64],
 }
 
+/// One panel: one y axis with one unit, its series, dashed references (`hlines`), and an
+/// optional shaded band `±band` (a confidence band).
+pub struct Panel<'a> {
+    /// The axis title with its unit, e.g. `phase (crank deg)`.
+    pub y_label: &'a str,
+    pub series: Vec<Series<'a>>,
+    pub hlines: Vec<f64>,
+    pub band: Option<f64>,
+}
+
+/// A vertical marker through every panel at `x` (a fault, a mode change).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Marker {
+    pub x: f64,
+    pub label: String,
+    /// `#rrggbb` or a basic name.
+    pub colour: &'static str,
+}
+
 /// At most this many points per series are drawn (min/max kept per bucket, so peaks survive).
 const MAX_POINTS: usize = 4000;
+/// Drawing size: plot width, legend column, panel height.
+const PLOT_W: u32 = 820;
+const LEGEND_W: u32 = 250;
+const PANEL_H: u32 = 190;
+const TITLE_H: u32 = 34;
+const MAX_MARKER_KEYS: usize = 14;
 
 fn thin(x: &[f64], y: &[f64]) -> Vec<(f64, f64)> {
     let n = x.len().min(y.len());
@@ -45,243 +75,406 @@ fn thin(x: &[f64], y: &[f64]) -> Vec<(f64, f64)> {
     out
 }
 
-/// An SVG document with the series, axes labels and a legend; `hlines` are dashed references.
-pub fn line_plot(title: &str, x_label: &str, y_label: &str, series: &[Series], hlines: &[f64]) -> String {
-    let (w, h, ml, mr, mt, mb) = (900.0, 420.0, 70.0, 20.0, 40.0, 50.0);
-    let pts: Vec<Vec<(f64, f64)>> = series.iter().map(|s| thin(s.x, s.y)).collect();
-    let all = pts.iter().flatten();
-    let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
-    for &(x, y) in all {
-        if x.is_finite() && y.is_finite() {
-            x0 = x0.min(x);
-            x1 = x1.max(x);
-            y0 = y0.min(y);
-            y1 = y1.max(y);
+/// A colour from `#rrggbb` or a basic name (unknown: grey).
+fn colour(c: &str) -> RGBColor {
+    let hex = |s: &str| u8::from_str_radix(s, 16).ok();
+    if let Some(h) = c.strip_prefix('#') {
+        if let (6, Some(r), Some(g), Some(b)) = (
+            h.len(),
+            h.get(0..2).and_then(hex),
+            h.get(2..4).and_then(hex),
+            h.get(4..6).and_then(hex),
+        ) {
+            return RGBColor(r, g, b);
         }
     }
-    for &v in hlines {
-        y0 = y0.min(v);
-        y1 = y1.max(v);
+    match c {
+        "black" => RGBColor(0, 0, 0),
+        "red" => RGBColor(214, 39, 40),
+        "blue" => RGBColor(31, 119, 180),
+        "green" => RGBColor(44, 160, 44),
+        "orange" => RGBColor(255, 127, 14),
+        "purple" => RGBColor(148, 103, 189),
+        _ => RGBColor(127, 127, 127),
     }
-    if x0 >= x1 {
-        x1 = x0 + 1.0;
-    }
-    if y0 >= y1 {
-        y1 = y0 + 1.0;
-    }
-    let pad = 0.05 * (y1 - y0);
-    let (y0, y1) = (y0 - pad, y1 + pad);
-    let sx = |x: f64| ml + (x - x0) / (x1 - x0) * (w - ml - mr);
-    let sy = |y: f64| mt + (1.0 - (y - y0) / (y1 - y0)) * (h - mt - mb);
-    let mut s = String::new();
-    let _ = writeln!(
-        s,
-        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" font-family="sans-serif" font-size="12">"#
-    );
-    let _ = writeln!(s, r#"<rect width="100%" height="100%" fill="white"/>"#);
-    let _ = writeln!(
-        s,
-        r#"<text x="{}" y="22" font-size="15" text-anchor="middle">{}</text>"#,
-        w / 2.0,
-        escape(title)
-    );
-    let _ = writeln!(
-        s,
-        r#"<rect x="{ml}" y="{mt}" width="{}" height="{}" fill="none" stroke="black"/>"#,
-        w - ml - mr,
-        h - mt - mb
-    );
-    for k in 0..=4 {
-        let fx = x0 + (x1 - x0) * k as f64 / 4.0;
-        let fy = y0 + (y1 - y0) * k as f64 / 4.0;
-        let _ = writeln!(
-            s,
-            r#"<text x="{:.1}" y="{}" text-anchor="middle">{}</text>"#,
-            sx(fx),
-            h - mb + 16.0,
-            tick(fx)
-        );
-        let _ = writeln!(
-            s,
-            r#"<text x="{}" y="{:.1}" text-anchor="end">{}</text>"#,
-            ml - 4.0,
-            sy(fy) + 4.0,
-            tick(fy)
-        );
-    }
-    let _ = writeln!(
-        s,
-        r#"<text x="{}" y="{}" text-anchor="middle">{}</text>"#,
-        w / 2.0,
-        h - 10.0,
-        escape(x_label)
-    );
-    let _ = writeln!(
-        s,
-        r#"<text x="16" y="{}" text-anchor="middle" transform="rotate(-90 16 {})">{}</text>"#,
-        h / 2.0,
-        h / 2.0,
-        escape(y_label)
-    );
-    for &v in hlines {
-        let _ = writeln!(
-            s,
-            r##"<line x1="{ml}" x2="{}" y1="{:.1}" y2="{:.1}" stroke="#888" stroke-dasharray="5,4"/>"##,
-            w - mr,
-            sy(v),
-            sy(v)
-        );
-    }
-    for (i, (ser, p)) in series.iter().zip(&pts).enumerate() {
-        let mut d = String::new();
-        for (k, &(x, y)) in p.iter().filter(|(x, y)| x.is_finite() && y.is_finite()).enumerate() {
-            let _ = write!(d, "{}{:.1},{:.1} ", if k == 0 { "M" } else { "L" }, sx(x), sy(y));
-        }
-        let _ = writeln!(
-            s,
-            r#"<path d="{d}" fill="none" stroke="{}" stroke-width="1.2"/>"#,
-            ser.colour
-        );
-        let ly = mt + 14.0 + 16.0 * i as f64;
-        let _ = writeln!(
-            s,
-            r#"<line x1="{}" x2="{}" y1="{ly}" y2="{ly}" stroke="{}" stroke-width="2"/>"#,
-            w - mr - 170.0,
-            w - mr - 150.0,
-            ser.colour
-        );
-        let _ = writeln!(
-            s,
-            r#"<text x="{}" y="{}">{}</text>"#,
-            w - mr - 145.0,
-            ly + 4.0,
-            escape(ser.label)
-        );
-    }
-    s.push_str("</svg>\n");
-    s
 }
 
-fn tick(v: f64) -> String {
-    if v != 0.0 && (v.abs() < 1e-2 || v.abs() >= 1e5) {
+/// Decimals that show a tick step of `span / 8` without noise digits.
+fn decimals(span: f64) -> usize {
+    let step = span / 8.0;
+    if !(step > 0.0) || !step.is_finite() {
+        return 2;
+    }
+    (-step.log10().floor()).clamp(0.0, 9.0) as usize
+}
+
+/// A tick label: `dec` decimals; values within float noise of zero (relative to the axis
+/// `span`) are 0.
+fn tick(v: f64, dec: usize, span: f64) -> String {
+    let v = if v.abs() < 1e-9 * span { 0.0 } else { v };
+    if v != 0.0 && (v.abs() >= 1e6 || v.abs() < 1e-4) {
         format!("{v:.2e}")
     } else {
-        format!("{v:.3}")
+        let s = format!("{v:.dec$}");
+        if s.starts_with("-") && s.trim_start_matches(['-', '0', '.']).is_empty() {
+            s[1..].to_string()
+        } else {
+            s
+        }
     }
+}
+
+fn range_of(values: impl Iterator<Item = f64>) -> (f64, f64) {
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for v in values.filter(|v| v.is_finite()) {
+        lo = lo.min(v);
+        hi = hi.max(v);
+    }
+    if !(lo <= hi) {
+        return (0.0, 1.0);
+    }
+    if hi - lo <= f64::EPSILON * hi.abs().max(1.0) {
+        let d = if hi == 0.0 { 1.0 } else { 0.05 * hi.abs() };
+        return (lo - d, hi + d);
+    }
+    (lo, hi)
+}
+
+/// An SVG document with one panel: the old single-axis call (`run` and the tests use it).
+pub fn line_plot(title: &str, x_label: &str, y_label: &str, series: &[Series], hlines: &[f64]) -> String {
+    let panel = Panel {
+        y_label,
+        series: series
+            .iter()
+            .map(|s| Series {
+                label: s.label,
+                colour: s.colour,
+                x: s.x,
+                y: s.y,
+            })
+            .collect(),
+        hlines: hlines.to_vec(),
+        band: None,
+    };
+    panel_plot(title, x_label, &[panel], &[])
+}
+
+/// An SVG document: stacked panels sharing the x axis (labelled on the bottom panel), the
+/// legend of each panel beside it, markers through all panels numbered on the top one with
+/// their key under the legends.
+pub fn panel_plot(title: &str, x_label: &str, panels: &[Panel], markers: &[Marker]) -> String {
+    match draw_panels(title, x_label, panels, markers) {
+        Ok(svg) => svg,
+        // Drawing into a string does not fail in practice; if it does, say so in the picture.
+        Err(e) => format!(
+            "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"600\" height=\"60\"><text x=\"10\" y=\"30\">{}: plot failed: {}</text></svg>\n",
+            escape(title),
+            escape(&e)
+        ),
+    }
+}
+
+fn draw_panels(title: &str, x_label: &str, panels: &[Panel], markers: &[Marker]) -> Result<String, String> {
+    let n = panels.len().max(1) as u32;
+    let (w, h) = (PLOT_W + LEGEND_W, TITLE_H + n * PANEL_H + 24);
+    let pts: Vec<Vec<Vec<(f64, f64)>>> = panels
+        .iter()
+        .map(|p| p.series.iter().map(|s| thin(s.x, s.y)).collect())
+        .collect();
+    let (x0, x1) = range_of(pts.iter().flatten().flatten().map(|p| p.0));
+    let xdec = decimals(x1 - x0);
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (w, h)).into_drawing_area();
+        let e = |e: DrawingAreaErrorKind<_>| e.to_string();
+        root.fill(&WHITE).map_err(e)?;
+        let root = root.titled(title, ("sans-serif", 17)).map_err(e)?;
+        let (plot_area, legend_area) = root.split_horizontally(PLOT_W);
+        let rows = plot_area.split_evenly((panels.len().max(1), 1));
+        let font = ("sans-serif", 14).into_font();
+        let small = ("sans-serif", 13).into_font();
+        let mut legend_y = 14;
+        for (i, ((area, panel), pts)) in rows.iter().zip(panels).zip(&pts).enumerate() {
+            let last = i + 1 == panels.len();
+            let mut ys: Vec<f64> = pts.iter().flatten().map(|p| p.1).collect();
+            ys.extend(&panel.hlines);
+            if let Some(b) = panel.band {
+                ys.extend([b, -b]);
+            }
+            let (y0, y1) = range_of(ys.into_iter());
+            let pad = 0.06 * (y1 - y0);
+            let (y0, y1) = (y0 - pad, y1 + pad);
+            let ydec = decimals(y1 - y0);
+            let mut chart = ChartBuilder::on(area)
+                .margin_top(if i == 0 { 14 } else { 6 })
+                .margin_right(12)
+                .x_label_area_size(if last { 44 } else { 18 })
+                .y_label_area_size(78)
+                .build_cartesian_2d(x0..x1, y0..y1)
+                .map_err(e)?;
+            let xfmt = |v: &f64| tick(*v, xdec, x1 - x0);
+            let yfmt = |v: &f64| tick(*v, ydec, y1 - y0);
+            let mut mesh = chart.configure_mesh();
+            mesh.x_labels(10)
+                .y_labels(6)
+                .x_label_formatter(&xfmt)
+                .y_label_formatter(&yfmt)
+                .y_desc(panel.y_label)
+                .label_style(font.clone())
+                .axis_desc_style(font.clone())
+                .bold_line_style(RGBColor(225, 225, 225))
+                .light_line_style(TRANSPARENT);
+            if last {
+                mesh.x_desc(x_label);
+            }
+            mesh.draw().map_err(e)?;
+            if let Some(b) = panel.band {
+                chart
+                    .draw_series(std::iter::once(Rectangle::new(
+                        [(x0, -b), (x1, b)],
+                        RGBColor(31, 119, 180).mix(0.12).filled(),
+                    )))
+                    .map_err(e)?;
+            }
+            for &v in &panel.hlines {
+                chart
+                    .draw_series(std::iter::once(PathElement::new(
+                        vec![(x0, v), (x1, v)],
+                        RGBColor(136, 136, 136).stroke_width(1),
+                    )))
+                    .map_err(e)?;
+            }
+            for m in markers {
+                chart
+                    .draw_series(std::iter::once(PathElement::new(
+                        vec![(m.x, y0), (m.x, y1)],
+                        colour(m.colour).mix(0.8).stroke_width(1),
+                    )))
+                    .map_err(e)?;
+            }
+            if i == 0 {
+                for (k, m) in markers.iter().enumerate() {
+                    chart
+                        .draw_series(std::iter::once(Text::new(
+                            format!("{}", k + 1),
+                            (m.x, y1),
+                            small.clone().color(&colour(m.colour)),
+                        )))
+                        .map_err(e)?;
+                }
+            }
+            for (s, p) in panel.series.iter().zip(pts) {
+                let c = colour(s.colour);
+                chart
+                    .draw_series(LineSeries::new(
+                        p.iter().copied().filter(|(x, y)| x.is_finite() && y.is_finite()),
+                        c.stroke_width(1),
+                    ))
+                    .map_err(e)?;
+            }
+            // This panel's legend beside it, at its top.
+            legend_y = legend_y.max(i as i32 * PANEL_H as i32 + 14);
+            if panel.series.iter().any(|s| !s.label.is_empty()) {
+                legend_area
+                    .draw(&Text::new(panel.y_label.to_string(), (8, legend_y), small.clone()))
+                    .map_err(e)?;
+                legend_y += 16;
+            }
+            for s in panel.series.iter().filter(|s| !s.label.is_empty()) {
+                legend_area
+                    .draw(&PathElement::new(
+                        vec![(10, legend_y + 6), (32, legend_y + 6)],
+                        colour(s.colour).stroke_width(2),
+                    ))
+                    .map_err(e)?;
+                legend_area
+                    .draw(&Text::new(s.label.to_string(), (38, legend_y), font.clone()))
+                    .map_err(e)?;
+                legend_y += 17;
+            }
+            legend_y += 8;
+        }
+        if !markers.is_empty() {
+            legend_area
+                .draw(&Text::new("markers".to_string(), (8, legend_y), small.clone()))
+                .map_err(e)?;
+            legend_y += 16;
+            for (k, m) in markers.iter().enumerate().take(MAX_MARKER_KEYS) {
+                legend_area
+                    .draw(&Text::new(
+                        format!("{} {}", k + 1, m.label),
+                        (10, legend_y),
+                        small.clone().color(&colour(m.colour)),
+                    ))
+                    .map_err(e)?;
+                legend_y += 15;
+            }
+            if markers.len() > MAX_MARKER_KEYS {
+                legend_area
+                    .draw(&Text::new(
+                        format!("... and {} more", markers.len() - MAX_MARKER_KEYS),
+                        (10, legend_y),
+                        small.clone(),
+                    ))
+                    .map_err(e)?;
+            }
+        }
+        root.present().map_err(e)?;
+    }
+    // The confidence band's rectangles carry a class, for styling and for tests.
+    Ok(svg.replace(
+        "opacity=\"0.12\" fill=\"#1F77B4\"",
+        "class=\"band\" opacity=\"0.12\" fill=\"#1F77B4\"",
+    ))
 }
 
 fn escape(t: &str) -> String {
     t.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
 }
 
-/// Writes the diagnosis plots into `dir`: measured vs baseline vs extended, the residuals, the
-/// residual autocorrelation with its 99 % band and the baseline residual's cross-correlation
-/// with the (up to three) regressors it is most correlated with, with the same band. Returns
-/// the files written.
-pub fn diagnosis_plots(d: &Diagnosis, dir: &Path) -> std::io::Result<Vec<PathBuf>> {
-    fs::create_dir_all(dir)?;
+const RED: &str = "#d62728";
+const BLUE: &str = "#1f77b4";
+const GREEN: &str = "#2ca02c";
+const PURPLE: &str = "#9467bd";
+const ORANGE: &str = "#ff7f0e";
+
+/// The diagnosis plots as (file name, SVG): measured, baseline and extended output; the
+/// residuals (the extended model's is the remainder); the residual autocorrelation with its
+/// 99 % band; the baseline residual's cross-correlation with the (up to three) regressors it
+/// is most correlated with, with the same band. `t_s` is the validation data's time when it
+/// has one sample per output sample; otherwise the x axis is the validation sample.
+pub fn diagnosis_svgs(d: &Diagnosis, t_s: Option<&[f64]>) -> Vec<(String, String)> {
     let n = d.baseline.measured.len();
-    let k: Vec<f64> = (0..n).map(|i| i as f64).collect();
-    let ext_label = format!("extended ({})", d.cause);
-    let mut written = Vec::new();
-    let mut put = |name: &str, svg: String| -> std::io::Result<()> {
-        let p = dir.join(name);
-        crate::output::write_atomic(&p, svg.as_bytes())?;
-        written.push(p);
-        Ok(())
+    let index: Vec<f64> = (0..n).map(|i| i as f64).collect();
+    let (x, x_label): (Vec<f64>, String) = match t_s {
+        Some(t) if t.len() == n => (t.to_vec(), "time (s)".into()),
+        // The fit decimated or trimmed the data: its samples have no one-to-one time.
+        Some(t) => (
+            index,
+            format!(
+                "sample of the fit ({n} from {} validation samples: decimated or trimmed)",
+                t.len()
+            ),
+        ),
+        None => (index, "validation sample".into()),
     };
-    put(
-        "fit.svg",
-        line_plot(
+    let x_label = x_label.as_str();
+    let causes = if d.cause == "none" {
+        "no effect".to_string()
+    } else {
+        d.cause.clone()
+    };
+    let ext_label = format!("extended ({causes})");
+    let out_label = format!("{} (validation)", d.output);
+    let mut svgs = Vec::new();
+    svgs.push((
+        "fit.svg".to_string(),
+        panel_plot(
             &format!("{}: {} on validation data", d.plant, d.output),
-            "validation sample",
-            &d.output,
+            x_label,
+            &[Panel {
+                y_label: &out_label,
+                series: vec![
+                    Series {
+                        label: "measured",
+                        colour: "black",
+                        x: &x,
+                        y: &d.baseline.measured,
+                    },
+                    Series {
+                        label: "baseline",
+                        colour: RED,
+                        x: &x,
+                        y: &d.baseline.predicted,
+                    },
+                    Series {
+                        label: &ext_label,
+                        colour: BLUE,
+                        x: &x,
+                        y: &d.extended.predicted,
+                    },
+                ],
+                hlines: vec![],
+                band: None,
+            }],
+            &[],
+        ),
+    ));
+    let rb = d.baseline.residual();
+    let re = d.extended.residual();
+    let res_label = format!("residual {}", d.output);
+    svgs.push((
+        "residuals.svg".to_string(),
+        panel_plot(
+            "residuals on validation data (the extended model's is the remainder)",
+            x_label,
             &[
-                Series {
-                    label: "measured",
-                    colour: "black",
-                    x: &k,
-                    y: &d.baseline.measured,
+                Panel {
+                    y_label: &res_label,
+                    series: vec![Series {
+                        label: "baseline",
+                        colour: RED,
+                        x: &x,
+                        y: &rb,
+                    }],
+                    hlines: vec![0.0],
+                    band: None,
                 },
-                Series {
-                    label: "baseline",
-                    colour: "#d62728",
-                    x: &k,
-                    y: &d.baseline.predicted,
-                },
-                Series {
-                    label: &ext_label,
-                    colour: "#1f77b4",
-                    x: &k,
-                    y: &d.extended.predicted,
+                Panel {
+                    y_label: &res_label,
+                    series: vec![Series {
+                        label: "remainder (extended)",
+                        colour: BLUE,
+                        x: &x,
+                        y: &re,
+                    }],
+                    hlines: vec![0.0],
+                    band: None,
                 },
             ],
             &[],
         ),
-    )?;
-    let rb = d.baseline.residual();
-    let re = d.extended.residual();
-    put(
-        "residuals.svg",
-        line_plot(
-            "residuals on validation data",
-            "validation sample",
-            &d.output,
-            &[
-                Series {
-                    label: "baseline",
-                    colour: "#d62728",
-                    x: &k,
-                    y: &rb,
-                },
-                Series {
-                    label: &ext_label,
-                    colour: "#1f77b4",
-                    x: &k,
-                    y: &re,
-                },
-            ],
-            &[0.0],
-        ),
-    )?;
+    ));
     let lags = d.whiteness.lags;
     let lag_x: Vec<f64> = (0..=lags).map(|l| l as f64).collect();
     let ab = autocorrelation(&rb, lags);
     let ae = autocorrelation(&re, lags);
-    put(
-        "autocorrelation.svg",
-        line_plot(
-            "residual autocorrelation with the 99 % band",
+    svgs.push((
+        "autocorrelation.svg".to_string(),
+        panel_plot(
+            "residual autocorrelation (shaded: the 99 % band of white noise)",
             "lag (samples)",
-            "normalised autocorrelation",
-            &[
-                Series {
-                    label: "baseline",
-                    colour: "#d62728",
-                    x: &lag_x,
-                    y: &ab,
-                },
-                Series {
-                    label: &ext_label,
-                    colour: "#1f77b4",
-                    x: &lag_x,
-                    y: &ae,
-                },
-            ],
-            &[d.whiteness.band, -d.whiteness.band],
+            &[Panel {
+                y_label: "autocorrelation (normalised)",
+                series: vec![
+                    Series {
+                        label: "baseline",
+                        colour: RED,
+                        x: &lag_x,
+                        y: &ab,
+                    },
+                    Series {
+                        label: &ext_label,
+                        colour: BLUE,
+                        x: &lag_x,
+                        y: &ae,
+                    },
+                ],
+                hlines: vec![0.0],
+                band: Some(d.whiteness.band),
+            }],
+            &[],
         ),
-    )?;
-    // The residual's correlation with the regressors it is most correlated with.
+    ));
     let mut worst: Vec<&crate::residuals::CrossCheck> = d.cross.iter().filter(|c| !c.correlation.is_empty()).collect();
     worst.sort_by(|a, b| (b.max_abs / b.band).total_cmp(&(a.max_abs / a.band)));
     worst.truncate(3);
     if let Some(first) = worst.first() {
         let half = (first.correlation.len() / 2) as f64;
         let lag_x: Vec<f64> = (0..first.correlation.len()).map(|i| i as f64 - half).collect();
-        let colours = ["#d62728", "#2ca02c", "#9467bd"];
         let series: Vec<Series> = worst
             .iter()
-            .zip(colours)
+            .zip([RED, GREEN, PURPLE])
             .map(|(c, colour)| Series {
                 label: &c.name,
                 colour,
@@ -289,18 +482,413 @@ pub fn diagnosis_plots(d: &Diagnosis, dir: &Path) -> std::io::Result<Vec<PathBuf
                 y: &c.correlation,
             })
             .collect();
-        put(
-            "cross_correlation.svg",
-            line_plot(
-                "baseline residual cross-correlation with the 99 % band (most correlated regressors)",
+        svgs.push((
+            "cross_correlation.svg".to_string(),
+            panel_plot(
+                "baseline residual cross-correlation with the most correlated regressors (shaded: 99 % band)",
                 "lag (samples; positive: the signal leads the residual)",
-                "normalised cross-correlation",
-                &series,
-                &[first.band, -first.band],
+                &[Panel {
+                    y_label: "cross-correlation (normalised)",
+                    series,
+                    hlines: vec![0.0],
+                    band: Some(first.band),
+                }],
+                &[],
             ),
-        )?;
+        ));
+    }
+    svgs
+}
+
+fn write_all(svgs: Vec<(String, String)>, dir: &Path) -> std::io::Result<Vec<PathBuf>> {
+    fs::create_dir_all(dir)?;
+    let mut written = Vec::new();
+    for (name, svg) in svgs {
+        let p = dir.join(name);
+        // Whole files only (crate::output): a killed run leaves the old plot or none.
+        crate::output::write_atomic(&p, svg.as_bytes())?;
+        written.push(p);
     }
     Ok(written)
+}
+
+/// Writes [`diagnosis_svgs`] into `dir` against the validation sample index; returns the files.
+pub fn diagnosis_plots(d: &Diagnosis, dir: &Path) -> std::io::Result<Vec<PathBuf>> {
+    write_all(diagnosis_svgs(d, None), dir)
+}
+
+/// Writes [`diagnosis_svgs`] into `dir` against the validation data's time `t_s`.
+pub fn diagnosis_plots_timed(d: &Diagnosis, t_s: &[f64], dir: &Path) -> std::io::Result<Vec<PathBuf>> {
+    write_all(diagnosis_svgs(d, Some(t_s)), dir)
+}
+
+/// The run's fault and mode-change markers: faults injected by the scenario (start, end),
+/// faults the ECU raised and cleared, EHVVA lift-mode and snubber switches.
+pub fn run_markers(sc: &Scenario, o: &RunOutput) -> Vec<Marker> {
+    let mut m = Vec::new();
+    for f in &sc.faults {
+        m.push(Marker {
+            x: f.start_s,
+            label: format!("{:.2} s injected {}", f.start_s, f.kind.name()),
+            colour: ORANGE,
+        });
+        if let Some(end) = f.end_s {
+            m.push(Marker {
+                x: end,
+                label: format!("{end:.2} s {} ends", f.kind.name()),
+                colour: ORANGE,
+            });
+        }
+    }
+    for e in &o.summary.fault_events {
+        m.push(Marker {
+            x: e.t_s,
+            label: format!(
+                "{:.2} s ECU {} {}",
+                e.t_s,
+                if e.raised { "raised" } else { "cleared" },
+                e.fault.name()
+            ),
+            colour: if e.raised { RED } else { GREEN },
+        });
+    }
+    for w in o.ehvva.windows(2) {
+        if w[1].lift_high != w[0].lift_high {
+            m.push(Marker {
+                x: w[1].t_s,
+                label: format!("{:.2} s lift {}", w[1].t_s, if w[1].lift_high { "high" } else { "low" }),
+                colour: PURPLE,
+            });
+        }
+        if w[1].snubber_on != w[0].snubber_on {
+            m.push(Marker {
+                x: w[1].t_s,
+                label: format!(
+                    "{:.2} s snubber {}",
+                    w[1].t_s,
+                    if w[1].snubber_on { "on" } else { "off" }
+                ),
+                colour: PURPLE,
+            });
+        }
+    }
+    m.sort_by(|a, b| a.x.total_cmp(&b.x));
+    m
+}
+
+/// The run's plots as (file name, SVG): the EVVT phase with its command, engine speed and
+/// battery; each vacuum actuator (LPT wastegate, HPT and HPC bypass) with position, duty,
+/// pressures and battery on their own axes; the EHVVA lift and pressures over the whole run;
+/// the EHVVA lift against crank angle, one line per engine cycle. Every time plot carries
+/// the fault and mode-change markers.
+pub fn run_svgs(sc: &Scenario, o: &RunOutput) -> Vec<(String, String)> {
+    let markers = run_markers(sc, o);
+    let mut svgs = Vec::new();
+    let e = &o.evvt;
+    let col = |f: &dyn Fn(&crate::run::EvvtRow) -> f64| e.iter().map(f).collect::<Vec<f64>>();
+    let et = col(&|r| r.t_s);
+    let (e_ref, e_ph, e_cmd, e_rpm, e_u) = (
+        col(&|r| r.phase_ref_deg),
+        col(&|r| r.phase_deg),
+        col(&|r| r.motor_cmd_rpm),
+        col(&|r| r.engine_rpm),
+        col(&|r| r.u_batt_v),
+    );
+    svgs.push((
+        "evvt.svg".to_string(),
+        panel_plot(
+            &format!("EVVT cam phaser, scenario `{}`", sc.name),
+            "time (s)",
+            &[
+                Panel {
+                    y_label: "cam phase (crank deg)",
+                    series: vec![
+                        Series {
+                            label: "set-point",
+                            colour: "black",
+                            x: &et,
+                            y: &e_ref,
+                        },
+                        Series {
+                            label: "plant",
+                            colour: BLUE,
+                            x: &et,
+                            y: &e_ph,
+                        },
+                    ],
+                    hlines: vec![],
+                    band: None,
+                },
+                Panel {
+                    y_label: "speed (rpm)",
+                    series: vec![
+                        Series {
+                            label: "motor command",
+                            colour: GREEN,
+                            x: &et,
+                            y: &e_cmd,
+                        },
+                        Series {
+                            label: "engine",
+                            colour: PURPLE,
+                            x: &et,
+                            y: &e_rpm,
+                        },
+                    ],
+                    hlines: vec![],
+                    band: None,
+                },
+                Panel {
+                    y_label: "battery (V)",
+                    series: vec![Series {
+                        label: "battery",
+                        colour: RED,
+                        x: &et,
+                        y: &e_u,
+                    }],
+                    hlines: vec![],
+                    band: None,
+                },
+            ],
+            &markers,
+        ),
+    ));
+
+    let v = &o.vacuum;
+    let vcol = |f: &dyn Fn(&crate::run::VacuumRow) -> f64| v.iter().map(f).collect::<Vec<f64>>();
+    let vt = vcol(&|r| r.t_s);
+    let (v_u, v_tank, v_amb) = (vcol(&|r| r.u_batt_v), vcol(&|r| r.p_tank_kpa), vcol(&|r| r.p_amb_kpa));
+    for (i, file, what) in [
+        (0, "vacuum.svg", "LPT wastegate"),
+        (1, "vacuum-hpt.svg", "HPT bypass"),
+        (2, "vacuum-hpc.svg", "HPC bypass"),
+    ] {
+        let (set, x, duty, p) = (
+            vcol(&|r| r.x_set_pct[i]),
+            vcol(&|r| r.x_pct[i]),
+            vcol(&|r| r.duty_pct[i]),
+            vcol(&|r| r.p_act_kpa[i]),
+        );
+        svgs.push((
+            file.to_string(),
+            panel_plot(
+                &format!("vacuum actuator: {what}, scenario `{}`", sc.name),
+                "time (s)",
+                &[
+                    Panel {
+                        y_label: "rod position (% stroke)",
+                        series: vec![
+                            Series {
+                                label: "set-point",
+                                colour: "black",
+                                x: &vt,
+                                y: &set,
+                            },
+                            Series {
+                                label: "position",
+                                colour: BLUE,
+                                x: &vt,
+                                y: &x,
+                            },
+                        ],
+                        hlines: vec![],
+                        band: None,
+                    },
+                    Panel {
+                        y_label: "valve duty (%)",
+                        series: vec![Series {
+                            label: "PWM duty",
+                            colour: GREEN,
+                            x: &vt,
+                            y: &duty,
+                        }],
+                        hlines: vec![],
+                        band: None,
+                    },
+                    Panel {
+                        y_label: "pressure (kPa)",
+                        series: vec![
+                            Series {
+                                label: "actuator chamber",
+                                colour: PURPLE,
+                                x: &vt,
+                                y: &p,
+                            },
+                            Series {
+                                label: "vacuum tank",
+                                colour: ORANGE,
+                                x: &vt,
+                                y: &v_tank,
+                            },
+                            Series {
+                                label: "ambient",
+                                colour: "#7f7f7f",
+                                x: &vt,
+                                y: &v_amb,
+                            },
+                        ],
+                        hlines: vec![],
+                        band: None,
+                    },
+                    Panel {
+                        y_label: "battery (V)",
+                        series: vec![Series {
+                            label: "battery",
+                            colour: RED,
+                            x: &vt,
+                            y: &v_u,
+                        }],
+                        hlines: vec![],
+                        band: None,
+                    },
+                ],
+                &markers,
+            ),
+        ));
+    }
+
+    let w = &o.ehvva;
+    let wcol = |f: &dyn Fn(&crate::run::EhvvaRow) -> f64| w.iter().map(f).collect::<Vec<f64>>();
+    let wt = wcol(&|r| r.t_s);
+    let (lift, duty, ph, pl) = (
+        wcol(&|r| r.lift_mm),
+        wcol(&|r| r.pilot_duty),
+        wcol(&|r| r.p_supply_mpa),
+        wcol(&|r| r.p_back_mpa),
+    );
+    svgs.push((
+        "ehvva.svg".to_string(),
+        panel_plot(
+            &format!(
+                "EHVVA valve over the whole run ({} events), scenario `{}`",
+                o.summary.ehvva_events, sc.name
+            ),
+            "time (s)",
+            &[
+                Panel {
+                    y_label: "valve lift (mm)",
+                    series: vec![Series {
+                        label: "lift (envelope)",
+                        colour: BLUE,
+                        x: &wt,
+                        y: &lift,
+                    }],
+                    hlines: vec![],
+                    band: None,
+                },
+                Panel {
+                    y_label: "pilot command (duty 0..1)",
+                    series: vec![Series {
+                        label: "pilot duty",
+                        colour: "black",
+                        x: &wt,
+                        y: &duty,
+                    }],
+                    hlines: vec![],
+                    band: None,
+                },
+                Panel {
+                    y_label: "pressure (MPa)",
+                    series: vec![
+                        Series {
+                            label: "supply Ph",
+                            colour: RED,
+                            x: &wt,
+                            y: &ph,
+                        },
+                        Series {
+                            label: "back Pl",
+                            colour: GREEN,
+                            x: &wt,
+                            y: &pl,
+                        },
+                    ],
+                    hlines: vec![],
+                    band: None,
+                },
+            ],
+            &markers,
+        ),
+    ));
+
+    // Lift against crank angle: one line per engine cycle (the cycle angle wraps at 720).
+    let mut cycles: Vec<(usize, usize)> = Vec::new();
+    let mut start = 0;
+    for k in 1..w.len() {
+        if w[k].crank_deg < w[k - 1].crank_deg {
+            cycles.push((start, k));
+            start = k;
+        }
+    }
+    if start < w.len() {
+        cycles.push((start, w.len()));
+    }
+    let crank = wcol(&|r| r.crank_deg);
+    let cycle_t0: Vec<f64> = cycles.iter().map(|c| wt[c.0]).collect();
+    // At most about 600 points per cycle (a 720 deg cycle at 800 rpm is 3 000 steps).
+    let stride = cycles.iter().map(|c| c.1 - c.0).max().unwrap_or(1).div_ceil(600).max(1);
+    let (crank, lift): (Vec<f64>, Vec<f64>) = if stride > 1 {
+        let mut keep = Vec::new();
+        for c in cycles.iter_mut() {
+            let from = keep.len();
+            keep.extend((c.0..c.1).step_by(stride));
+            *c = (from, keep.len());
+        }
+        (
+            keep.iter().map(|&k| crank[k]).collect(),
+            keep.iter().map(|&k| lift[k]).collect(),
+        )
+    } else {
+        (crank, lift.clone())
+    };
+
+    // Colour by time through the run: early cycles blue, late ones red; labels on the first
+    // and last cycle only.
+    const RAMP: [&str; 6] = ["#1f77b4", "#3a8fb7", "#7a9cc6", "#c8748a", "#e0504a", "#d62728"];
+    // Only cycles with a valve event; the first and the last of them are labelled.
+    let with_event: Vec<usize> = (0..cycles.len())
+        .filter(|&k| lift[cycles[k].0..cycles[k].1].iter().any(|&l| l > 0.05))
+        .collect();
+    let label_of = |k: Option<&usize>| {
+        k.map(|&k| format!("cycle from {:.2} s", cycle_t0[k]))
+            .unwrap_or_default()
+    };
+    let (first_label, last_label) = (label_of(with_event.first()), label_of(with_event.last()));
+    let ne = with_event.len();
+    let series: Vec<Series> = with_event
+        .iter()
+        .enumerate()
+        .map(|(j, &k)| Series {
+            label: if j == 0 {
+                &first_label
+            } else if j + 1 == ne {
+                &last_label
+            } else {
+                ""
+            },
+            colour: RAMP[(j * (RAMP.len() - 1)) / ne.saturating_sub(1).max(1)],
+            x: &crank[cycles[k].0..cycles[k].1],
+            y: &lift[cycles[k].0..cycles[k].1],
+        })
+        .collect();
+    svgs.push((
+        "ehvva-crank.svg".to_string(),
+        panel_plot(
+            &format!(
+                "EHVVA lift against crank angle, one line per engine cycle ({} cycles with an event; blue early, red late)",
+                series.len()
+            ),
+            "crank angle in the cycle (deg, 0..720)",
+            &[Panel {
+                y_label: "valve lift (mm)",
+                series,
+                hlines: vec![],
+                band: None,
+            }],
+            &[],
+        ),
+    ));
+    svgs
 }
 
 #[cfg(test)]
@@ -333,6 +921,71 @@ mod tests {
             &[0.5],
         );
         assert!(s.starts_with("<svg") && s.trim_end().ends_with("</svg>"));
-        assert!(s.contains("a &lt; b &amp; c"));
+        assert!(s.contains("a &lt; b &amp; c"), "{s}");
+    }
+
+    /// The x ticks of a 0..2.7 s time axis are round numbers of seconds, the legend is right
+    /// of the data (x beyond the plot width), and two panels have their own y axis titles.
+    #[test]
+    fn time_ticks_are_round_and_legends_sit_outside_the_data() {
+        let t: Vec<f64> = (0..=270).map(|k| k as f64 * 0.01).collect();
+        let y: Vec<f64> = t.iter().map(|t| (7.0 * t).sin()).collect();
+        let v: Vec<f64> = t.iter().map(|t| 12.0 + t).collect();
+        let s = panel_plot(
+            "two units",
+            "time (s)",
+            &[
+                Panel {
+                    y_label: "lift (mm)",
+                    series: vec![Series {
+                        label: "lift",
+                        colour: BLUE,
+                        x: &t,
+                        y: &y,
+                    }],
+                    hlines: vec![],
+                    band: None,
+                },
+                Panel {
+                    y_label: "battery (V)",
+                    series: vec![Series {
+                        label: "battery",
+                        colour: RED,
+                        x: &t,
+                        y: &v,
+                    }],
+                    hlines: vec![],
+                    band: Some(0.5),
+                },
+            ],
+            &[Marker {
+                x: 1.234,
+                label: "1.23 s fault".into(),
+                colour: RED,
+            }],
+        );
+        let texts: Vec<(f64, String)> = s
+            .split("<text")
+            .skip(1)
+            .filter_map(|chunk| {
+                let x = chunk.split("x=\"").nth(1)?.split('"').next()?.parse::<f64>().ok()?;
+                let body = chunk.split('>').nth(1)?.split('<').next()?.trim().to_string();
+                Some((x, body))
+            })
+            .collect();
+        for label in ["lift", "battery"] {
+            let (x, _) = texts.iter().find(|(_, b)| b == label).expect(label);
+            assert!(*x > f64::from(PLOT_W), "legend `{label}` at x = {x}, inside the plot");
+        }
+        for tick in ["0.5", "1.0", "1.5", "2.0", "2.5"] {
+            assert!(texts.iter().any(|(_, b)| b == tick), "no tick {tick}");
+        }
+        assert!(
+            !texts.iter().any(|(_, b)| b.len() > 6 && b.parse::<f64>().is_ok()),
+            "noisy tick"
+        );
+        assert!(texts.iter().any(|(_, b)| b == "lift (mm)") && texts.iter().any(|(_, b)| b == "battery (V)"));
+        assert!(texts.iter().any(|(_, b)| b == "1 1.23 s fault"));
+        assert_eq!(s.matches("class=\"band\"").count(), 1, "the ±0.5 band");
     }
 }

@@ -1,12 +1,14 @@
 //! `diagnose` on real measured data: the EMPS benchmark (closed loop, estimation and validation
-//! experiments) in ../shared/data/emps. Skips with a message where ../shared is absent.
+//! experiments) in ../shared/data/emps (or `$SHARED_DIR/data/emps`, for a worktree that sits
+//! elsewhere). Skips with a message where neither is present.
 use std::path::PathBuf;
 use std::process::Command;
 
 fn emps(file: &str) -> Option<PathBuf> {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared/data/emps")
-        .join(file);
+    let shared = std::env::var_os("SHARED_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared"));
+    let p = shared.join("data/emps").join(file);
     if p.exists() {
         Some(p)
     } else {
@@ -64,7 +66,11 @@ fn names_coulomb_friction_with_the_published_parameters() {
         r["baseline"]["rmse"].as_f64().unwrap(),
         r["extended"]["rmse"].as_f64().unwrap(),
     );
-    assert!((gain - 100.0 * (rb - re) / rb).abs() < 1e-9);
+    // The JSON carries 6 significant digits.
+    assert!(
+        (gain - 100.0 * (rb - re) / rb).abs() < 1e-3,
+        "gain {gain}, RMSE {rb} -> {re}"
+    );
     assert!(gain > 50.0, "gain {gain}");
     assert_eq!(r["residual_tests"]["whiteness_pass"], false);
     // Grouped by the direction of motion, the baseline residual force has a different mean
@@ -98,9 +104,9 @@ fn names_coulomb_friction_with_the_published_parameters() {
     ] {
         assert!(dir.join("plots").join(f).exists(), "{f} missing");
     }
-    // The cross-correlation plot shows the 99 % band (two dashed lines) and the velocity sign.
+    // The cross-correlation plot shows the 99 % band (a shaded band) and the velocity sign.
     let svg = std::fs::read_to_string(dir.join("plots/cross_correlation.svg")).unwrap();
-    assert_eq!(svg.matches("stroke-dasharray").count(), 2);
+    assert_eq!(svg.matches("class=\"band\"").count(), 1);
     assert!(
         svg.contains("velocity sign"),
         "the most correlated regressors should include the velocity sign"

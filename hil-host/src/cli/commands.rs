@@ -4,15 +4,16 @@
 use std::path::{Path, PathBuf};
 
 use hil_host::diagnose::{self, report, Rules};
-use hil_host::log::{read_log, Log, Plant};
+use hil_host::log::{read_log_mapped, Log, Plant};
+use hil_host::mf4::ChannelMap;
 use hil_host::numbers::{sig, tidy_json};
 use hil_host::output::{self, Claim, OutputDir};
 use hil_host::run::Scenario;
 
 use super::progress::{self, Counter, Spinner};
 use super::{
-    CheckArgs, Cli, Command, DiagnoseArgs, GenerateArgs, IdentifyArgs, IdentifyCommand, PilArgs, RunArgs,
-    TargetBenchArgs,
+    CalibrateArgs, CalibrationArgs, CheckArgs, Cli, Command, DiagnoseArgs, GenerateArgs, IdentifyArgs, IdentifyCommand,
+    PilArgs, RunArgs, TargetBenchArgs,
 };
 
 /// A failed command (exit status 1); usage errors are clap's (exit status 2).
@@ -50,6 +51,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Identify(IdentifyCommand::Evvt(a)) => identify_evvt(a),
         Command::Identify(IdentifyCommand::Ehvva(a)) => identify_ehvva(a),
         Command::Pil(a) => pil(a),
+        Command::Calibrate(a) => calibrate(a),
         Command::TargetBench(a) => target_bench(a),
         Command::Completions { shell } => {
             use clap::CommandFactory;
@@ -59,10 +61,16 @@ pub fn run(cli: Cli) -> Result<()> {
     }
 }
 
-/// Reads a log with a spinner (big logs take seconds).
-fn read(path: &Path, plant: Option<Plant>) -> Result<Log> {
+/// Reads a log (CSV or MF4) with a spinner (big logs take seconds), renamed by the channel
+/// map when one is given.
+fn read(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> Result<Log> {
     let _spinner = progress::reading(path);
-    Ok(read_log(path, plant)?)
+    Ok(read_log_mapped(path, plant, map)?)
+}
+
+/// The `--channel-map` file, read and checked.
+fn channel_map(path: Option<&Path>) -> Result<Option<ChannelMap>> {
+    Ok(path.map(ChannelMap::read).transpose()?)
 }
 
 /// A JSON report, rounded and free of nulls, written atomically (never over an input).
@@ -73,7 +81,8 @@ fn write_json(path: &Path, mut value: serde_json::Value) -> Result<()> {
 }
 
 fn check(a: CheckArgs) -> Result<()> {
-    let log = read(&a.log, a.plant.map(Plant::from))?;
+    let map = channel_map(a.channel_map.as_deref())?;
+    let log = read(&a.log, a.plant.map(Plant::from), map.as_ref())?;
     println!(
         "{}: plant {}, {} samples at {} s, columns {}",
         log.file,
@@ -95,11 +104,15 @@ fn diagnose(a: DiagnoseArgs) -> Result<()> {
     if let Some(json) = &a.json {
         output::check_not_input(json)?;
     }
+    if let Some(page) = &a.report {
+        output::check_not_input(page)?;
+    }
+    let map = channel_map(a.channel_map.as_deref())?;
     let plant = a.plant.map(Plant::from);
-    let est_full = read(&a.estimation, plant)?;
+    let est_full = read(&a.estimation, plant, map.as_ref())?;
     let plant = est_full.plant;
     let (est, val, tail) = match &a.validation {
-        Some(v) => (est_full, read(v, Some(plant))?, false),
+        Some(v) => (est_full, read(v, Some(plant), map.as_ref())?, false),
         None => {
             let (e, v) = diagnose::split_tail(&est_full, 0.3);
             (e, v, true)
@@ -133,13 +146,21 @@ fn diagnose(a: DiagnoseArgs) -> Result<()> {
         eprintln!("report written to {}", out.display());
     }
     if let Some(mut dir) = plots {
-        let written = hil_host::plot::diagnosis_plots(&d, dir.dir())
+        let written = hil_host::plot::diagnosis_plots_timed(&d, val.col("t_s").unwrap_or(&[]), dir.dir())
             .map_err(|e| fail(format!("{}: {e}", dir.dir().display())))?;
         for w in &written {
             dir.record(w);
             eprintln!("plot written to {}", w.display());
         }
         dir.finish()?;
+    }
+    if let Some(page) = &a.report {
+        let plots = hil_host::plot::diagnosis_svgs(&d, val.col("t_s"));
+        let mut json = report::to_json(&d);
+        tidy_json(&mut json);
+        let html = hil_host::html::diagnosis_page(&json, &report::summary(&d), &plots);
+        output::write_atomic(page, html.as_bytes()).map_err(|e| fail(format!("{}: {e}", page.display())))?;
+        eprintln!("report written to {}", page.display());
     }
     Ok(())
 }
@@ -164,22 +185,30 @@ fn load_scenario(file: Option<&Path>) -> Result<Scenario> {
 }
 
 fn run_scenario(a: RunArgs) -> Result<()> {
-    use hil_host::run::{run_with, write_outputs, NativeLink, RunOptions};
+    use hil_host::run::{run_with_unit, write_outputs, NativeLink, RunOptions};
     let scenario = load_scenario(a.scenario.as_deref())?;
+    let (ecu, unit) = calibration_inputs(&a.calibration)?;
     let out = a.out.unwrap_or_else(|| PathBuf::from(format!("out/{}", scenario.name)));
     let mut dir = OutputDir::open(&out, Claim::new("run", format!("scenario {}", scenario.name)), a.force)?;
     let o = {
         let _s = Spinner::start(&format!("running scenario `{}`", scenario.name), true);
-        run_with(&scenario, &mut NativeLink::new().map_err(fail)?, &RunOptions::default()).map_err(fail)?
+        let mut link = NativeLink::with_config(ecu).map_err(fail)?;
+        run_with_unit(&scenario, &mut link, &RunOptions::default(), &unit).map_err(fail)?
     };
     let written = write_outputs(&scenario, &o, &out).map_err(|e| fail(format!("{}: {e}", out.display())))?;
     for w in &written {
         dir.record(w);
     }
     dir.finish()?;
+    if let Some(page) = &a.report {
+        let plots = hil_host::plot::run_svgs(&scenario, &o);
+        let html = hil_host::html::run_page(&scenario.name, &o.summary.text(&scenario.name), &plots);
+        output::write_atomic(page, html.as_bytes()).map_err(|e| fail(format!("{}: {e}", page.display())))?;
+        eprintln!("report written to {}", page.display());
+    }
     print!("{}", o.summary.text(&scenario.name));
     println!("logs (DATA-FORMAT) and plots in {}", out.display());
-    Ok(())
+    summary_json(&a.calibration, &o.summary, &scenario.name)
 }
 
 fn generate(a: GenerateArgs) -> Result<()> {
@@ -195,7 +224,9 @@ fn generate(a: GenerateArgs) -> Result<()> {
     let claim = Claim::new("generate", format!("{} {} --seed {seed}", plant.name(), a.effect));
     let known = hil_host::generate::effects(plant);
     let prbs_grid = plant == Plant::Evvt && a.effect == "prbs-grid";
-    if !(known.contains(&a.effect.as_str()) || prbs_grid) {
+    // One catalogue effect, several joined by `+`, or physics outside the catalogue.
+    if !(known.contains(&a.effect.as_str()) || hil_host::generate::parse_effects(plant, &a.effect).is_ok() || prbs_grid)
+    {
         use clap::CommandFactory;
         let mut cmd = Cli::command();
         cmd.build();
@@ -259,12 +290,13 @@ fn identify_evvt(a: IdentifyArgs) -> Result<()> {
     if let Some(json) = &a.json {
         output::check_not_input(json)?;
     }
+    let map = channel_map(a.channel_map.as_deref())?;
     let opts = evvt::EvvtIdentifyOptions::default();
     let counter = Counter::new("identify evvt: log", a.logs.len() as u64);
     let mut points = Vec::new();
     for (k, path) in a.logs.iter().enumerate() {
         counter.step(k as u64 + 1, a.logs.len() as u64);
-        let log = read(path, Some(Plant::Evvt))?;
+        let log = read(path, Some(Plant::Evvt), map.as_ref())?;
         for n in &log.notices {
             eprintln!("notice: {}: {n}", log.file);
         }
@@ -291,9 +323,10 @@ fn identify_ehvva(a: IdentifyArgs) -> Result<()> {
     if let Some(json) = &a.json {
         output::check_not_input(json)?;
     }
+    let map = channel_map(a.channel_map.as_deref())?;
     let mut sets = Vec::new();
     for path in &a.logs {
-        let log = read(path, Some(Plant::Ehvva))?;
+        let log = read(path, Some(Plant::Ehvva), map.as_ref())?;
         for n in &log.notices {
             eprintln!("notice: {}: {n}", log.file);
         }
@@ -330,7 +363,10 @@ fn pil(a: PilArgs) -> Result<()> {
     };
     let r = {
         let _s = Spinner::start(&format!("PIL run of `{}` on QEMU", scenario.name), true);
-        pil::run_scenario(&scenario, &elf, faults, a.until, a.compare_native, &out).map_err(fail)?
+        let (_, unit) = calibration_inputs(&a.calibration)?;
+        let image = a.calibration.calibration.as_deref();
+        pil::run_scenario_calibrated(&scenario, &elf, faults, a.until, a.compare_native, &out, image, &unit)
+            .map_err(fail)?
     };
     print!("{}", r.output.summary.text(&scenario.name));
     print!("{}", r.text());
@@ -349,6 +385,7 @@ fn pil(a: PilArgs) -> Result<()> {
         out.display(),
         written.len()
     );
+    summary_json(&a.calibration, &r.output.summary, &scenario.name)?;
     if r.first_difference.is_some() {
         return Err(fail("the PIL run differs from the native run"));
     }
@@ -397,5 +434,61 @@ fn target_bench(a: TargetBenchArgs) -> Result<()> {
     if b.plant_bits_target[n..] != b.plant_bits_host[n..] || !b.answers_equal_native {
         return Err(fail("the target's results differ from the host's"));
     }
+    Ok(())
+}
+
+/// `--calibration` (the ECU's image, refused whole when bad) and `--unit` (a generated unit's
+/// truth.json) of `run` and `pil`.
+fn calibration_inputs(a: &CalibrationArgs) -> Result<(model_core::ecu::lockstep::EcuCoreConfig, hil_host::run::Unit)> {
+    use hil_host::calibrate::{ecu_config_from_image, unit_from_truth};
+    let ecu = match &a.calibration {
+        Some(p) => ecu_config_from_image(p).map_err(fail)?,
+        None => Default::default(),
+    };
+    let unit = match &a.unit {
+        Some(p) => unit_from_truth(p).map_err(fail)?,
+        None => Default::default(),
+    };
+    Ok((ecu, unit))
+}
+
+/// `--json`: the run's error figures per actuator.
+fn summary_json(a: &CalibrationArgs, s: &hil_host::run::Summary, name: &str) -> Result<()> {
+    if let Some(path) = &a.json {
+        output::check_not_input(path).map_err(|e| fail(format!("{}: {e}", path.display())))?;
+        write_json(path, s.json(name))?;
+        println!("error figures written to {}", path.display());
+    }
+    Ok(())
+}
+
+/// `calibrate`: the unit's logs to calibration.bin, .a2l, .json (hil_host::calibrate).
+fn calibrate(a: CalibrateArgs) -> Result<()> {
+    use hil_host::calibrate::{self as cal, parse_flash_base};
+    let flash_base = parse_flash_base(&a.flash_base).map_err(fail)?;
+    output::protect_inputs(&a.logs);
+    let mut dir = OutputDir::open(
+        &a.out,
+        Claim::new("calibrate", format!("{} logs", a.logs.len())),
+        a.force,
+    )?;
+    let o = {
+        let _s = Spinner::start("calibrating from the logs", true);
+        cal::calibrate(&a.logs, &mut |_| {}).map_err(fail)?
+    };
+    for n in &o.notes {
+        println!("{n}");
+    }
+    for p in cal::write_outputs(&o, &a.out, flash_base).map_err(fail)? {
+        println!("wrote {}", p.display());
+        dir.record(&p);
+    }
+    dir.finish()?;
+    let learned = o.sources.iter().filter(|s| !s.logs.is_empty()).count();
+    println!(
+        "{learned} of {} characteristics learned from the logs, the rest paper defaults; image {} bytes for 0x{flash_base:08X}",
+        model_core::ecu::calibration::CHARACTERISTICS.len(),
+        model_core::ecu::calibration::IMAGE_BYTES
+    );
     Ok(())
 }

@@ -68,7 +68,8 @@ Without --validation the last 30 % of the estimation log is held out as validati
 
 Examples:
   hil-host diagnose est.csv --validation val.csv
-  hil-host diagnose est.csv --json report.json --plots plots/
+  hil-host diagnose est.csv --json report.json --plots plots/ --report report.html
+  hil-host diagnose est.mf4 --validation val.mf4 --channel-map ecu.toml
   hil-host diagnose emps-estimation.csv --validation emps-validation.csv")]
     Diagnose(DiagnoseArgs),
     /// Closed loop of all three actuators natively: the ECU core against the plant models;
@@ -78,7 +79,7 @@ Without a scenario file the built-in default scenario runs.
 
 Examples:
   hil-host run
-  hil-host run scenarios/fault-crank-lost.toml --out out/crank")]
+  hil-host run scenarios/fault-crank-lost.toml --out out/crank --report crank.html")]
     Run(RunArgs),
     /// Write a bench-like estimation and validation log pair with one hidden effect (the truth
     /// goes to truth.json beside them)
@@ -87,6 +88,19 @@ Examples:
     /// Identify actuator models from bench logs
     #[command(subcommand)]
     Identify(IdentifyCommand),
+    /// The ECU's calibration image from a unit's bench logs (any mix of plants):
+    /// calibration.bin, calibration.a2l (ASAM MCD-2 MC) and calibration.json
+    #[command(after_help = "\
+EHVVA matrix logs go to `identify ehvva`, EVVT PRBS logs to `identify evvt`, vacuum logs to
+`diagnose` (with the named extension); the rest keeps the paper defaults (calibration.json
+says which). Flash the image with
+  probe-rs download --binary-format bin --base-address 0x080E0000 --chip STM32F405RGTx calibration.bin
+
+Examples:
+  hil-host calibrate unit/estimation.csv --out cal
+  hil-host calibrate ehvva-matrix.csv prbs/*.csv vacuum-hpt.csv --out cal
+  hil-host run scenarios/calibration-sweep.toml --unit unit/truth.json --calibration cal/calibration.bin")]
+    Calibrate(CalibrateArgs),
     /// Processor in the loop: the closed loop of `run` with the ECU core as firmware on QEMU's
     /// emulated STM32F405, in lockstep over its UART
     #[command(after_help = "\
@@ -129,17 +143,30 @@ fn generate_help() -> String {
         s += &format!("  {:<11} {}\n", p.name(), effects.join(", "));
     }
     s += "  evvt        prbs-grid: the nine closed-loop PRBS identification logs instead\n";
+    s += "Several at once joined by `+` (e.g. supply-voltage+backlash); outside the catalogue:";
+    for p in Plant::ALL {
+        s += &format!(" {} {}", p.name(), hil_host::generate::outside_effects(p).join(", "));
+        s += if p == Plant::ALL[Plant::ALL.len() - 1] {
+            "\n"
+        } else {
+            ";"
+        };
+    }
     s += "\nExamples:\n  hil-host generate vacuum backlash --seed 3\n  hil-host generate positioner none --seed=7 --out cases/control\n  hil-host generate evvt prbs-grid --out prbs";
     s
 }
 
 #[derive(Debug, Args)]
 pub struct CheckArgs {
-    /// The log (DATA-FORMAT.md)
+    /// The log (DATA-FORMAT.md: CSV, or ASAM MDF 4 .mf4)
     pub log: PathBuf,
     /// The plant, when the log does not say
     #[arg(long, value_enum)]
     pub plant: Option<PlantArg>,
+    /// Rename an MF4 file's channels to DATA-FORMAT columns and add metadata (TOML:
+    /// [channels] "Logger.Name" = "column", [meta] key = value; docs/data-format.md)
+    #[arg(long, value_name = "FILE")]
+    pub channel_map: Option<PathBuf>,
 }
 
 #[derive(Debug, Args)]
@@ -158,6 +185,13 @@ pub struct DiagnoseArgs {
     /// Write SVG plots into this directory
     #[arg(long, value_name = "DIR")]
     pub plots: Option<PathBuf>,
+    /// Write one self-contained HTML page: verdict, evidence, plots, parameters, gain
+    #[arg(long, value_name = "FILE")]
+    pub report: Option<PathBuf>,
+    /// Rename an MF4 file's channels to DATA-FORMAT columns and add metadata (TOML:
+    /// [channels] "Logger.Name" = "column", [meta] key = value; docs/data-format.md)
+    #[arg(long, value_name = "FILE")]
+    pub channel_map: Option<PathBuf>,
     /// Write the plots into a directory that holds other files or another run's outputs
     #[arg(long)]
     pub force: bool,
@@ -170,9 +204,44 @@ pub struct RunArgs {
     /// Directory for the logs and plots [default: out/<scenario name>]
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
+    /// Write one self-contained HTML page: summary and plots
+    #[arg(long, value_name = "FILE")]
+    pub report: Option<PathBuf>,
     /// Write into a directory that holds other files or another run's outputs
     #[arg(long)]
     pub force: bool,
+    #[command(flatten)]
+    pub calibration: CalibrationArgs,
+}
+
+#[derive(Debug, Args)]
+pub struct CalibrateArgs {
+    /// The unit's bench logs
+    #[arg(required = true, value_name = "LOG")]
+    pub logs: Vec<PathBuf>,
+    /// Directory for calibration.bin, calibration.a2l and calibration.json
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// The calibration sector's address in the ECU's flash (hex)
+    #[arg(long, value_name = "ADDR", default_value = "0x080E0000")]
+    pub flash_base: String,
+    /// Write into a directory that holds other files or another run's outputs
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// `--calibration`, `--unit`, `--json` of `run` and `pil`.
+#[derive(Debug, Args)]
+pub struct CalibrationArgs {
+    /// The ECU runs this calibration image (refused whole when any check fails)
+    #[arg(long, value_name = "FILE")]
+    pub calibration: Option<PathBuf>,
+    /// The plants are the unit `generate` described (its truth.json)
+    #[arg(long, value_name = "FILE")]
+    pub unit: Option<PathBuf>,
+    /// Write the error figures per actuator here (ehvva.timing_error_deg_rms, ...)
+    #[arg(long, value_name = "FILE")]
+    pub json: Option<PathBuf>,
 }
 
 #[derive(Debug, Args)]
@@ -219,6 +288,10 @@ pub struct IdentifyArgs {
     /// Write the tables as JSON here
     #[arg(long, value_name = "FILE")]
     pub json: Option<PathBuf>,
+    /// Rename an MF4 file's channels to DATA-FORMAT columns and add metadata (TOML:
+    /// [channels] "Logger.Name" = "column", [meta] key = value; docs/data-format.md)
+    #[arg(long, value_name = "FILE")]
+    pub channel_map: Option<PathBuf>,
 }
 
 #[derive(Debug, Args)]
@@ -246,6 +319,8 @@ pub struct PilArgs {
     /// Write into a directory that holds other files or another run's outputs
     #[arg(long)]
     pub force: bool,
+    #[command(flatten)]
+    pub calibration: CalibrationArgs,
 }
 
 #[derive(Debug, Args)]

@@ -27,12 +27,13 @@ use std::sync::Mutex;
 
 use model_core::ehvva::{EhvvaInputs, EhvvaParams, EhvvaPlant, EhvvaReduced, EhvvaTables};
 
+use super::catalogue::{Effect, EhvvaEffect};
 use super::{Family, Fit};
 use crate::log::{Log, Plant};
 use crate::lsq::{solve, LsqOptions, LsqResult};
 
-/// The catalogue effects of this family (DATA-FORMAT.md).
-pub const EFFECTS: [&str; 4] = ["viscosity", "pressure-delay", "direction-delay", "snubber"];
+/// The catalogue effects of this family (DATA-FORMAT.md), from the typed catalogue.
+pub const EFFECTS: [&str; 4] = EhvvaEffect::NAMES;
 
 /// Rest kept before each rising command edge (the segment start), ms.
 pub const PRE_MS: f64 = 1.0;
@@ -401,39 +402,98 @@ pub const BASELINE_KNOBS: [Knob; 4] = [
     },
 ];
 
-/// The knob each catalogue effect adds.
+/// What varies from unit to unit beyond the four knobs of the paper's calibration (issue #12:
+/// spring rate and preload ±15 %, friction ±30 %, piston areas ±12 %): the diagnosis fits them
+/// with the baseline (bounds wide enough for real units), and fixes at the paper's value what
+/// the data cannot identify.
+///
+/// The piston top area At is not among them: the reduced model is invariant to scaling the
+/// moving mass, both piston areas, the spring, the friction and Cd by one factor (every force
+/// of eq. (13) and the orifice losses ρ At³/(2 Cd² Aorit²) L'² scale alike, the chamber
+/// pressure does not depend on them), so lift data cannot see that scale. At is held at the
+/// paper's value as the reference and reported as not identifiable; the fitted mass, areas,
+/// spring, friction and Cd are the unit's relative to it.
+pub const UNIT_KNOBS: [Knob; 8] = [
+    Knob {
+        name: "spring_N_per_mm",
+        lo: 3.0,
+        hi: 15.0,
+        apply: |p, v| p.spring_n_per_mm = v,
+    },
+    Knob {
+        name: "spring_preload_mm",
+        lo: 15.0,
+        hi: 50.0,
+        apply: |p, v| p.spring_preload_mm = v,
+    },
+    Knob {
+        name: "friction_N_per_m_s",
+        lo: 0.0,
+        hi: 20.0,
+        apply: |p, v| p.friction_n_per_m_s = v,
+    },
+    Knob {
+        name: "area_bottom_mm2",
+        lo: 2.0,
+        hi: 8.0,
+        apply: |p, v| p.area_bottom_mm2 = v,
+    },
+    Knob {
+        name: "area_main_mm2",
+        lo: 4.0,
+        hi: 25.0,
+        apply: |p, v| p.area_main_mm2 = v,
+    },
+    Knob {
+        name: "area_top_orifice_mm2",
+        lo: 0.05,
+        hi: 0.8,
+        apply: |p, v| p.area_top_orifice_mm2 = v,
+    },
+    Knob {
+        name: "area_top_switch_orifice_mm2",
+        lo: 0.05,
+        hi: 0.9,
+        apply: |p, v| p.area_top_switch_orifice_mm2 = v,
+    },
+    Knob {
+        name: "area_bottom_port_mm2",
+        lo: 0.1,
+        hi: 1.5,
+        apply: |p, v| p.area_bottom_port_mm2 = v,
+    },
+];
+
+/// The paper's value of a unit knob.
+fn unit_nominal(k: &Knob) -> f64 {
+    let p = EhvvaParams::baseline();
+    match k.name {
+        "spring_N_per_mm" => p.spring_n_per_mm,
+        "spring_preload_mm" => p.spring_preload_mm,
+        "friction_N_per_m_s" => p.friction_n_per_m_s,
+        "area_main_mm2" => p.area_main_mm2,
+        "area_top_orifice_mm2" => p.area_top_orifice_mm2,
+        "area_top_switch_orifice_mm2" => p.area_top_switch_orifice_mm2,
+        "area_bottom_port_mm2" => p.area_bottom_port_mm2,
+        _ => p.area_bottom_mm2,
+    }
+}
+
+/// The knob each catalogue effect adds: its model-core gain, 0 (neutral, the baseline) to 2
+/// (1 = the paper).
 pub fn effect_knob(effect: &str) -> Result<Knob, String> {
-    Ok(match effect {
-        "viscosity" => Knob {
-            name: "viscosity_gain",
-            lo: 0.0,
-            hi: 2.0,
-            apply: |p, v| p.effect_viscosity = v,
-        },
-        "pressure-delay" => Knob {
-            name: "pressure_delay_gain",
-            lo: 0.0,
-            hi: 2.0,
-            apply: |p, v| p.effect_pressure_delay = v,
-        },
-        "direction-delay" => Knob {
-            name: "direction_delay_gain",
-            lo: 0.0,
-            hi: 2.0,
-            apply: |p, v| p.effect_direction_delay = v,
-        },
-        "snubber" => Knob {
-            name: "snubber_gain",
-            lo: 0.0,
-            hi: 2.0,
-            apply: |p, v| p.effect_snubber = v,
-        },
-        other => {
-            return Err(format!(
-                "unknown ehvva effect `{other}` (known: {})",
-                EFFECTS.join(", ")
-            ))
-        }
+    let e = EhvvaEffect::from_name(effect)?;
+    let apply: fn(&mut EhvvaParams, f64) = match e {
+        EhvvaEffect::Viscosity => |p, v| p.effect_viscosity = v,
+        EhvvaEffect::PressureDelay => |p, v| p.effect_pressure_delay = v,
+        EhvvaEffect::DirectionDelay => |p, v| p.effect_direction_delay = v,
+        EhvvaEffect::Snubber => |p, v| p.effect_snubber = v,
+    };
+    Ok(Knob {
+        name: e.params()[0].0,
+        lo: 0.0,
+        hi: 2.0,
+        apply,
     })
 }
 
@@ -530,12 +590,25 @@ pub fn edge_delays_ms(
     (open, close)
 }
 
+/// A calibrated baseline: its knobs, solution and solver run, and the unit knobs fixed at the
+/// paper's value because the data could not identify them.
+#[derive(Clone, Debug)]
+struct Baseline {
+    knobs: Vec<Knob>,
+    x: Vec<f64>,
+    r: LsqResult,
+    fixed: Vec<String>,
+}
+
 /// Settings of the family.
 #[derive(Debug)]
 pub struct EhvvaFamily {
     pub lsq: LsqOptions,
-    /// The last baseline fit (key of the estimation log, solution): extensions start from it.
-    baseline: Mutex<Option<(u64, Vec<f64>, LsqResult)>>,
+    /// Fit the unit's spring, preload, friction and areas with the baseline ([`UNIT_KNOBS`]);
+    /// off: the paper's four knobs only.
+    pub unit_baseline: bool,
+    /// The last baseline fit (key of the estimation log): extensions start from it.
+    baseline: Mutex<Option<(u64, Baseline)>>,
 }
 
 impl Default for EhvvaFamily {
@@ -547,6 +620,7 @@ impl Default for EhvvaFamily {
                 fd_step: 1e-5,
                 ..LsqOptions::default()
             },
+            unit_baseline: true,
             baseline: Mutex::new(None),
         }
     }
@@ -578,19 +652,71 @@ impl EhvvaFamily {
         Ok(x)
     }
 
-    fn fit_baseline(&self, set: &Events) -> Result<(Vec<f64>, LsqResult), String> {
+    /// The baseline: the paper's four knobs first (from the onset-matched start), then, with
+    /// `unit_baseline`, the unit knobs added from that optimum at the paper's values; unit knobs
+    /// the data cannot identify there (`lsq::not_identifiable`) or that end on a bound are fixed
+    /// at the paper's value and the rest refitted. Cached per estimation data.
+    fn fit_baseline(&self, set: &Events) -> Result<Baseline, String> {
         let key = set.key();
-        if let Some((k, x, r)) = self.baseline.lock().ok().and_then(|g| g.clone()) {
+        if let Some((k, b)) = self.baseline.lock().ok().and_then(|g| g.clone()) {
             if k == key {
-                return Ok((x, r));
+                return Ok(b);
             }
         }
         let x0 = self.baseline_start(set)?;
-        let r = calibrate(&EhvvaParams::baseline(), &BASELINE_KNOBS, &x0, set, &self.lsq)?;
-        if let Ok(mut g) = self.baseline.lock() {
-            *g = Some((key, r.x.clone(), r.clone()));
+        let r4 = calibrate(&EhvvaParams::baseline(), &BASELINE_KNOBS, &x0, set, &self.lsq)?;
+        let mut b = Baseline {
+            knobs: BASELINE_KNOBS.to_vec(),
+            x: r4.x.clone(),
+            r: r4,
+            fixed: Vec::new(),
+        };
+        let four = b.clone();
+        if self.unit_baseline {
+            let mut knobs = BASELINE_KNOBS.to_vec();
+            knobs.extend(UNIT_KNOBS);
+            let mut x0 = b.x.clone();
+            x0.extend(UNIT_KNOBS.iter().map(unit_nominal));
+            let r = calibrate(&EhvvaParams::baseline(), &knobs, &x0, set, &self.lsq)?;
+            let lo: Vec<f64> = knobs.iter().map(|k| k.lo).collect();
+            let hi: Vec<f64> = knobs.iter().map(|k| k.hi).collect();
+            let mut weak: Vec<usize> = crate::lsq::not_identifiable(&r, &lo, &hi);
+            weak.extend(crate::lsq::at_bounds(&r.x, &lo, &hi));
+            weak.retain(|&i| i >= BASELINE_KNOBS.len());
+            if weak.is_empty() {
+                b = Baseline {
+                    knobs,
+                    x: r.x.clone(),
+                    r,
+                    fixed: Vec::new(),
+                };
+            } else {
+                let keep: Vec<usize> = (0..knobs.len()).filter(|i| !weak.contains(i)).collect();
+                let fixed: Vec<String> = weak.iter().map(|&i| knobs[i].name.to_string()).collect();
+                // The fixed knobs stay at the paper's value (the base parameters hold it).
+                let kept: Vec<Knob> = keep.iter().map(|&i| knobs[i]).collect();
+                let x0: Vec<f64> = keep.iter().map(|&i| r.x[i]).collect();
+                let x0: Vec<f64> = kept.iter().zip(x0).map(|(k, v)| v.clamp(k.lo, k.hi)).collect();
+                let r2 = calibrate(&EhvvaParams::baseline(), &kept, &x0, set, &self.lsq)?;
+                b = Baseline {
+                    knobs: kept,
+                    x: r2.x.clone(),
+                    r: r2,
+                    fixed,
+                };
+            }
         }
-        Ok((r.x.clone(), r))
+        // The unit fit starts from the four-knob optimum, but fixing what it could not identify
+        // moves it: never keep a baseline worse on the estimation data than the four knobs.
+        if b.r.cost > four.r.cost {
+            let mut kept = four;
+            kept.fixed = UNIT_KNOBS.iter().map(|k| k.name.to_string()).collect();
+            b = kept;
+        }
+        if let Ok(mut g) = self.baseline.lock() {
+            *g = Some((key, b.clone()));
+        }
+        Ok(b)
     }
 }
 
@@ -608,18 +734,40 @@ impl Family for EhvvaFamily {
         &EFFECTS
     }
 
-    fn fit(&self, effect: Option<&str>, est: &Log, val: &Log) -> Result<Fit, String> {
+    fn fit(&self, effects: &[&str], parent: Option<&Fit>, est: &Log, val: &Log) -> Result<Fit, String> {
         let de = Events::from_log(est)?;
         let dv = Events::from_log(val)?;
-        let (xb, rb) = self.fit_baseline(&de)?;
-        let mut knobs: Vec<Knob> = BASELINE_KNOBS.to_vec();
-        let r = match effect {
-            None => rb,
-            Some(e) => {
-                knobs.push(effect_knob(e)?);
-                let mut x0 = xb.clone();
-                x0.push(1.0);
-                calibrate(&EhvvaParams::baseline(), &knobs, &x0, &de, &self.lsq)?
+        let base = self.fit_baseline(&de)?;
+        let (xb, rb) = (base.x.clone(), base.r.clone());
+        let mut knobs: Vec<Knob> = base.knobs.clone();
+        for e in effects {
+            knobs.push(effect_knob(e)?);
+        }
+        let r = if effects.is_empty() {
+            rb
+        } else {
+            // Start from the parent's optimum (the baseline's when there is none), the new
+            // effect first at the paper's gain (where its gradient is informative), then, if
+            // that ends above the parent, from the parent itself with the gain at neutral: a
+            // richer model never ends worse than the one it extends.
+            let from_parent = |name: &str| {
+                parent
+                    .and_then(|f| f.internal.iter().find(|(n, _)| n == name).map(|(_, v)| *v))
+                    .or_else(|| base.knobs.iter().position(|k| k.name == name).map(|i| xb[i]))
+            };
+            let start =
+                |new_gain: f64| -> Vec<f64> { knobs.iter().map(|k| from_parent(k.name).unwrap_or(new_gain)).collect() };
+            let parent_cost = parent.map_or(rb.cost, |f| f.est_cost);
+            let r = calibrate(&EhvvaParams::baseline(), &knobs, &start(1.0), &de, &self.lsq)?;
+            if r.cost > parent_cost {
+                let r0 = calibrate(&EhvvaParams::baseline(), &knobs, &start(0.0), &de, &self.lsq)?;
+                if r0.cost < r.cost {
+                    r0
+                } else {
+                    r
+                }
+            } else {
+                r
             }
         };
         let p = apply_knobs(&EhvvaParams::baseline(), &knobs, &r.x);
@@ -635,14 +783,34 @@ impl Family for EhvvaFamily {
         measured[..skip].copy_from_slice(&lift[..skip]);
         predicted[..skip].copy_from_slice(&lift[..skip]);
         let params = knobs.iter().zip(&r.x).map(|(k, v)| (k.name.to_string(), *v)).collect();
-        Ok(Fit::new(
-            effect.unwrap_or("baseline"),
+        let names: Vec<String> = knobs.iter().map(|k| k.name.to_string()).collect();
+        let lo: Vec<f64> = knobs.iter().map(|k| k.lo).collect();
+        let hi: Vec<f64> = knobs.iter().map(|k| k.hi).collect();
+        let fit = Fit::new(
+            &Fit::label(effects),
             params,
             r.ci95.clone(),
             measured,
             predicted,
             r.iterations,
-        ))
+        );
+        // An effect gain at 0 is the effect switched off (its neutral value), not a bound the
+        // data pushed against.
+        let mut fit = fit.with_solver(&names, &lo, &hi, &r);
+        // What the baseline could not identify was fixed at the paper's value: reported.
+        if self.unit_baseline {
+            fit.not_identifiable.push(
+                "area_top_mm2 (the scale of mass, areas, spring, friction and Cd together; held at the paper's value)"
+                    .into(),
+            );
+        }
+        for f in &base.fixed {
+            fit.not_identifiable.push(format!("{f} (fixed at the paper's value)"));
+        }
+        let params = fit.params.clone();
+        fit.at_bound
+            .retain(|n| !(n.ends_with("_gain") && params.iter().any(|(k, v)| k == n && *v == 0.0)));
+        Ok(fit)
     }
 
     fn regressors(&self, val: &Log) -> Vec<(String, Vec<f64>)> {
@@ -711,19 +879,16 @@ mod tests {
     fn event_simulation_reproduces_the_bench_with_the_truth() {
         let (est, _, truth) = logs("direction-delay", 3);
         let set = Events::from_log(&est).unwrap();
-        let mut knobs = BASELINE_KNOBS.to_vec();
-        knobs.push(effect_knob("direction-delay").unwrap());
-        let x: Vec<f64> = knobs.iter().map(|k| get(&truth, k.name)).collect();
-        let p = apply_knobs(&EhvvaParams::baseline(), &knobs, &x);
+        let p = gen::params_from_truth(&truth);
         let mut sim = vec![0.0; set.samples];
         simulate_all(&p, &set, &mut sim).unwrap();
         let e: Vec<f64> = sim.iter().zip(set.measured()).map(|(s, y)| s - y).collect();
         let rms = crate::residuals::rmse(&e);
         assert!(rms < 0.008, "rms {rms} mm: more than the lift sensor's noise");
         // A 10 % longer delay does not.
-        let mut wrong = x.clone();
-        wrong[0] *= 1.1;
-        simulate_all(&apply_knobs(&EhvvaParams::baseline(), &knobs, &wrong), &set, &mut sim).unwrap();
+        let mut wrong = p;
+        scale_td(&mut wrong, get(&truth, "td_ms_at_7MPa_22C") * 1.1);
+        simulate_all(&wrong, &set, &mut sim).unwrap();
         let e: Vec<f64> = sim.iter().zip(set.measured()).map(|(s, y)| s - y).collect();
         assert!(crate::residuals::rmse(&e) > 5.0 * rms);
     }
@@ -754,16 +919,13 @@ mod tests {
         assert!(tail.col("lift_mm").unwrap()[seated..seated + 5]
             .iter()
             .all(|l| l.abs() < 0.05));
-        let mut knobs = BASELINE_KNOBS.to_vec();
-        knobs.push(effect_knob("snubber").unwrap());
-        let x: Vec<f64> = knobs.iter().map(|k| get(&truth, k.name)).collect();
         let mut sim = vec![0.0; set.samples];
-        simulate_all(&apply_knobs(&EhvvaParams::baseline(), &knobs, &x), &set, &mut sim).unwrap();
+        simulate_all(&gen::params_from_truth(&truth), &set, &mut sim).unwrap();
         let e: Vec<f64> = sim.iter().zip(set.measured()).map(|(s, y)| s - y).collect();
         let rms = crate::residuals::rmse(&e);
         assert!(rms < 0.008, "rms {rms} mm");
         // The family scores the skipped samples as measured, for every candidate alike.
-        let fit = EhvvaFamily::default().fit(Some("snubber"), &est, &tail).unwrap();
+        let fit = EhvvaFamily::default().fit(&["snubber"], None, &est, &tail).unwrap();
         assert_eq!(&fit.measured[..seated], &tail.col("lift_mm").unwrap()[..seated]);
         assert!(fit.rmse < 0.008, "validation rmse {} mm", fit.rmse);
     }
@@ -774,16 +936,29 @@ mod tests {
     fn fits_recover_the_hidden_parameters() {
         let f = EhvvaFamily::default();
         let (est, val, truth) = logs("none", 17);
-        let fit = f.fit(None, &est, &val).unwrap();
-        for (name, tol) in [("td_ms_at_7MPa_22C", 0.01), ("cd_at_22C", 0.02), ("mass_kg", 0.05)] {
-            let (got, want) = (get(&fit.params, name), get(&truth, name));
+        let fit = f.fit(&[], None, &est, &val).unwrap();
+        // Mass, Cd and the other forces come out relative to the piston top area, held at the
+        // paper's value (the scale the data cannot see).
+        let scale = EhvvaParams::baseline().area_top_mm2 / get(&truth, "area_top_mm2");
+        for (name, tol, s) in [
+            ("td_ms_at_7MPa_22C", 0.01, 1.0),
+            // Cd trades with the fitted orifice areas (the flow losses go with Cd·A; only the
+            // notches, not fitted, tell them apart).
+            ("cd_at_22C", 0.06, scale),
+            ("mass_kg", 0.05, scale),
+            ("spring_N_per_mm", 0.05, scale),
+        ] {
+            let (got, want) = (get(&fit.params, name), get(&truth, name) * s);
             assert!((got / want - 1.0).abs() < tol, "{name}: {got} vs {want}");
         }
+        assert!(fit.not_identifiable.iter().any(|n| n.starts_with("area_top_mm2")));
         let (est, val, truth) = logs("viscosity", 18);
-        let fit = f.fit(Some("viscosity"), &est, &val).unwrap();
+        let fit = f.fit(&["viscosity"], None, &est, &val).unwrap();
         let (got, want) = (get(&fit.params, "viscosity_gain"), get(&truth, "viscosity_gain"));
         assert!((got / want - 1.0).abs() < 0.05, "viscosity gain {got} vs {want}");
-        assert!(fit.rmse < 0.012, "validation rmse {}", fit.rmse);
+        // The orifices of a real unit vary too and are not all fitted: a little above the
+        // sensor noise (σ 2-6 µm).
+        assert!(fit.rmse < 0.02, "validation rmse {}", fit.rmse);
     }
 
     #[test]

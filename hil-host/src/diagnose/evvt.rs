@@ -39,12 +39,13 @@ use std::sync::Mutex;
 
 use model_core::evvt::{quantize_phase_deg, zoh};
 
+use super::catalogue::{Effect, EvvtEffect};
 use super::{Family, Fit};
 use crate::log::{Log, Plant};
 use crate::lsq::{solve, LsqOptions, LsqResult};
 
-/// The catalogue effects of this family (DATA-FORMAT.md).
-pub const EFFECTS: [&str; 4] = ["supply-voltage", "engine-speed", "direction", "belt-vibration"];
+/// The catalogue effects of this family (DATA-FORMAT.md), from the typed catalogue.
+pub const EFFECTS: [&str; 4] = EvvtEffect::NAMES;
 
 /// Settings of the family.
 #[derive(Debug)]
@@ -449,7 +450,6 @@ fn project_sinusoid(r: &[f64], revs: &[f64], order: f64) -> (f64, f64) {
 
 /// Parameter vector layout of one model.
 struct Spec {
-    names: Vec<String>,
     x0: Vec<f64>,
     lo: Vec<f64>,
     hi: Vec<f64>,
@@ -462,28 +462,34 @@ struct Ctx {
     n_ref_krpm: f64,
 }
 
-fn model_from(effect: Option<&str>, x: &[f64], ctx: &Ctx) -> Model {
+/// The model of the baseline plus `effects`; `x` is α, β, then each effect's parameters in
+/// the order of `effects` (the catalogue's parameters of each).
+fn model_from(effects: &[EvvtEffect], x: &[f64], ctx: &Ctx) -> Model {
     let mut m = Model {
         v_ref: ctx.v_ref,
         n_ref_krpm: ctx.n_ref_krpm,
         ..Model::lti(x[0], x[1])
     };
-    match effect {
-        Some("supply-voltage") => {
-            m.alpha_per_v = x[2];
-            m.beta_per_v = x[3];
+    let mut at = 2;
+    for e in effects {
+        let v = |i: usize| x.get(at + i).copied().unwrap_or(0.0);
+        match e {
+            EvvtEffect::SupplyVoltage => {
+                m.alpha_per_v = v(0);
+                m.beta_per_v = v(1);
+            }
+            EvvtEffect::EngineSpeed => {
+                m.alpha_per_krpm = v(0);
+                m.beta_per_krpm = v(1);
+            }
+            EvvtEffect::Direction => m.advance_factor = v(0),
+            EvvtEffect::BeltVibration => {
+                m.belt_order = v(0);
+                m.belt_cos = v(1);
+                m.belt_sin = v(2);
+            }
         }
-        Some("engine-speed") => {
-            m.alpha_per_krpm = x[2];
-            m.beta_per_krpm = x[3];
-        }
-        Some("direction") => m.advance_factor = x[2],
-        Some("belt-vibration") => {
-            m.belt_order = x[2];
-            m.belt_cos = x[3];
-            m.belt_sin = x[4];
-        }
-        _ => {}
+        at += e.params().len();
     }
     m
 }
@@ -496,8 +502,8 @@ impl EvvtFamily {
         self.lsq.clone()
     }
 
-    fn solve_model(&self, effect: Option<&str>, d: &Data, ctx: &Ctx, spec: &Spec) -> Result<LsqResult, String> {
-        let r = |x: &[f64], out: &mut [f64]| sim_error(&model_from(effect, x, ctx), d, out);
+    fn solve_model(&self, effects: &[EvvtEffect], d: &Data, ctx: &Ctx, spec: &Spec) -> Result<LsqResult, String> {
+        let r = |x: &[f64], out: &mut [f64]| sim_error(&model_from(effects, x, ctx), d, out);
         solve(r, &spec.x0, &spec.lo, &spec.hi, d.y.len(), &self.opts()).map_err(|e| e.to_string())
     }
 
@@ -518,12 +524,11 @@ impl EvvtFamily {
             }
         }
         let spec = Spec {
-            names: vec![],
             x0: vec![best.1, best.2],
             lo: vec![ALPHA_BOUNDS.0, BETA_BOUNDS.0],
             hi: vec![ALPHA_BOUNDS.1, BETA_BOUNDS.1],
         };
-        let res = self.solve_model(None, d, ctx, &spec)?;
+        let res = self.solve_model(&[], d, ctx, &spec)?;
         if let Ok(mut g) = self.baseline.lock() {
             *g = Some((d.key(), res.x[0], res.x[1]));
         }
@@ -548,55 +553,16 @@ impl EvvtFamily {
         (self.min_order, self.max_order.min(nyquist_order))
     }
 
-    fn spec(&self, effect: &str, d: &Data, ctx: &Ctx, alpha: f64, beta: f64) -> Result<Spec, String> {
-        let ab = |names: &mut Vec<String>| {
-            names.push("alpha_deg_per_s2_rpm".into());
-            names.push("beta_per_s".into());
-        };
-        let mut names = Vec::new();
-        ab(&mut names);
-        let (mut x0, mut lo, mut hi) = (
-            vec![alpha, beta],
-            vec![ALPHA_BOUNDS.0, BETA_BOUNDS.0],
-            vec![ALPHA_BOUNDS.1, BETA_BOUNDS.1],
-        );
-        match effect {
-            "supply-voltage" => {
-                names[0] = format!("alpha_deg_per_s2_rpm_at_{:.2}V", ctx.v_ref);
-                names[1] = format!("beta_per_s_at_{:.2}V", ctx.v_ref);
-                names.extend(["alpha_rel_slope_per_V".to_string(), "beta_rel_slope_per_V".to_string()]);
-                x0.extend([0.0, 0.0]);
-                lo.extend([-1.0, -1.0]);
-                hi.extend([1.0, 1.0]);
-            }
-            "engine-speed" => {
-                names[0] = format!("alpha_deg_per_s2_rpm_at_{:.0}rpm", ctx.n_ref_krpm * 1000.0);
-                names[1] = format!("beta_per_s_at_{:.0}rpm", ctx.n_ref_krpm * 1000.0);
-                names.extend([
-                    "alpha_rel_slope_per_1000rpm".to_string(),
-                    "beta_rel_slope_per_1000rpm".to_string(),
-                ]);
-                x0.extend([0.0, 0.0]);
-                lo.extend([-3.0, -3.0]);
-                hi.extend([3.0, 3.0]);
-            }
-            "direction" => {
-                names.push("advance_alpha_factor".into());
-                x0.push(1.0);
-                lo.push(0.1);
-                hi.push(4.0);
-            }
-            "belt-vibration" => {
+    /// The parameters `effect` adds (catalogue names), their start and bounds; `parent` is the
+    /// model it extends (the belt disturbance's order is read off its residual).
+    fn spec(&self, effect: EvvtEffect, d: &Data, parent: &Model) -> Result<Spec, String> {
+        let (x0, lo, hi) = match effect {
+            EvvtEffect::SupplyVoltage => (vec![0.0, 0.0], vec![-1.0, -1.0], vec![1.0, 1.0]),
+            EvvtEffect::EngineSpeed => (vec![0.0, 0.0], vec![-3.0, -3.0], vec![3.0, 3.0]),
+            EvvtEffect::Direction => (vec![1.0], vec![0.1], vec![4.0]),
+            EvvtEffect::BeltVibration => {
                 let mut out = vec![0.0; d.y.len()];
-                sim_error(
-                    &Model {
-                        v_ref: ctx.v_ref,
-                        n_ref_krpm: ctx.n_ref_krpm,
-                        ..Model::lti(alpha, beta)
-                    },
-                    d,
-                    &mut out,
-                )?;
+                sim_error(parent, d, &mut out)?;
                 // The residual is model − measured; the disturbance is in the measurement.
                 let resid: Vec<f64> = out.iter().map(|e| -e).collect();
                 let (olo, ohi) = self.order_range(d);
@@ -606,18 +572,36 @@ impl EvvtFamily {
                 let (c, s) = project_sinusoid(&resid, &d.revs, order);
                 // The order is refined within the peak's main lobe (± 1/total revolutions).
                 let lobe = 1.0 / d.revs.last().copied().unwrap_or(1.0).max(1.0);
-                names.extend([
-                    "belt_order".to_string(),
-                    "belt_cos_deg".to_string(),
-                    "belt_sin_deg".to_string(),
-                ]);
-                x0.extend([order, c, s]);
-                lo.extend([order - lobe, -20.0, -20.0]);
-                hi.extend([order + lobe, 20.0, 20.0]);
+                (
+                    vec![order, c, s],
+                    vec![order - lobe, -20.0, -20.0],
+                    vec![order + lobe, 20.0, 20.0],
+                )
             }
-            other => return Err(format!("unknown evvt effect `{other}` (known: {})", EFFECTS.join(", "))),
+        };
+        Ok(Spec { x0, lo, hi })
+    }
+
+    /// The report's names of α and β and the effects' parameters (α and β are named at the
+    /// reference point of a scheduling effect).
+    fn report_names(effects: &[EvvtEffect], ctx: &Ctx) -> Vec<String> {
+        let mut names = vec!["alpha_deg_per_s2_rpm".to_string(), "beta_per_s".to_string()];
+        let mut at = Vec::new();
+        if effects.contains(&EvvtEffect::SupplyVoltage) {
+            at.push(format!("{:.2}V", ctx.v_ref));
         }
-        Ok(Spec { names, x0, lo, hi })
+        if effects.contains(&EvvtEffect::EngineSpeed) {
+            at.push(format!("{:.0}rpm", ctx.n_ref_krpm * 1000.0));
+        }
+        if !at.is_empty() {
+            for n in names.iter_mut() {
+                *n = format!("{n}_at_{}", at.join("_"));
+            }
+        }
+        for e in effects {
+            names.extend(e.params().iter().map(|(n, _)| n.to_string()));
+        }
+        names
     }
 
     /// Prediction on the validation record. The belt disturbance's phase is re-estimated there
@@ -662,47 +646,86 @@ impl Family for EvvtFamily {
         &EFFECTS
     }
 
-    fn fit(&self, effect: Option<&str>, est: &Log, val: &Log) -> Result<Fit, String> {
+    fn fit(&self, effects: &[&str], parent: Option<&Fit>, est: &Log, val: &Log) -> Result<Fit, String> {
+        let effects: Vec<EvvtEffect> = effects
+            .iter()
+            .map(|e| EvvtEffect::from_name(e))
+            .collect::<Result<_, _>>()?;
         let de = Data::from_log(est, self.open_loop_window_s, self.quantizer_ramp_lsb)?;
         let dv = Data::from_log(val, self.open_loop_window_s, self.quantizer_ramp_lsb)?;
         let ctx = Ctx {
             v_ref: Data::mean(&de.volt),
             n_ref_krpm: Data::mean(&de.rpm) / 1000.0,
         };
-        let (alpha, beta, base_res) = match self.cached_baseline(&de).filter(|_| effect.is_some()) {
+        let (alpha, beta, base_res) = match self.cached_baseline(&de).filter(|_| !effects.is_empty()) {
             Some((a, b)) => (a, b, None),
             None => {
                 let (a, b, r) = self.baseline(&de, &ctx)?;
                 (a, b, Some(r))
             }
         };
-        let (x, ci, names, iterations) = match effect {
-            None => {
-                let r = base_res.ok_or("baseline fit missing")?;
-                (
-                    r.x.clone(),
-                    r.ci95.clone(),
-                    vec!["alpha_deg_per_s2_rpm".to_string(), "beta_per_s".to_string()],
-                    r.iterations,
-                )
-            }
-            Some(e) => {
-                let spec = self.spec(e, &de, &ctx, alpha, beta)?;
-                let r = self.solve_model(effect, &de, &ctx, &spec)?;
-                (r.x.clone(), r.ci95.clone(), spec.names, r.iterations)
+        let mut lo = vec![ALPHA_BOUNDS.0, BETA_BOUNDS.0];
+        let mut hi = vec![ALPHA_BOUNDS.1, BETA_BOUNDS.1];
+        let internal_names: Vec<String> = ["alpha", "beta"]
+            .iter()
+            .map(|s| s.to_string())
+            .chain(
+                effects
+                    .iter()
+                    .flat_map(|e| e.params().iter().map(|(n, _)| n.to_string())),
+            )
+            .collect();
+        let r = match effects.split_last() {
+            None => base_res.ok_or("baseline fit missing")?,
+            Some((last, before)) => {
+                // Start from the parent's optimum (the model this one extends), the new effect
+                // at its neutral start: the solver only accepts steps that lower the cost, so
+                // the extension cannot end above its parent.
+                let mut x0: Vec<f64> = match parent {
+                    Some(f) if f.internal.len() >= 2 => f.internal.iter().map(|(_, v)| *v).collect(),
+                    _ => vec![alpha, beta],
+                };
+                for e in before {
+                    // Bounds of the effects already in (their values come from the parent).
+                    let s = self.spec(*e, &de, &model_from(&[], &x0, &ctx))?;
+                    lo.extend(s.lo);
+                    hi.extend(s.hi);
+                }
+                x0.truncate(lo.len());
+                let parent_model = model_from(before, &x0, &ctx);
+                let spec = self.spec(*last, &de, &parent_model)?;
+                x0.extend(spec.x0);
+                lo.extend(spec.lo);
+                hi.extend(spec.hi);
+                for (i, v) in x0.iter_mut().enumerate() {
+                    *v = v.clamp(lo[i], hi[i]);
+                }
+                self.solve_model(
+                    &effects,
+                    &de,
+                    &ctx,
+                    &Spec {
+                        x0,
+                        lo: lo.clone(),
+                        hi: hi.clone(),
+                    },
+                )?
             }
         };
-        let model = model_from(effect, &x, &ctx);
+        let x = r.x.clone();
+        let model = model_from(&effects, &x, &ctx);
         let predicted = self.predict(&model, &dv)?;
+        let names = Self::report_names(&effects, &ctx);
         let (mut params, mut ci95): (Vec<(String, f64)>, Vec<Option<f64>>) =
-            (names.into_iter().zip(x.iter().copied()).collect(), ci);
-        if effect == Some("belt-vibration") {
+            (names.into_iter().zip(x.iter().copied()).collect(), r.ci95.clone());
+        if let Some(pos) = effects.iter().position(|e| *e == EvvtEffect::BeltVibration) {
             // Report amplitude and phase instead of the cos/sin pair (same count).
-            let (c, s) = (x[3], x[4]);
+            let at = 2 + effects[..pos].iter().map(|e| e.params().len()).sum::<usize>();
+            let (c, s) = (x[at + 1], x[at + 2]);
             let amp = c.hypot(s);
-            let (cc, cs) = (ci95[3], ci95[4]);
-            params[3] = ("belt_amplitude_deg".into(), amp);
-            params[4] = ("belt_phase_rad_at_log_start".into(), c.atan2(s));
+            let (cc, cs) = (ci95[at + 1], ci95[at + 2]);
+            params[at + 1] = ("belt_amplitude_deg".into(), amp);
+            params[at + 2] = ("belt_phase_rad_at_log_start".into(), c.atan2(s));
             let (ci_a, ci_p) = match (cc, cs) {
                 (Some(u), Some(v)) if amp > 0.0 => (
                     Some(((c * u).powi(2) + (s * v).powi(2)).sqrt() / amp),
@@ -710,17 +733,21 @@ impl Family for EvvtFamily {
                 ),
                 _ => (None, None),
             };
-            ci95[3] = ci_a;
-            ci95[4] = ci_p;
+            ci95[at + 1] = ci_a;
+            ci95[at + 2] = ci_p;
         }
-        Ok(Fit::new(
-            effect.unwrap_or("baseline"),
+        let labels: Vec<&str> = effects.iter().map(|e| e.name()).collect();
+        let mut fit = Fit::new(
+            &Fit::label(&labels),
             params,
             ci95,
             dv.y.clone(),
             predicted,
-            iterations,
-        ))
+            r.iterations,
+        )
+        .with_solver(&internal_names, &lo, &hi, &r);
+        fit.internal = internal_names.into_iter().zip(x).collect();
+        Ok(fit)
     }
 
     fn regressors(&self, val: &Log) -> Vec<(String, Vec<f64>)> {
@@ -877,7 +904,7 @@ mod tests {
     fn baseline_recovers_lti_parameters() {
         let (est, val, t) = logs("none", 33);
         let f = EvvtFamily::default();
-        let fit = f.fit(None, &est, &val).unwrap();
+        let fit = f.fit(&[], None, &est, &val).unwrap();
         let (a, b) = (
             truth(&t, "alpha_at_nominal_deg_per_s2_rpm"),
             truth(&t, "beta_at_nominal_per_s"),
@@ -902,7 +929,7 @@ mod tests {
     fn extensions_recover_the_hidden_parameters() {
         let f = EvvtFamily::default();
         let (est, val, t) = logs("direction", 44);
-        let fit = f.fit(Some("direction"), &est, &val).unwrap();
+        let fit = f.fit(&["direction"], None, &est, &val).unwrap();
         let factor = fit.params.iter().find(|(k, _)| k == "advance_alpha_factor").unwrap().1;
         let truth_factor = truth(&t, "advance_alpha_factor");
         assert!(
@@ -910,7 +937,7 @@ mod tests {
             "advance factor {factor} vs {truth_factor}"
         );
         let (est, val, t) = logs("belt-vibration", 45);
-        let fit = f.fit(Some("belt-vibration"), &est, &val).unwrap();
+        let fit = f.fit(&["belt-vibration"], None, &est, &val).unwrap();
         let p = |k: &str| fit.params.iter().find(|(n, _)| n == k).unwrap().1;
         let order = truth(&t, "belt_order");
         assert!(
@@ -944,7 +971,7 @@ mod tests {
             Data::from_log(&wrong, 2.0, 0.5).unwrap().drive,
             Drive::OpenLoop { .. }
         ));
-        let fit = EvvtFamily::default().fit(None, &est, &val).unwrap();
+        let fit = EvvtFamily::default().fit(&[], None, &est, &val).unwrap();
         let a = truth(&t, "alpha_at_nominal_deg_per_s2_rpm");
         assert!(
             (fit.params[0].1 / a - 1.0).abs() < 0.2,

@@ -7,6 +7,7 @@
 //! for extra parameters, the significance test that keeps noise from being named a cause, the
 //! preference for the simpler of two nested explanations, and the report.
 
+pub mod catalogue;
 pub mod ehvva;
 pub mod evvt;
 pub mod positioner;
@@ -24,8 +25,10 @@ use crate::residuals::{cross_check, fit_pct, group_check, rmse, whiteness, Cross
 /// One calibrated model and how it does on the validation data.
 #[derive(Clone, Debug)]
 pub struct Fit {
-    /// `baseline` or the catalogue effect's name.
+    /// `baseline`, the catalogue effect's name, or the effects joined by `+`.
     pub effect: String,
+    /// The catalogue effects of this model, in the order they were added (empty: baseline).
+    pub effects: Vec<String>,
     pub params: Vec<(String, f64)>,
     /// 95 % half-widths, same order as `params`.
     pub ci95: Vec<Option<f64>>,
@@ -36,6 +39,21 @@ pub struct Fit {
     pub fit_pct: f64,
     /// Solver iterations (0 for closed-form fits).
     pub iterations: usize,
+    /// The family's own parameter vector at the optimum (internal names), from which a richer
+    /// model that extends this one starts.
+    pub internal: Vec<(String, f64)>,
+    /// The solver's cost at the optimum on the estimation data (½‖r‖², the family's
+    /// residuals), NaN when not known: a model never ends above the one it extends.
+    pub est_cost: f64,
+    /// How the fit ended (the solver's stop reason per stage, or `closed form`).
+    pub convergence: String,
+    /// Parameters that ended on a bound of their search range.
+    pub at_bound: Vec<String>,
+    /// Parameters with a physically impossible value (a negative mass), with the value.
+    pub impossible: Vec<String>,
+    /// Parameters (or directions) the data cannot identify: a singular information matrix or a
+    /// 95 % interval wider than half the parameter's search range.
+    pub not_identifiable: Vec<String>,
 }
 
 impl Fit {
@@ -48,8 +66,15 @@ impl Fit {
         iterations: usize,
     ) -> Self {
         let e: Vec<f64> = measured.iter().zip(&predicted).map(|(y, p)| y - p).collect();
+        let effects = if effect == "baseline" {
+            Vec::new()
+        } else {
+            effect.split('+').map(str::to_string).collect()
+        };
         Fit {
             effect: effect.to_string(),
+            effects,
+            internal: params.clone(),
             params,
             ci95,
             rmse: rmse(&e),
@@ -57,6 +82,15 @@ impl Fit {
             measured,
             predicted,
             iterations,
+            est_cost: f64::NAN,
+            convergence: if iterations == 0 {
+                "closed form".into()
+            } else {
+                format!("{iterations} iterations")
+            },
+            at_bound: Vec::new(),
+            impossible: Vec::new(),
+            not_identifiable: Vec::new(),
         }
     }
     pub fn residual(&self) -> Vec<f64> {
@@ -65,6 +99,118 @@ impl Fit {
     pub fn n_params(&self) -> usize {
         self.params.len()
     }
+    /// The label of a model with `effects` (`baseline` when empty).
+    pub fn label(effects: &[&str]) -> String {
+        if effects.is_empty() {
+            "baseline".into()
+        } else {
+            effects.join("+")
+        }
+    }
+    /// Records what a solver run says about the fit: its stop reason, the parameters at a
+    /// bound and those the data cannot identify (`names`, `lo`, `hi` in the solver's order).
+    pub fn with_solver(mut self, names: &[String], lo: &[f64], hi: &[f64], r: &crate::lsq::LsqResult) -> Self {
+        self.est_cost = r.cost;
+        self.convergence = crate::lsq::convergence_text(r);
+        for i in crate::lsq::at_bounds(&r.x, lo, hi) {
+            if let Some(n) = names.get(i) {
+                self.at_bound.push(n.clone());
+            }
+        }
+        for i in crate::lsq::not_identifiable(r, lo, hi) {
+            if let Some(n) = names.get(i) {
+                self.not_identifiable.push(n.clone());
+            }
+        }
+        self
+    }
+    /// Is anything about this calibration not good (a bound, an impossible value, a direction
+    /// the data cannot see)?
+    pub fn flags(&self) -> Vec<String> {
+        let mut f = Vec::new();
+        if !self.at_bound.is_empty() {
+            f.push(format!("at a bound: {}", self.at_bound.join(", ")));
+        }
+        if !self.impossible.is_empty() {
+            f.push(format!("physically impossible: {}", self.impossible.join(", ")));
+        }
+        if !self.not_identifiable.is_empty() {
+            f.push(format!(
+                "not identifiable from these data: {}",
+                self.not_identifiable.join(", ")
+            ));
+        }
+        f
+    }
+}
+
+/// What a perfect model would score on the validation data.
+#[derive(Clone, Debug)]
+pub struct NoiseFloor {
+    pub rmse: f64,
+    pub method: String,
+}
+
+/// The noise floor from the data themselves: the sensor noise from the second differences of a
+/// model's validation residual `y` (what the model already explains is removed; a smooth
+/// remainder's second difference is small next to white noise's, whose variance it multiplies
+/// by 6), as a trimmed RMS of the 80 % smallest |Δ²y| (robust to the few samples where a
+/// remainder moves fast; corrected for the trimming of a Gaussian), and at least the
+/// quantization error q/√12 of the measured output's step `q`: what a perfect model would
+/// leave. The diagnosis takes the smallest over the baseline and each model it selects.
+pub fn noise_floor_of(y: &[f64], q: f64) -> NoiseFloor {
+    let mut d: Vec<f64> = y.windows(3).map(|w| (w[0] - 2.0 * w[1] + w[2]).abs()).collect();
+    let sigma = if d.len() >= 10 {
+        d.sort_by(f64::total_cmp);
+        let keep = (d.len() as f64 * 0.8).round() as usize;
+        let ms = d[..keep].iter().map(|v| v * v).sum::<f64>() / keep as f64;
+        // E[x² | |x| < z_0.9] = 1 - 2 z φ(z) / 0.8 for a unit Gaussian, z = 1.2816.
+        (ms / 0.4377 / 6.0).sqrt()
+    } else {
+        0.0
+    };
+    let quant = q / 12f64.sqrt();
+    NoiseFloor {
+        rmse: sigma.max(quant),
+        method: format!(
+            "sensor noise from the second differences of the validation residual (trimmed RMS of the 80 % smallest, /√6): σ = {}; quantization step of the output q = {} (q/√12 = {}); floor = the larger",
+            sig(sigma),
+            sig(q),
+            sig(quant)
+        ),
+    }
+}
+
+/// The quantization step of a signal: the smallest spacing between its distinct values
+/// (0 for a signal with too few repeats to tell).
+pub fn resolution(y: &[f64]) -> f64 {
+    let mut v: Vec<f64> = y.iter().copied().filter(|x| x.is_finite()).collect();
+    v.sort_by(f64::total_cmp);
+    v.dedup();
+    if v.len() < 2 || v.len() * 4 > y.len() {
+        // Nearly every sample distinct: no visible quantizer.
+        return 0.0;
+    }
+    let span = v[v.len() - 1] - v[0];
+    let min_gap = v
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .filter(|g| *g > span * 1e-9)
+        .fold(f64::INFINITY, f64::min);
+    if min_gap.is_finite() {
+        min_gap
+    } else {
+        0.0
+    }
+}
+
+/// A number with 4 significant digits for a sentence.
+fn sig(x: f64) -> String {
+    if x == 0.0 || !x.is_finite() {
+        return format!("{x}");
+    }
+    let digits = (3 - x.abs().log10().floor() as i32).max(0) as usize;
+    format!("{x:.digits$}")
 }
 
 /// A plant's models for the diagnosis.
@@ -79,11 +225,21 @@ pub trait Family {
     fn nested(&self) -> &'static [(&'static str, &'static str)] {
         &[]
     }
-    /// Calibrates the baseline (`effect` = None) or baseline + effect on `est`, predicts `val`.
-    fn fit(&self, effect: Option<&str>, est: &Log, val: &Log) -> Result<Fit, String>;
+    /// Calibrates the baseline plus `effects` (empty: the baseline) on `est`, predicts `val`.
+    /// `parent` is the calibrated model that this one extends (the baseline plus all but the
+    /// last of `effects`): the fit starts from its optimum with the new effect at its neutral
+    /// value (and may try other starts), so it never ends worse on the estimation data than
+    /// the model it nests.
+    fn fit(&self, effects: &[&str], parent: Option<&Fit>, est: &Log, val: &Log) -> Result<Fit, String>;
     /// Signals of the validation data to correlate the residual with (inputs and candidate
     /// regressors), aligned with the fit's `measured`.
     fn regressors(&self, val: &Log) -> Vec<(String, Vec<f64>)>;
+    /// What a perfect model would score on the validation data, estimated from `fit`'s
+    /// validation residual (the part of the output the model already explains is no noise)
+    /// and the quantization of the measured output.
+    fn noise_floor(&self, _val: &Log, fit: &Fit) -> NoiseFloor {
+        noise_floor_of(&fit.residual(), resolution(&fit.measured))
+    }
 }
 
 /// Decision thresholds.
@@ -99,6 +255,15 @@ pub struct Rules {
     /// simpler one's by this many percentage points (of the baseline RMSE), significantly:
     /// "explains the data about equally" is judged against what the baseline got wrong.
     pub nested_margin_pct: f64,
+    /// The verdict is `explained` when the validation RMSE is at most this multiple of the
+    /// noise floor (what is left beyond the noise is then below 1.7 σ of it): clean generated
+    /// logs of healthy units end at 1.0-1.7× (a simulation from logged set-points does not
+    /// reproduce every detail of a bench, e.g. the EHVVA's accumulator dips).
+    pub explained_ratio: f64,
+    /// Forward selection stops adding effects once the remainder is this close to the floor.
+    pub stop_ratio: f64,
+    /// At most this many effects are combined.
+    pub max_causes: usize,
 }
 
 impl Default for Rules {
@@ -108,17 +273,24 @@ impl Default for Rules {
             min_z: 4.0,
             penalty_per_param: 0.01,
             nested_margin_pct: 10.0,
+            explained_ratio: 2.0,
+            stop_ratio: 1.5,
+            max_causes: 3,
         }
     }
 }
 
 /// How clearly model B's errors beat model A's, as a z-score. The validation record is cut
 /// into 40 blocks, so the residuals' autocorrelation does not pass for thousands of
-/// independent samples; two tests of "B is better" are made on the blocks' mean squared-error
-/// differences and the larger score is returned:
-/// - the t-statistic of their mean (sensitive when the improvement is even), and
+/// independent samples; three tests of "B is better" are made on the blocks and the largest
+/// score is returned:
+/// - the t-statistic of the mean of the blocks' mean squared-error differences (sensitive when
+///   the improvement is even);
 /// - the sign test of how many blocks B wins (robust when the improvement is concentrated in
-///   some blocks, e.g. friction that only shows while the load moves).
+///   some blocks, e.g. friction that only shows while the load moves);
+/// - the t-statistic of the mean log ratio of the blocks' mean squared errors (scale-free: a
+///   large, consistent relative gain is not drowned by one block whose errors are large for
+///   both models).
 pub fn improvement_z(e_a: &[f64], e_b: &[f64]) -> f64 {
     let n = e_a.len().min(e_b.len());
     let blocks = 40.min(n);
@@ -126,26 +298,28 @@ pub fn improvement_z(e_a: &[f64], e_b: &[f64]) -> f64 {
         return 0.0;
     }
     let size = n / blocks;
-    let means: Vec<f64> = (0..blocks)
-        .map(|b| {
-            (b * size..(b + 1) * size)
-                .map(|t| e_a[t] * e_a[t] - e_b[t] * e_b[t])
-                .sum::<f64>()
-                / size as f64
-        })
-        .collect();
-    let m = means.iter().sum::<f64>() / blocks as f64;
-    let var = means.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (blocks - 1) as f64;
-    let se = (var / blocks as f64).sqrt();
-    let t = if se == 0.0 {
-        if m > 0.0 {
-            f64::INFINITY
-        } else {
-            0.0
+    let mse = |e: &[f64], b: usize| (b * size..(b + 1) * size).map(|t| e[t] * e[t]).sum::<f64>() / size as f64;
+    let (ma, mb): (Vec<f64>, Vec<f64>) = (0..blocks).map(|b| (mse(e_a, b), mse(e_b, b))).unzip();
+    let means: Vec<f64> = ma.iter().zip(&mb).map(|(a, b)| a - b).collect();
+    let t_of = |v: &[f64]| {
+        let k = v.len();
+        if k < 2 {
+            return 0.0;
         }
-    } else {
-        m / se
+        let m = v.iter().sum::<f64>() / k as f64;
+        let var = v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (k - 1) as f64;
+        let se = (var / k as f64).sqrt();
+        if se == 0.0 {
+            if m > 0.0 {
+                f64::INFINITY
+            } else {
+                0.0
+            }
+        } else {
+            m / se
+        }
     };
+    let t = t_of(&means);
     let wins = means.iter().filter(|&&d| d > 0.0).count() as f64;
     let ties = means.iter().filter(|&&d| d == 0.0).count() as f64;
     let decided = blocks as f64 - ties;
@@ -154,16 +328,46 @@ pub fn improvement_z(e_a: &[f64], e_b: &[f64]) -> f64 {
     } else {
         0.0
     };
-    t.max(sign)
+    let logs: Vec<f64> = ma
+        .iter()
+        .zip(&mb)
+        .filter(|(a, b)| **a > 0.0 && **b > 0.0)
+        .map(|(a, b)| (a / b).ln())
+        .collect();
+    // Blocks that are identical for both models (e.g. samples neither predicts) say nothing.
+    let logs: Vec<f64> = logs.into_iter().filter(|v| v.abs() > 1e-12).collect();
+    let log_t = if logs.len() >= blocks / 2 { t_of(&logs) } else { 0.0 };
+    t.max(sign).max(log_t)
 }
 
 /// One candidate's standing.
 #[derive(Clone, Debug)]
 pub struct Candidate {
     pub fit: Fit,
+    /// Gain over the model it extends (the baseline in the first round), % of that model's
+    /// validation RMSE.
     pub gain_pct: f64,
     pub z: f64,
     pub eligible: bool,
+}
+
+/// One round of the forward selection: every remaining effect tried on top of `base`.
+#[derive(Clone, Debug)]
+pub struct Round {
+    /// The effects already selected (the model every candidate of this round extends).
+    pub base: Vec<String>,
+    pub candidates: Vec<Candidate>,
+    /// The effect added in this round, if any.
+    pub added: Option<String>,
+}
+
+/// What the final model leaves on the validation data.
+#[derive(Clone, Debug)]
+pub struct Remainder {
+    pub rmse: f64,
+    pub ratio_to_floor: f64,
+    /// Where the remainder lives (input, state, direction, regime, lag or frequency).
+    pub evidence: Vec<String>,
 }
 
 /// Everything the diagnosis found.
@@ -180,10 +384,24 @@ pub struct Diagnosis {
     pub cross: Vec<CrossCheck>,
     /// The baseline residual grouped by each regressor as an operating condition.
     pub grouped: Vec<GroupCheck>,
+    /// The first round: every catalogue effect on top of the baseline.
     pub candidates: Vec<Candidate>,
+    /// The later rounds of the forward selection.
+    pub rounds: Vec<Round>,
+    /// `causes[0]`, or `none`.
     pub cause: String,
+    /// Every effect the data need, in the order added.
+    pub causes: Vec<String>,
     pub extended: Fit,
     pub gain_pct: f64,
+    pub noise_floor: NoiseFloor,
+    pub remainder: Remainder,
+    /// `explained` or `unexplained`.
+    pub verdict: String,
+    /// Residual tests on the extended model's validation residual.
+    pub remainder_whiteness: Whiteness,
+    pub remainder_cross: Vec<CrossCheck>,
+    pub remainder_grouped: Vec<GroupCheck>,
     /// Sentences for the human summary.
     pub evidence: Vec<String>,
     /// Input columns that never vary in the estimation or the validation data, with where when
@@ -243,7 +461,7 @@ pub struct Progress<'a> {
 
 /// What the fitting thread tells the progress relay.
 enum Tick {
-    Fit { name: String, index: usize },
+    Fit { name: String, index: usize, total: usize },
     Iteration,
 }
 
@@ -260,15 +478,18 @@ pub fn diagnose(
     progress: &mut (dyn FnMut(&Progress) + Send),
 ) -> Result<Diagnosis, String> {
     let start = Instant::now();
-    let total = 1 + family.effects().len();
     let (tx, rx) = mpsc::channel::<Tick>();
     std::thread::scope(|s| {
         s.spawn(move || {
-            let (mut name, mut index, mut iteration) = (String::new(), 0, 0);
+            let (mut name, mut index, mut iteration, mut total) = (String::new(), 0, 0, 0);
             // Ends when the fitting side has dropped every sender.
             for tick in rx {
                 match tick {
-                    Tick::Fit { name: n, index: i } => (name, index, iteration) = (n, i, 0),
+                    Tick::Fit {
+                        name: n,
+                        index: i,
+                        total: t,
+                    } => (name, index, iteration, total) = (n, i, 0, t),
                     Tick::Iteration => iteration += 1,
                 }
                 progress(&Progress {
@@ -280,14 +501,15 @@ pub fn diagnose(
                 });
             }
         });
-        let fit = |effect: Option<&str>, index: usize| -> Result<Fit, String> {
+        let fit = |effects: &[&str], parent: Option<&Fit>, index: usize, total: usize| -> Result<Fit, String> {
             let _ = tx.send(Tick::Fit {
-                name: effect.unwrap_or("baseline").to_string(),
+                name: Fit::label(effects),
                 index,
+                total,
             });
             let iterations = tx.clone();
             with_iteration_observer(Arc::new(move |_| drop(iterations.send(Tick::Iteration))), || {
-                family.fit(effect, est, val)
+                family.fit(effects, parent, est, val)
             })
         };
         let result = diagnose_fits(family, est, val, validation_is_tail, rules, &fit);
@@ -296,10 +518,20 @@ pub fn diagnose(
     })
 }
 
-/// Calibrates one model (`None`: the baseline) as fit number `index`, and reports it.
-type FitOne<'a> = dyn Fn(Option<&str>, usize) -> Result<Fit, String> + 'a;
+/// Calibrates one model (the baseline plus the effects, extending `parent`) as fit number
+/// `index` of (so far) `total`, and reports it.
+type FitOne<'a> = dyn Fn(&[&str], Option<&Fit>, usize, usize) -> Result<Fit, String> + 'a;
 
-/// The diagnosis proper; `fit(effect, index)` calibrates one model (and reports it).
+/// The diagnosis proper; `fit` calibrates one model (and reports it).
+///
+/// 1. The baseline, its residual tests and the noise floor.
+/// 2. Forward selection: each remaining catalogue effect is fitted on top of the model so far
+///    (starting from its optimum); the best eligible one (gain ≥ `min_gain_pct` over the model
+///    it extends, z ≥ `min_z`, penalised rank, the simpler of two nested effects unless the
+///    richer adds `nested_margin_pct`) is added, until none is eligible, the remainder is at
+///    the floor (`stop_ratio`) or `max_causes` are in.
+/// 3. The verdict: `explained` when the remainder is within `explained_ratio` of the floor and
+///    carries no material structure; else `unexplained`, with where the remainder lives.
 fn diagnose_fits(
     family: &dyn Family,
     est: &Log,
@@ -308,70 +540,113 @@ fn diagnose_fits(
     rules: &Rules,
     fit: &FitOne,
 ) -> Result<Diagnosis, String> {
-    let baseline = fit(None, 1)?;
+    let mut total = 1 + family.effects().len();
+    let mut index = 1;
+    let baseline = fit(&[], None, index, total)?;
     let e0 = baseline.residual();
     let lags = (e0.len() / 20).clamp(5, 50);
-    let white = whiteness(&e0, lags);
+    let mut floor = family.noise_floor(val, &baseline);
+    // Seconds per residual sample (an equation-error family may decimate).
+    let dt_res = val.dt_s * val.len() as f64 / e0.len().max(1) as f64;
     let regressors = family.regressors(val);
-    let cross: Vec<CrossCheck> = regressors
-        .iter()
-        .map(|(name, u)| cross_check(name, &e0, u, lags))
-        .collect();
-    let grouped: Vec<GroupCheck> = regressors.iter().map(|(name, u)| group_check(name, &e0, u)).collect();
-
-    let mut candidates = Vec::new();
-    for (i, effect) in family.effects().iter().enumerate() {
-        let fit = match fit(Some(effect), 2 + i) {
-            Ok(f) => f,
-            Err(e) => {
-                // A candidate that cannot be fitted is reported, not fatal.
-                let mut f = baseline.clone();
-                f.effect = effect.to_string();
-                f.rmse = f64::INFINITY;
-                f.fit_pct = f64::NEG_INFINITY;
-                f.params = vec![(format!("error: {e}"), f64::NAN)];
-                candidates.push(Candidate {
-                    fit: f,
-                    gain_pct: f64::NEG_INFINITY,
-                    z: 0.0,
-                    eligible: false,
-                });
-                continue;
-            }
-        };
-        let gain_pct = 100.0 * (baseline.rmse - fit.rmse) / baseline.rmse;
-        let z = improvement_z(&e0, &fit.residual());
-        let eligible = gain_pct >= rules.min_gain_pct && z >= rules.min_z;
-        candidates.push(Candidate {
-            fit,
-            gain_pct,
-            z,
-            eligible,
-        });
-    }
-
-    // Rank by penalised validation error.
-    let score = |c: &Candidate| {
-        c.fit.rmse * (1.0 + rules.penalty_per_param * c.fit.n_params().saturating_sub(baseline.n_params()) as f64)
-    };
-    let mut best: Option<usize> = None;
-    for (i, c) in candidates.iter().enumerate() {
-        if c.eligible && best.is_none_or(|b| score(c) < score(&candidates[b])) {
-            best = Some(i);
-        }
-    }
     let mut evidence = Vec::new();
-    // Prefer the simpler of two nested explanations unless the richer is clearly better.
-    if let Some(b) = best {
-        for (simple, rich) in family.nested() {
-            if candidates[b].fit.effect == *rich {
-                if let Some(s) = candidates.iter().position(|c| c.fit.effect == *simple && c.eligible) {
-                    let extra = candidates[b].gain_pct - candidates[s].gain_pct;
-                    let over = 100.0 * (candidates[s].fit.rmse - candidates[b].fit.rmse) / candidates[s].fit.rmse;
+
+    let mut selected: Vec<&'static str> = Vec::new();
+    let mut current = baseline.clone();
+    let mut rounds: Vec<Round> = Vec::new();
+    let score = |c: &Candidate, base: &Fit| {
+        c.fit.rmse * (1.0 + rules.penalty_per_param * c.fit.n_params().saturating_sub(base.n_params()) as f64)
+    };
+    loop {
+        if selected.len() >= rules.max_causes || (!rounds.is_empty() && current.rmse <= rules.stop_ratio * floor.rmse) {
+            break;
+        }
+        // A simpler effect nested in a selected one adds nothing; a richer one may replace it.
+        let remaining: Vec<&'static str> = family
+            .effects()
+            .iter()
+            .copied()
+            .filter(|e| !selected.contains(e))
+            .filter(|e| {
+                !family
+                    .nested()
+                    .iter()
+                    .any(|(simple, rich)| simple == e && selected.contains(rich))
+            })
+            .collect();
+        if remaining.is_empty() {
+            break;
+        }
+        if !rounds.is_empty() {
+            total += remaining.len();
+        }
+        let e_cur = current.residual();
+        let mut candidates = Vec::new();
+        for effect in &remaining {
+            index += 1;
+            let mut set = selected.clone();
+            set.push(effect);
+            let parent = if selected.is_empty() { &baseline } else { &current };
+            let fitted = match fit(&set, Some(parent), index, total) {
+                Ok(f) => f,
+                Err(e) => {
+                    // A candidate that cannot be fitted is reported, not fatal.
+                    let mut f = current.clone();
+                    f.effect = Fit::label(&set);
+                    f.effects = set.iter().map(|s| s.to_string()).collect();
+                    f.rmse = f64::INFINITY;
+                    f.fit_pct = f64::NEG_INFINITY;
+                    f.params = vec![(format!("error: {e}"), f64::NAN)];
+                    f.ci95 = vec![None];
+                    candidates.push(Candidate {
+                        fit: f,
+                        gain_pct: f64::NEG_INFINITY,
+                        z: 0.0,
+                        eligible: false,
+                    });
+                    continue;
+                }
+            };
+            let gain_pct = 100.0 * (current.rmse - fitted.rmse) / current.rmse;
+            let z = improvement_z(&e_cur, &fitted.residual());
+            // Gains are judged against what the baseline got wrong beyond the noise: an effect
+            // that only shaves noise is not a cause.
+            // An effect that ends switched off (at its neutral value) gains only by refitting
+            // the rest of the model: no evidence for it.
+            let off = catalogue::is_off(family.plant(), effect, &fitted.internal);
+            if off && gain_pct >= rules.min_gain_pct {
+                evidence.push(format!(
+                    "`{effect}` ends at its neutral value (switched off); its {gain_pct:.1} % come from refitting the rest of the model: not a cause"
+                ));
+            }
+            let eligible = gain_pct >= rules.min_gain_pct && z >= rules.min_z && !off;
+            candidates.push(Candidate {
+                fit: fitted,
+                gain_pct,
+                z,
+                eligible,
+            });
+        }
+        let mut best: Option<usize> = None;
+        for (i, c) in candidates.iter().enumerate() {
+            if c.eligible && best.is_none_or(|b| score(c, &current) < score(&candidates[b], &current)) {
+                best = Some(i);
+            }
+        }
+        // Prefer the simpler of two nested explanations unless the richer is clearly better.
+        let last_of = |c: &Candidate| c.fit.effects.last().cloned().unwrap_or_default();
+        if let Some(b) = best {
+            for (simple, rich) in family.nested() {
+                if last_of(&candidates[b]) != *rich {
+                    continue;
+                }
+                let base_rmse = baseline.rmse.max(f64::MIN_POSITIVE);
+                if let Some(s) = candidates.iter().position(|c| last_of(c) == *simple && c.eligible) {
+                    let extra = 100.0 * (candidates[s].fit.rmse - candidates[b].fit.rmse) / base_rmse;
                     let z = improvement_z(&candidates[s].fit.residual(), &candidates[b].fit.residual());
                     if extra < rules.nested_margin_pct || z < rules.min_z {
                         evidence.push(format!(
-                            "`{rich}` nests `{simple}`; it adds {extra:.1} points of gain (its RMSE is {over:.1} % below `{simple}`'s, z = {z:.1}), under the {} point margin: the simpler `{simple}` is named",
+                            "`{rich}` nests `{simple}`; it adds {extra:.1} points of gain (z = {z:.1}), under the {} point margin: the simpler `{simple}` is named",
                             rules.nested_margin_pct
                         ));
                         best = Some(s);
@@ -380,58 +655,199 @@ fn diagnose_fits(
                             "`{rich}` adds {extra:.1} points of gain over the nested `{simple}` (z = {z:.1}): named"
                         ));
                     }
+                } else if selected.contains(simple) {
+                    // The richer one replaces the simpler one already selected.
+                    let extra = 100.0 * (current.rmse - candidates[b].fit.rmse) / base_rmse;
+                    if extra < rules.nested_margin_pct {
+                        evidence.push(format!(
+                            "`{rich}` nests the selected `{simple}` and adds {extra:.1} points of gain, under the {} point margin: `{simple}` kept",
+                            rules.nested_margin_pct
+                        ));
+                        best = None;
+                    } else {
+                        evidence.push(format!(
+                            "`{rich}` replaces the nested `{simple}`: {extra:.1} more points of gain (z = {:.1})",
+                            candidates[b].z
+                        ));
+                    }
                 }
             }
         }
-    }
-
-    if white.pass {
-        evidence.push(format!(
-            "baseline residual is white (Ljung-Box Q = {:.1} < {:.1})",
-            white.ljung_box_q, white.ljung_box_limit
-        ));
-    } else {
-        evidence.push(format!(
-            "baseline residual is not white: Ljung-Box Q = {:.1} > {:.1}, largest autocorrelation {:.2} at lag {} (band ±{:.3})",
-            white.ljung_box_q, white.ljung_box_limit, white.max_abs_rho, white.max_lag, white.band
-        ));
-    }
-    for c in cross.iter().filter(|c| !c.pass) {
-        evidence.push(format!(
-            "residual correlates with {} ({:.2} at lag {}, band ±{:.3})",
-            c.name, c.max_abs, c.at_lag, c.band
-        ));
-    }
-    for g in grouped.iter().filter(|g| !g.pass) {
-        let means: Vec<String> = g
-            .groups
-            .iter()
-            .map(|m| format!("{} {:+.4} (RMSE {:.4}, {} samples)", m.label, m.mean, m.rmse, m.samples))
-            .collect();
-        evidence.push(format!(
-            "residual mean differs by {} (z = {:.1}): {}",
-            g.name,
-            g.z,
-            means.join("; ")
-        ));
-    }
-    let (cause, extended, gain_pct) = match best {
-        Some(b) => {
+        // Two effects can mask each other: each alone gains but not consistently enough. When
+        // no single effect is eligible, the two with the largest gains are fitted together
+        // and added together if the pair is eligible and significantly better than each alone.
+        if best.is_none() && selected.len() + 2 <= rules.max_causes {
+            let mut gaining: Vec<usize> = (0..candidates.len())
+                .filter(|&i| candidates[i].gain_pct >= rules.min_gain_pct && candidates[i].fit.rmse.is_finite())
+                .collect();
+            gaining.sort_by(|&a, &b| candidates[b].gain_pct.total_cmp(&candidates[a].gain_pct));
+            if let [a, b, ..] = gaining[..] {
+                let (ea, eb) = (last_of(&candidates[a]), last_of(&candidates[b]));
+                let nests = family
+                    .nested()
+                    .iter()
+                    .any(|(s, r)| (*s == ea && *r == eb) || (*s == eb && *r == ea));
+                let find = |name: &str| family.effects().iter().copied().find(|e| *e == name);
+                if let (false, Some(na), Some(nb)) = (nests, find(&ea), find(&eb)) {
+                    let mut set = selected.clone();
+                    set.extend([na, nb]);
+                    index += 1;
+                    total += 1;
+                    if let Ok(pair) = fit(&set, Some(&candidates[a].fit), index, total) {
+                        let gain_pct = 100.0 * (current.rmse - pair.rmse) / current.rmse;
+                        let z = improvement_z(&e_cur, &pair.residual());
+                        let beats = |single: &Candidate| {
+                            100.0 * (single.fit.rmse - pair.rmse) / single.fit.rmse >= rules.min_gain_pct
+                                && improvement_z(&single.fit.residual(), &pair.residual()) >= rules.min_z
+                        };
+                        let eligible = gain_pct >= rules.min_gain_pct
+                            && z >= rules.min_z
+                            && beats(&candidates[a])
+                            && beats(&candidates[b]);
+                        evidence.push(format!(
+                            "neither effect alone is significant; `{ea}` and `{eb}` together lower the validation RMSE from {:.4} to {:.4} ({gain_pct:.1} %, z = {z:.1}){}",
+                            current.rmse,
+                            pair.rmse,
+                            if eligible { ", more than either alone: both added" } else { ": not added" }
+                        ));
+                        candidates.push(Candidate {
+                            fit: pair,
+                            gain_pct,
+                            z,
+                            eligible,
+                        });
+                        if eligible {
+                            let c = candidates.len() - 1;
+                            selected.extend([na, nb]);
+                            current = candidates[c].fit.clone();
+                            let f = family.noise_floor(val, &current);
+                            if f.rmse < floor.rmse {
+                                floor = NoiseFloor {
+                                    rmse: f.rmse,
+                                    method: format!("{} (from the model with {})", f.method, selected.join(" + ")),
+                                };
+                            }
+                            rounds.push(Round {
+                                base: selected[..selected.len() - 2].iter().map(|s| s.to_string()).collect(),
+                                candidates,
+                                added: Some(format!("{ea}+{eb}")),
+                            });
+                            continue;
+                        }
+                    }
+                }
+            }
+        }
+        let added = best.map(|b| last_of(&candidates[b]));
+        if let Some(b) = best {
             let c = &candidates[b];
             evidence.push(format!(
-                "`{}` lowers the validation RMSE from {:.4} to {:.4} ({:.1} %, z = {:.1})",
-                c.fit.effect, baseline.rmse, c.fit.rmse, c.gain_pct, c.z
+                "{} `{}` lowers the validation RMSE from {:.4} to {:.4} ({:.1} %, z = {:.1})",
+                if selected.is_empty() { "adding" } else { "then adding" },
+                last_of(c),
+                current.rmse,
+                c.fit.rmse,
+                c.gain_pct,
+                c.z
             ));
-            (c.fit.effect.clone(), c.fit.clone(), c.gain_pct)
+            let new = family
+                .effects()
+                .iter()
+                .copied()
+                .find(|e| *e == last_of(c))
+                .ok_or("a candidate outside the catalogue")?;
+            selected.retain(|s| !family.nested().iter().any(|(simple, rich)| simple == s && *rich == new));
+            selected.push(new);
+            current = c.fit.clone();
+            let f = family.noise_floor(val, &current);
+            if f.rmse < floor.rmse {
+                floor = NoiseFloor {
+                    rmse: f.rmse,
+                    method: format!("{} (from the model with {})", f.method, selected.join(" + ")),
+                };
+            }
         }
-        None => {
-            evidence.push(format!(
-                "no extension lowers the validation RMSE by ≥ {} % with z ≥ {}: cause `none`",
-                rules.min_gain_pct, rules.min_z
-            ));
-            (String::from("none"), baseline.clone(), 0.0)
+        rounds.push(Round {
+            base: round_base(&selected, added.is_some()),
+            candidates,
+            added: added.clone(),
+        });
+        if added.is_none() {
+            break;
         }
+    }
+    let mut rounds = rounds.into_iter();
+    let candidates = rounds.next().map(|r| r.candidates).unwrap_or_default();
+    let rounds: Vec<Round> = rounds.collect();
+
+    let tests = ResidualTests::run(&e0, &regressors, lags, floor.rmse);
+    tests.describe("baseline residual", &mut evidence);
+    let causes: Vec<String> = selected.iter().map(|s| s.to_string()).collect();
+    let extended = current;
+    let gain_pct = if causes.is_empty() {
+        0.0
+    } else {
+        100.0 * (baseline.rmse - extended.rmse) / baseline.rmse
     };
+    if causes.is_empty() {
+        evidence.push(format!(
+            "no extension lowers the validation RMSE by ≥ {} % with z ≥ {}: cause `none`",
+            rules.min_gain_pct, rules.min_z
+        ));
+    }
+    let e_ext = extended.residual();
+    let rest = ResidualTests::run(&e_ext, &regressors, lags, floor.rmse);
+    let ratio = if floor.rmse > 0.0 {
+        extended.rmse / floor.rmse
+    } else {
+        f64::INFINITY
+    };
+    let ratio_txt = if ratio.is_finite() {
+        format!("{ratio:.2}×")
+    } else {
+        "not comparable with".to_string()
+    };
+    let material = rest.material_failures();
+    let explained = ratio <= rules.explained_ratio && material.is_empty();
+    let mut where_ = Vec::new();
+    if !explained {
+        where_ = locate(&rest, &e_ext, floor.rmse, dt_res);
+        if where_.is_empty() {
+            where_.push(format!(
+                "the remainder is {ratio_txt} the noise floor with no single input, state or regime it follows; look at the residual plot for what the catalogue does not describe"
+            ));
+        }
+    }
+    let verdict = if explained { "explained" } else { "unexplained" }.to_string();
+    evidence.push(if explained {
+        format!(
+            "verdict explained: the remainder (RMSE {:.4}) is {ratio_txt} the noise floor {:.4}, without material structure",
+            extended.rmse, floor.rmse
+        )
+    } else {
+        format!(
+            "verdict unexplained: the remainder (RMSE {:.4}) is {ratio_txt} the noise floor {:.4}{}: physics outside the catalogue{}",
+            extended.rmse,
+            floor.rmse,
+            if material.is_empty() {
+                String::new()
+            } else {
+                format!(", with structure ({})", material.join("; "))
+            },
+            if causes.is_empty() {
+                String::new()
+            } else {
+                format!(" beyond {}", causes.join(" + "))
+            }
+        )
+    });
+    for (what, f) in
+        std::iter::once(("baseline", &baseline)).chain((!causes.is_empty()).then_some(("extended", &extended)))
+    {
+        for flag in f.flags() {
+            evidence.push(format!("{what} calibration: {flag}"));
+        }
+    }
     Ok(Diagnosis {
         plant: family.plant(),
         output: family.output().to_string(),
@@ -440,16 +856,249 @@ fn diagnose_fits(
         validation: (val.file.clone(), val.len()),
         validation_is_tail,
         baseline,
-        whiteness: white,
-        cross,
-        grouped,
+        whiteness: tests.white,
+        cross: tests.cross,
+        grouped: tests.grouped,
         candidates,
-        cause,
+        rounds,
+        cause: causes.first().cloned().unwrap_or_else(|| "none".into()),
+        causes,
         extended,
         gain_pct,
+        noise_floor: floor.clone(),
+        remainder: Remainder {
+            rmse: e_ext.iter().map(|v| v * v).sum::<f64>().sqrt() / (e_ext.len().max(1) as f64).sqrt(),
+            ratio_to_floor: ratio,
+            evidence: where_,
+        },
+        verdict,
+        remainder_whiteness: rest.white,
+        remainder_cross: rest.cross,
+        remainder_grouped: rest.grouped,
         evidence,
         unexcited: unexcited_inputs(est, val),
     })
+}
+
+/// The effects a round extended (for the report), from the selection after it.
+fn round_base(selected: &[&str], added: bool) -> Vec<String> {
+    let k = if added {
+        selected.len().saturating_sub(1)
+    } else {
+        selected.len()
+    };
+    selected[..k].iter().map(|s| s.to_string()).collect()
+}
+
+/// Structure a part of the residual must account for to matter: half the noise floor (RMS).
+const MATERIAL_SHARE: f64 = 0.5;
+
+/// The residual tests of one model's validation residual, judged against the noise floor: a
+/// test fails when its statistic is significant (99 %) *and* the structure it finds is material,
+/// i.e. accounts for more than half the noise floor's RMS. On oversampled, quantized or
+/// closed-loop data every model short of the truth leaves statistically significant structure;
+/// what a calibration engineer needs is whether it matters next to the sensor's own noise.
+struct ResidualTests {
+    white: Whiteness,
+    cross: Vec<CrossCheck>,
+    grouped: Vec<GroupCheck>,
+    floor: f64,
+    rmse: f64,
+}
+
+impl ResidualTests {
+    fn run(e: &[f64], regressors: &[(String, Vec<f64>)], lags: usize, floor: f64) -> Self {
+        let rmse_e = rmse(e);
+        let excess = (rmse_e * rmse_e - floor * floor).max(0.0).sqrt();
+        let mut white = whiteness(e, lags);
+        // Colour that accounts for less than the material share beyond the noise is immaterial.
+        white.pass = white.pass || excess <= 1.5 * MATERIAL_SHARE * floor;
+        // Structure is material when it accounts for more than the material share of the floor
+        // and the residual exceeds the floor by as much (what a perfect model leaves may have
+        // structure of its own, e.g. an equation-error formulation's filter artefacts).
+        let small = excess <= MATERIAL_SHARE * floor;
+        let mut cross: Vec<CrossCheck> = regressors.iter().map(|(n, u)| cross_check(n, e, u, lags)).collect();
+        for c in &mut cross {
+            c.pass = c.pass || small || c.max_abs * rmse_e <= MATERIAL_SHARE * floor;
+        }
+        let mut grouped: Vec<GroupCheck> = regressors.iter().map(|(n, u)| group_check(n, e, u)).collect();
+        for g in &mut grouped {
+            let all = g.groups.iter().map(|m| m.samples).sum::<usize>().max(1) as f64;
+            let mean = g.groups.iter().map(|m| m.mean * m.samples as f64).sum::<f64>() / all;
+            // The RMS the group means account for.
+            let between = (g
+                .groups
+                .iter()
+                .map(|m| (m.mean - mean).powi(2) * m.samples as f64)
+                .sum::<f64>()
+                / all)
+                .sqrt();
+            g.pass = g.pass || small || between <= MATERIAL_SHARE * floor;
+        }
+        ResidualTests {
+            white,
+            cross,
+            grouped,
+            floor,
+            rmse: rmse_e,
+        }
+    }
+
+    /// The material failures in a few words each (cross-correlation and grouping: the colour
+    /// alone is judged by the ratio to the floor).
+    fn material_failures(&self) -> Vec<String> {
+        let mut out = Vec::new();
+        for c in self.cross.iter().filter(|c| !c.pass) {
+            out.push(format!("follows {}", c.name));
+        }
+        for g in self.grouped.iter().filter(|g| !g.pass) {
+            out.push(format!("differs by {}", g.name));
+        }
+        out
+    }
+
+    fn describe(&self, what: &str, evidence: &mut Vec<String>) {
+        let w = &self.white;
+        if w.pass {
+            evidence.push(format!(
+                "{what}: no material colour (Ljung-Box Q = {:.1}, limit {:.1}; RMSE {:.4} against a floor of {:.4})",
+                w.ljung_box_q, w.ljung_box_limit, self.rmse, self.floor
+            ));
+        } else {
+            evidence.push(format!(
+                "{what} is not white: Ljung-Box Q = {:.1} > {:.1}, largest autocorrelation {:.2} at lag {} (band ±{:.3}); RMSE {:.4} against a floor of {:.4}",
+                w.ljung_box_q, w.ljung_box_limit, w.max_abs_rho, w.max_lag, w.band, self.rmse, self.floor
+            ));
+        }
+        for c in self.cross.iter().filter(|c| !c.pass) {
+            evidence.push(format!(
+                "{what} correlates with {} ({:.2} at lag {}, band ±{:.3})",
+                c.name, c.max_abs, c.at_lag, c.band
+            ));
+        }
+        for g in self.grouped.iter().filter(|g| !g.pass) {
+            let means: Vec<String> = g
+                .groups
+                .iter()
+                .map(|m| format!("{} {:+.4} (RMSE {:.4}, {} samples)", m.label, m.mean, m.rmse, m.samples))
+                .collect();
+            evidence.push(format!(
+                "{what}: mean differs by {} (z = {:.1}): {}",
+                g.name,
+                g.z,
+                means.join("; ")
+            ));
+        }
+    }
+}
+
+/// Where a remainder lives, in words a calibration engineer can act on: the signals it follows
+/// (and at which lag), the regimes where its mean or its size differs, and its colour (the lag
+/// of its strongest self-correlation and its dominant period).
+fn locate(t: &ResidualTests, e: &[f64], floor: f64, dt_s: f64) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut cross: Vec<&CrossCheck> = t.cross.iter().filter(|c| !c.pass).collect();
+    cross.sort_by(|a, b| b.max_abs.total_cmp(&a.max_abs));
+    for c in cross.iter().take(3) {
+        let lag_s = c.at_lag as f64 * dt_s;
+        out.push(format!(
+            "it follows {} (correlation {:+.2}{}; accounts for an RMS of about {:.3} against a noise floor of {:.3})",
+            c.name,
+            c.correlation
+                .get((c.correlation.len() / 2) as isize as usize)
+                .and_then(|_| c
+                    .correlation
+                    .get(((c.correlation.len() / 2) as isize + c.at_lag) as usize))
+                .copied()
+                .unwrap_or(c.max_abs),
+            if c.at_lag == 0 {
+                ", at no lag".to_string()
+            } else if c.at_lag > 0 {
+                format!(", the signal leading by {} samples = {}", c.at_lag, secs(lag_s))
+            } else {
+                format!(", the signal lagging by {} samples = {}", -c.at_lag, secs(-lag_s))
+            },
+            c.max_abs * t.rmse,
+            floor
+        ));
+    }
+    let mut grouped: Vec<&GroupCheck> = t.grouped.iter().filter(|g| !g.pass).collect();
+    grouped.sort_by(|a, b| b.z.total_cmp(&a.z));
+    for g in grouped.iter().take(3) {
+        let parts: Vec<String> = g
+            .groups
+            .iter()
+            .map(|m| format!("{} {:+.4} (RMSE {:.4})", m.label, m.mean, m.rmse))
+            .collect();
+        out.push(format!("its mean depends on {}: {}", g.name, parts.join(", ")));
+    }
+    // Regimes where the remainder is much larger than elsewhere, even with a zero mean.
+    for g in &t.grouped {
+        let (lo, hi) = g.groups.iter().fold(
+            (None::<&crate::residuals::Group>, None::<&crate::residuals::Group>),
+            |(lo, hi), m| {
+                (
+                    if lo.is_none_or(|l| m.rmse < l.rmse) {
+                        Some(m)
+                    } else {
+                        lo
+                    },
+                    if hi.is_none_or(|h| m.rmse > h.rmse) {
+                        Some(m)
+                    } else {
+                        hi
+                    },
+                )
+            },
+        );
+        if let (Some(lo), Some(hi)) = (lo, hi) {
+            if hi.rmse > 2.0 * lo.rmse.max(floor) && hi.rmse > 2.0 * floor {
+                out.push(format!(
+                    "it is largest where {} is {} (RMSE {:.4}, against {:.4} where it is {})",
+                    g.name, hi.label, hi.rmse, lo.rmse, lo.label
+                ));
+            }
+        }
+    }
+    // Colour: the correlation time and a dominant period.
+    let lags = (e.len() / 4).min(2000);
+    let rho = crate::residuals::autocorrelation(e, lags);
+    if let Some(k) = rho.iter().position(|r| *r < 1.0 / std::f64::consts::E) {
+        if k > 1 && t.rmse > 1.5 * floor {
+            out.push(format!(
+                "it is slow next to the noise: correlated over {} samples = {} (a missing dynamic or a drift rather than noise)",
+                k,
+                secs(k as f64 * dt_s)
+            ));
+        }
+        // The first local maximum after the first negative excursion: a period.
+        if let Some(z) = rho.iter().position(|r| *r < 0.0) {
+            let peak = (z..rho.len().saturating_sub(1))
+                .filter(|&i| rho[i] > rho[i - 1] && rho[i] >= rho[i + 1])
+                .max_by(|&a, &b| rho[a].total_cmp(&rho[b]));
+            if let Some(p) = peak.filter(|&p| rho[p] > 0.3) {
+                out.push(format!(
+                    "it repeats with a period of {} samples = {} ({:.3} Hz; autocorrelation {:.2} there)",
+                    p,
+                    secs(p as f64 * dt_s),
+                    1.0 / (p as f64 * dt_s),
+                    rho[p]
+                ));
+            }
+        }
+    }
+    out
+}
+
+/// Seconds in a readable unit.
+fn secs(s: f64) -> String {
+    if s.abs() < 1e-3 {
+        format!("{:.1} µs", s * 1e6)
+    } else if s.abs() < 1.0 {
+        format!("{:.2} ms", s * 1e3)
+    } else {
+        format!("{s:.3} s")
+    }
 }
 
 /// The family for a plant.
@@ -483,13 +1132,13 @@ mod tests {
         fn effects(&self) -> &'static [&'static str] {
             &["square", "square-again"]
         }
-        fn fit(&self, effect: Option<&str>, _est: &Log, _val: &Log) -> Result<Fit, String> {
+        fn fit(&self, effects: &[&str], _parent: Option<&Fit>, _est: &Log, _val: &Log) -> Result<Fit, String> {
             let u: Vec<f64> = (0..200).map(|k| k as f64 / 100.0).collect();
             let y: Vec<f64> = u
                 .iter()
                 .map(|u| 2.0 * u + 0.5 * u * u + 0.01 * (u * 977.0).sin())
                 .collect();
-            let with_b = effect.is_some();
+            let with_b = !effects.is_empty();
             let model = |x: &[f64], u: f64| x[0] * u + if with_b { x[1] * u * u } else { 0.0 };
             let r = crate::lsq::solve(
                 |x: &[f64], out: &mut [f64]| {
@@ -509,7 +1158,7 @@ mod tests {
             let x = [r.x[0].exp(), r.x[1].exp()];
             let predicted = u.iter().map(|&u| model(&x, u)).collect();
             Ok(Fit::new(
-                effect.unwrap_or("baseline"),
+                &Fit::label(effects),
                 vec![("a".into(), x[0]), ("b".into(), x[1])],
                 vec![None, None],
                 y,

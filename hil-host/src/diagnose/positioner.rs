@@ -13,10 +13,17 @@
 //! Baseline: M, Fv, offset. `coulomb-friction`: + Fc. `asymmetric-friction`: viscous and
 //! Coulomb coefficients per direction, M, Fv+, Fv−, Fc+, Fc− (EMPS description eq. (12)).
 
-use super::{Family, Fit};
+use super::catalogue::{Effect, PositionerEffect};
+use super::{noise_floor_of, Family, Fit, NoiseFloor};
 use crate::log::{Log, Plant};
 use crate::lsq::{invert_spd, linear_lsq};
 use crate::signal::{derivative, downsample, Butterworth};
+
+/// Asymmetric friction contains Coulomb friction.
+const NESTED: [(&str, &str); 1] = [(
+    PositionerEffect::CoulombFriction.name(),
+    PositionerEffect::AsymmetricFriction.name(),
+)];
 
 /// Filter settings. Defaults reproduce the published EMPS IDIM-LS estimates.
 #[derive(Clone, Debug)]
@@ -121,6 +128,67 @@ impl PositionerFamily {
     }
 }
 
+impl PositionerFamily {
+    /// The RMS force error of the formulation itself (see `noise_floor`).
+    fn formulation_error(&self, val: &Log, fit: &Fit) -> Result<f64, String> {
+        let get = |k: &str| fit.params.iter().find(|(n, _)| n == k).map(|(_, v)| *v);
+        let mass = get("M_kg").filter(|m| *m > 0.0).ok_or("no positive mass")?;
+        let fv = |v: f64| {
+            if v >= 0.0 {
+                get("Fv_pos_Ns_per_m").or(get("Fv_Ns_per_m")).unwrap_or(0.0)
+            } else {
+                get("Fv_neg_Ns_per_m").or(get("Fv_Ns_per_m")).unwrap_or(0.0)
+            }
+        };
+        let fc = |v: f64| {
+            if v > self.v_still_m_s {
+                get("Fc_pos_N").or(get("Fc_N")).unwrap_or(0.0) + get("offset_N").unwrap_or(0.0)
+            } else if v < -self.v_still_m_s {
+                -get("Fc_neg_N").or(get("Fc_N")).unwrap_or(0.0) + get("offset_N").unwrap_or(0.0)
+            } else {
+                get("offset_N").unwrap_or(0.0)
+            }
+        };
+        let q = val.col("pos_m").ok_or("no pos_m column")?;
+        let f = val.col("force_N").ok_or("no force_N column")?;
+        let lsb = super::resolution(q);
+        let sub = 10;
+        let h = val.dt_s / sub as f64;
+        let (mut x, mut v) = (q.first().copied().unwrap_or(0.0), 0.0);
+        let mut synth = val.clone();
+        let mut pos = Vec::with_capacity(q.len());
+        for &force in f {
+            pos.push(if lsb > 0.0 { (x / lsb).round() * lsb } else { x });
+            for _ in 0..sub {
+                // Friction cannot reverse the motion within a step (a stuck load stays stuck).
+                let a = (force - fv(v) * v - fc(v)) / mass;
+                let v_new = v + a * h;
+                v = if v != 0.0 && v_new.signum() != v.signum() {
+                    0.0
+                } else {
+                    v_new
+                };
+                x += v * h;
+            }
+        }
+        synth.columns.insert("pos_m".into(), pos);
+        let m = self.motion(&synth)?;
+        let effect = if fit.effects.iter().any(|e| e == "asymmetric-friction") {
+            Some("asymmetric-friction")
+        } else if fit.effects.iter().any(|e| e == "coulomb-friction") {
+            Some("coulomb-friction")
+        } else {
+            None
+        };
+        let (cols, names, y) = self.columns(&m, effect, 1.0 / val.dt_s)?;
+        let theta: Vec<f64> = names.iter().map(|n| get(n).unwrap_or(0.0)).collect();
+        let e: Vec<f64> = (0..y.len())
+            .map(|i| y[i] - cols.iter().zip(&theta).map(|(c, t)| c[i] * t).sum::<f64>())
+            .collect();
+        Ok(crate::residuals::rmse(&e))
+    }
+}
+
 /// A linear regression problem: the regressor columns, their parameter names, the target (the
 /// measured force), all decimated alike.
 type Regression = (Vec<Vec<f64>>, Vec<String>, Vec<f64>);
@@ -136,13 +204,26 @@ impl Family for PositionerFamily {
         "equation-error: inverse dynamic model (IDIM-LS) — force reconstructed from the filtered, differentiated measured position; no closed-loop simulation"
     }
     fn effects(&self) -> &'static [&'static str] {
-        &["coulomb-friction", "asymmetric-friction"]
+        &PositionerEffect::NAMES
     }
     fn nested(&self) -> &'static [(&'static str, &'static str)] {
-        &[("coulomb-friction", "asymmetric-friction")]
+        &NESTED
     }
 
-    fn fit(&self, effect: Option<&str>, est: &Log, val: &Log) -> Result<Fit, String> {
+    fn fit(&self, effects: &[&str], _parent: Option<&Fit>, est: &Log, val: &Log) -> Result<Fit, String> {
+        // Linear least squares finds the global optimum of every model at once, so a richer
+        // model is never worse on the estimation data than the one it nests; asymmetric
+        // friction contains Coulomb friction (the set of both is the asymmetric model).
+        for e in effects {
+            PositionerEffect::from_name(e)?;
+        }
+        let effect = if effects.contains(&PositionerEffect::AsymmetricFriction.name()) {
+            Some(PositionerEffect::AsymmetricFriction.name())
+        } else if effects.contains(&PositionerEffect::CoulombFriction.name()) {
+            Some(PositionerEffect::CoulombFriction.name())
+        } else {
+            None
+        };
         let (cols, names, y) = self.columns(&self.motion(est)?, effect, 1.0 / est.dt_s)?;
         let theta =
             linear_lsq(&cols, &y).ok_or("the regressors are linearly dependent (no motion in the estimation data?)")?;
@@ -167,14 +248,49 @@ impl Family for PositionerFamily {
         let pred: Vec<f64> = (0..vy.len())
             .map(|i| (0..p).map(|j| vcols[j][i] * theta[j]).sum())
             .collect();
-        Ok(Fit::new(
-            effect.unwrap_or("baseline"),
+        let mut fit = Fit::new(
+            &Fit::label(effects),
             names.into_iter().zip(theta).collect(),
             ci95,
             vy,
             pred,
             0,
-        ))
+        );
+        fit.est_cost = 0.5 * resid.iter().map(|r| r * r).sum::<f64>();
+        // A mass, a viscous or a Coulomb coefficient below zero is no physical positioner.
+        for (k, v) in &fit.params {
+            // Fc± hold the offset too (eq. (12)): either may be negative.
+            if *v < 0.0 && (k.starts_with("M_") || k.starts_with("Fv") || k == "Fc_N") {
+                fit.impossible.push(format!("{k} = {v:.4}"));
+            }
+        }
+        for (c, (k, _)) in fit.ci95.iter().zip(&fit.params) {
+            if c.is_none() {
+                fit.not_identifiable.push(k.clone());
+            }
+        }
+        Ok(fit)
+    }
+
+    /// What a perfect model would leave in the equation-error formulation: the force noise
+    /// (second differences of the residual, as every family) and the formulation's own error,
+    /// measured on a log the fitted model itself writes: the model is run under the logged
+    /// force (10 sub-steps per sample), its position quantized like the encoder, and the same
+    /// filters, derivatives and decimation turn it back into a force with the same parameters.
+    /// What that reconstruction misses (filter roll-off at the acceleration's jumps, the
+    /// encoder's steps through two derivatives) a perfect model would miss too.
+    fn noise_floor(&self, val: &Log, fit: &Fit) -> NoiseFloor {
+        let noise = noise_floor_of(&fit.residual(), 0.0);
+        match self.formulation_error(val, fit) {
+            Ok(art) => NoiseFloor {
+                rmse: noise.rmse.hypot(art),
+                method: format!(
+                    "{}; with the equation-error formulation's own error on a log the fitted model writes itself (its position through the same filters and derivatives, encoder-quantized): {:.4}; floor = their root sum of squares",
+                    noise.method, art
+                ),
+            },
+            Err(_) => noise,
+        }
     }
 
     fn regressors(&self, val: &Log) -> Vec<(String, Vec<f64>)> {

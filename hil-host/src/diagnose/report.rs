@@ -111,7 +111,14 @@ fn params_json(fit: &Fit) -> (Value, Value) {
 
 fn fit_json(fit: &Fit, w: &Why, obj: &mut Obj) {
     let (params, ci) = params_json(fit);
-    obj.put("params", params).put("ci95", ci);
+    obj.put("params", params)
+        .put("ci95", ci)
+        .put("effects", json!(fit.effects))
+        .put("convergence", json!(fit.convergence))
+        .put("at_bound", json!(fit.at_bound))
+        .put("impossible", json!(fit.impossible))
+        .put("not_identifiable", json!(fit.not_identifiable));
+    obj.num("estimation_cost", fit.est_cost, None);
     match failed(fit) {
         Some(e) => {
             obj.put("error", Value::String(e.clone()));
@@ -140,6 +147,17 @@ fn candidate_json(c: &Candidate, w: &Why) -> Value {
 pub fn to_json(d: &Diagnosis) -> Value {
     let w = why(d);
     let candidates: Vec<Value> = d.candidates.iter().map(|c| candidate_json(c, &w)).collect();
+    let rounds: Vec<Value> = d
+        .rounds
+        .iter()
+        .map(|r| {
+            json!({
+                "base": r.base,
+                "candidates": r.candidates.iter().map(|c| candidate_json(c, &w)).collect::<Vec<_>>(),
+                "added": r.added,
+            })
+        })
+        .collect();
     let cross: Vec<Value> = d
         .cross
         .iter()
@@ -205,8 +223,31 @@ pub fn to_json(d: &Diagnosis) -> Value {
         .put("baseline", baseline.done())
         .put("residual_tests", tests.done())
         .put("candidates", Value::Array(candidates))
+        .put("selection_rounds", Value::Array(rounds))
         .put("cause", json!(d.cause))
+        .put("causes", json!(d.causes))
         .put("extended", extended.done());
+    let mut floor = Obj::default();
+    floor
+        .num("rmse", d.noise_floor.rmse, None)
+        .put("method", json!(d.noise_floor.method));
+    let mut remainder = Obj::default();
+    remainder
+        .num("rmse", d.remainder.rmse, None)
+        .num("ratio_to_floor", d.remainder.ratio_to_floor, None)
+        .put("evidence", json!(d.remainder.evidence))
+        .put("whiteness_pass", json!(d.remainder_whiteness.pass))
+        .put(
+            "input_correlation_pass",
+            json!(d.remainder_cross.iter().all(|c| c.pass)),
+        )
+        .put(
+            "grouped_by_condition_pass",
+            json!(d.remainder_grouped.iter().all(|g| g.pass)),
+        );
+    top.put("noise_floor", floor.done())
+        .put("remainder", remainder.done())
+        .put("verdict", json!(d.verdict));
     // With cause `none` the gain is 0 by definition (DATA-FORMAT.md), computable or not.
     let gain_why = if d.cause == "none" { None } else { w.gain.as_deref() };
     top.num("gain_pct", d.gain_pct, gain_why)
@@ -237,9 +278,21 @@ pub fn summary(d: &Diagnosis) -> String {
         s.push_str(&format!("warning: nothing can be diagnosed from these data: {why}\n\n"));
     }
     s.push_str(&format!(
-        "baseline: RMSE {}, fit {}\n",
+        "baseline: RMSE {}, fit {} ({})\n",
         num(d.baseline.rmse),
-        fit_text(&d.baseline)
+        fit_text(&d.baseline),
+        d.baseline.convergence
+    ));
+    for f in d.baseline.flags() {
+        s.push_str(&format!("  WARNING baseline calibration {f}\n"));
+    }
+    if d.baseline.fit_pct < 0.0 && d.baseline.fit_pct.is_finite() {
+        s.push_str("  WARNING baseline fit below 0 %: worse than the output's mean\n");
+    }
+    s.push_str(&format!(
+        "noise floor: RMSE {} ({})\n",
+        num(d.noise_floor.rmse),
+        d.noise_floor.method
     ));
     s.push_str("what the baseline gets wrong:\n");
     for e in &d.evidence {
@@ -247,7 +300,11 @@ pub fn summary(d: &Diagnosis) -> String {
     }
     s.push_str("\ncandidates (validation RMSE, gain, significance):\n");
     for c in &d.candidates {
-        let mark = if c.fit.effect == d.cause { "  <- cause" } else { "" };
+        let mark = if d.causes.first() == Some(&c.fit.effect) {
+            "  <- first cause"
+        } else {
+            ""
+        };
         match failed(&c.fit) {
             Some(e) => s.push_str(&format!("  {:<22} {}\n", c.fit.effect, not_computable(&e))),
             None => {
@@ -273,7 +330,32 @@ pub fn summary(d: &Diagnosis) -> String {
     if let Some(why) = w.fit_short.or(w.gain.as_deref()) {
         s.push_str(&format!("  (gain {})\n", not_computable(why)));
     }
-    s.push_str(&format!("\ncause: {}\n", d.cause));
+    for (i, r) in d.rounds.iter().enumerate() {
+        s.push_str(&format!("\nround {} on top of {}:\n", i + 2, r.base.join(" + ")));
+        for c in &r.candidates {
+            s.push_str(&format!(
+                "  {:<40} RMSE {:>10}  gain {:>8}  z {:>6.1}{}\n",
+                c.fit.effect,
+                num(c.fit.rmse),
+                pct(c.gain_pct),
+                c.z,
+                if c.eligible && r.added.is_some() && r.added.as_deref().is_some_and(|a| c.fit.effect.ends_with(a)) {
+                    "  <- added"
+                } else {
+                    ""
+                }
+            ));
+        }
+    }
+    s.push_str(&format!(
+        "\ncause: {}\ncauses: {}\n",
+        d.cause,
+        if d.causes.is_empty() {
+            "none".to_string()
+        } else {
+            d.causes.join(" + ")
+        }
+    ));
     s.push_str("extended model parameters (± 95 %):\n");
     let mut no_ci = Vec::new();
     for ((k, v), c) in d.extended.params.iter().zip(&d.extended.ci95) {
@@ -309,6 +391,24 @@ pub fn summary(d: &Diagnosis) -> String {
             fit_text(&d.baseline),
             fit_text(&d.extended)
         )),
+    }
+    if !d.causes.is_empty() {
+        for f in d.extended.flags() {
+            s.push_str(&format!("  WARNING extended calibration {f}\n"));
+        }
+    }
+    let ratio = if d.remainder.ratio_to_floor.is_finite() {
+        format!("{:.2}x the noise floor", d.remainder.ratio_to_floor)
+    } else {
+        "the noise floor is 0: ratio not computable".to_string()
+    };
+    s.push_str(&format!(
+        "verdict: {} (remainder RMSE {} = {ratio})\n",
+        d.verdict,
+        num(d.remainder.rmse)
+    ));
+    for e in &d.remainder.evidence {
+        s.push_str(&format!("  where the remainder lives: {e}\n"));
     }
     s
 }

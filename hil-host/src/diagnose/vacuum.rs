@@ -62,6 +62,7 @@ use model_core::vacuum::{
     PositionMap, StaticPressureMap, VacuumEffects, VacuumInputs, VacuumParams, VacuumValveActuator,
 };
 
+use super::catalogue::{Effect, VacuumEffect};
 use super::{Family, Fit};
 use crate::log::{Log, Plant};
 use crate::lsq::{solve, LsqOptions};
@@ -288,8 +289,8 @@ impl VacuumModel {
         }
     }
 
-    /// The parameters a fit of this model's shapes and `effect` adjusts.
-    pub fn parameter_names(&self, effect: Option<&str>) -> Result<Vec<&'static str>, String> {
+    /// The parameters a fit of this model's shapes and `effects` adjusts.
+    pub fn parameter_names(&self, effects: &[&str]) -> Result<Vec<&'static str>, String> {
         let mut names = match self.valve_map {
             ValveMap::PiecewiseLinear => vec!["k1_kPa_per_pct", "p01_kPa", "k2_kPa_per_pct", "p02_kPa"],
             ValveMap::Cubic => vec!["k1_kPa_per_pct", "p01_kPa", "k3_kPa_per_pct3", "u0_pct"],
@@ -301,7 +302,7 @@ impl VacuumModel {
             "damping_extend_kPa_s_per_pct",
             "damping_retract_kPa_s_per_pct",
         ]);
-        if let Some(e) = effect {
+        for e in effects {
             names.extend(effect_names(e)?);
         }
         Ok(names)
@@ -314,8 +315,8 @@ impl VacuumModel {
         }
     }
 
-    fn field(&mut self, name: &str) -> &mut f64 {
-        match name {
+    fn field(&mut self, name: &str) -> Option<&mut f64> {
+        Some(match name {
             "k1_kPa_per_pct" => &mut self.k1_kpa_per_pct,
             "p01_kPa" => &mut self.p01_kpa,
             "k2_kPa_per_pct" => &mut self.k2_kpa_per_pct,
@@ -337,43 +338,64 @@ impl VacuumModel {
             "fc_kPa" => &mut self.fc_kpa,
             "dahl_x_pct" => &mut self.dahl_x_pct,
             "backlash_pct" => &mut self.backlash_pct,
-            // Names come from `parameter_names`; an unknown one is a programming error caught by
-            // the unit tests, so it lands on a scratch field rather than panicking a tool.
-            _ => &mut self.u_ref_v,
-        }
+            // Names come from `parameter_names`: an unknown one is no field.
+            _ => return None,
+        })
     }
 
+    /// The parameter of this name (NaN for a name that is none of the model's: a solver start
+    /// at NaN is refused by name).
     pub fn get(&self, name: &str) -> f64 {
         let mut m = *self;
-        *m.field(name)
+        m.field(name).map_or(f64::NAN, |v| *v)
     }
 
-    pub fn set(&mut self, name: &str, value: f64) {
-        *self.field(name) = value;
+    /// Sets the parameter of this name; an unknown name is an error naming it.
+    pub fn set(&mut self, name: &str, value: f64) -> Result<(), String> {
+        *self
+            .field(name)
+            .ok_or_else(|| format!("`{name}` is no parameter of the vacuum model"))? = value;
+        Ok(())
     }
 
     /// The model with `effect` switched on at its starting magnitude.
     pub fn with_effect(&self, effect: &str) -> Result<Self, String> {
         let mut m = *self;
-        match effect {
-            "supply-voltage" => {
+        match VacuumEffect::from_name(effect)? {
+            VacuumEffect::SupplyVoltage => {
                 m.effects.supply_voltage = true;
                 m.voltage_gain = 1.0;
             }
-            "pressure-direction" => {
+            VacuumEffect::PressureDirection => {
                 m.effects.pressure_direction = true;
                 m.tau_fall_s = m.tau_rise_s;
             }
-            "coulomb-friction" => {
+            VacuumEffect::CoulombFriction => {
                 m.effects.coulomb_friction = true;
                 m.fc_kpa = 2.0;
                 m.dahl_x_pct = 0.3;
             }
-            "backlash" => {
+            VacuumEffect::Backlash => {
                 m.effects.backlash = true;
                 m.backlash_pct = 4.0;
             }
-            other => return Err(format!("unknown vacuum effect `{other}`")),
+        }
+        Ok(m)
+    }
+
+    /// The model with `effect` switched on at its neutral value (the model unchanged): the
+    /// start from which an extension cannot end above the model it extends.
+    pub fn with_effect_neutral(&self, effect: &str) -> Result<Self, String> {
+        let e = VacuumEffect::from_name(effect)?;
+        let mut m = self.with_effect(effect)?;
+        for (name, neutral) in e.params() {
+            // A shape parameter (Dahl's presliding distance) has no neutral of its own.
+            let v = match neutral {
+                super::catalogue::Neutral::Value(v) => *v,
+                super::catalogue::Neutral::SameAs(other) => m.get(other),
+                super::catalogue::Neutral::Shape => continue,
+            };
+            m.set(name, v)?;
         }
         Ok(m)
     }
@@ -413,14 +435,13 @@ impl VacuumModel {
     }
 }
 
-fn effect_names(effect: &str) -> Result<&'static [&'static str], String> {
-    Ok(match effect {
-        "supply-voltage" => &["voltage_gain"],
-        "pressure-direction" => &["tau_fall_s"],
-        "coulomb-friction" => &["fc_kPa", "dahl_x_pct"],
-        "backlash" => &["backlash_pct"],
-        other => return Err(format!("unknown vacuum effect `{other}`")),
-    })
+/// The parameters an effect adds: the catalogue's.
+fn effect_names(effect: &str) -> Result<Vec<&'static str>, String> {
+    Ok(VacuumEffect::from_name(effect)?
+        .params()
+        .iter()
+        .map(|(n, _)| *n)
+        .collect())
 }
 
 /// Bounds of each parameter: physical signs and generous ranges around the paper's actuators.
@@ -518,8 +539,15 @@ enum Residuals {
     Position,
 }
 
-/// A calibrated model, its fitted parameter names, their 95 % half-widths and the iterations.
-type Calibrated = (VacuumModel, Vec<&'static str>, Vec<Option<f64>>, usize);
+/// A calibrated model, its fitted parameter names, their 95 % half-widths, the iterations and
+/// the last (position) stage's solver run.
+type Calibrated = (
+    VacuumModel,
+    Vec<&'static str>,
+    Vec<Option<f64>>,
+    usize,
+    crate::lsq::LsqResult,
+);
 
 /// Family settings.
 #[derive(Debug)]
@@ -625,7 +653,7 @@ impl VacuumFamily {
         let residual = |theta: &[f64], out: &mut [f64]| -> Result<(), String> {
             let mut m = *start;
             for (n, v) in names.iter().zip(theta) {
-                m.set(n, *v);
+                m.set(n, *v)?;
             }
             let mut xs = vec![0.0; max_len];
             let mut ps = vec![0.0; max_len];
@@ -655,7 +683,7 @@ impl VacuumFamily {
         let r = solve(residual, &x0, &lo, &hi, n_res, opts).map_err(|e| e.to_string())?;
         let mut m = *start;
         for (n, v) in names.iter().zip(&r.x) {
-            m.set(n, *v);
+            m.set(n, *v)?;
         }
         Ok((m, r))
     }
@@ -679,7 +707,7 @@ impl VacuumFamily {
             // Only the position: the whole baseline from each preset start, the best kept.
             let mut best: Option<(f64, VacuumModel)> = None;
             for start in valve_starts() {
-                let names = start.parameter_names(None)?;
+                let names = start.parameter_names(&[])?;
                 if let Ok((m, r)) = self.fit_stage(&start, &names, data, Residuals::Position, &self.lsq) {
                     iterations += r.iterations;
                     if best.as_ref().is_none_or(|(c, _)| r.cost < *c) {
@@ -691,7 +719,7 @@ impl VacuumFamily {
         } else {
             let mut best: Option<(f64, VacuumModel)> = None;
             for start in valve_starts() {
-                let names = start.parameter_names(None)?;
+                let names = start.parameter_names(&[])?;
                 let pressure_names: Vec<&'static str> =
                     names.iter().copied().filter(|n| is_pressure_param(n)).collect();
                 if let Ok((m, r)) = self.fit_stage(&start, &pressure_names, data, Residuals::Pressure, &self.lsq) {
@@ -712,43 +740,115 @@ impl VacuumFamily {
         Ok((model, iterations))
     }
 
-    /// Calibrates the baseline (`None`) or baseline + effect. With a logged pressure, in two
-    /// stages on the two outputs: the pressure parameters (valve map, time constants, κ) on the
-    /// pressure error, which does not depend on the rod; then the rod parameters (position map,
-    /// mass, damping, friction, clearance) on the position error with the pressure model held.
-    /// The mechanical effects leave the pressure error unchanged, so their pressure stage is the
-    /// baseline's; the pressure effects start their rod stage from the baseline's rod. Without a
-    /// logged pressure, all parameters at once on the position error. Returns the model, the
-    /// fitted parameter names, their 95 % half-widths (from each stage's Jacobian) and the
-    /// solver iterations.
-    fn calibrate(&self, est: &Log, effect: Option<&str>) -> Result<Calibrated, String> {
+    /// Calibrates the baseline plus `effects` (empty: the baseline). With a logged pressure, in
+    /// two stages on the two outputs: the pressure parameters (valve map, time constants, κ) on
+    /// the pressure error, which does not depend on the rod; then the rod parameters (position
+    /// map, mass, damping, friction, clearance) on the position error with the pressure model
+    /// held. Without a logged pressure, all parameters at once on the position error.
+    ///
+    /// Starts: an extension starts from `parent` (the model it extends, at its optimum) with the
+    /// new effect at its starting magnitude, and, for a mechanical effect, also from the
+    /// band-centre map of the prepared start (the baseline's rod is bent by the hysteresis it
+    /// could not describe); the clearance, whose cost is multimodal, also from a large
+    /// clearance (10 %). If every start ends above the parent's position cost, the parent with
+    /// the effect at its neutral value is refitted too: an extension never ends worse on the
+    /// estimation data than the model it extends. Returns the model, the fitted parameter names,
+    /// their 95 % half-widths, the iterations and the final position-stage solver run.
+    fn calibrate(&self, est: &Log, effects: &[&str], parent: Option<&Fit>) -> Result<Calibrated, String> {
         let data = self.est_data(est)?;
         let (prepared, mut iterations) = self.prepared(est, &data)?;
-        let key = fingerprint(est);
-        let pressure_effect = matches!(effect, Some("supply-voltage" | "pressure-direction"));
-        let mut model = prepared;
-        if pressure_effect {
-            if let Ok(guard) = self.baseline_cache.lock() {
-                if let Some((k, b)) = guard.as_ref() {
-                    if *k == key {
-                        model = *b;
-                    }
+        let is_pressure_effect = |e: &str| {
+            matches!(
+                VacuumEffect::from_name(e),
+                Ok(VacuumEffect::SupplyVoltage | VacuumEffect::PressureDirection)
+            )
+        };
+        let names = prepared.parameter_names(effects)?;
+        // The parent model: the prepared shapes with the parent's effects on and its values.
+        let parent_model = |new_neutral: bool| -> Result<VacuumModel, String> {
+            let mut m = prepared;
+            let Some((last, before)) = effects.split_last() else {
+                return Ok(m);
+            };
+            for e in before {
+                m = m.with_effect(e)?;
+            }
+            if let Some(f) = parent {
+                for (n, v) in &f.internal {
+                    m.set(n, *v)?;
                 }
             }
+            if new_neutral {
+                m.with_effect_neutral(last)
+            } else {
+                m.with_effect(last)
+            }
+        };
+        let mut starts: Vec<VacuumModel> = Vec::new();
+        if effects.is_empty() {
+            starts.push(prepared);
+        } else {
+            starts.push(parent_model(false)?);
+            let last = effects[effects.len() - 1];
+            if !is_pressure_effect(last) {
+                // From the band-centre map: the rod parameters of the prepared start.
+                let mut m = parent_model(false)?;
+                for n in prepared.parameter_names(&[])? {
+                    if !is_pressure_param(n) {
+                        m.set(n, prepared.get(n))?;
+                    }
+                }
+                starts.push(m);
+            }
+            if last == VacuumEffect::Backlash.name() {
+                let mut m = parent_model(false)?;
+                m.backlash_pct = 10.0;
+                starts.push(m);
+            }
         }
-        if let Some(e) = effect {
-            model = model.with_effect(e)?;
+        let parent_cost = parent.map_or(f64::INFINITY, |f| f.est_cost);
+        let mut best: Option<Calibrated> = None;
+        let mut tried_neutral = false;
+        loop {
+            for start in std::mem::take(&mut starts) {
+                let c = self.calibrate_from(&data, start, &names, effects.iter().any(|e| is_pressure_effect(e)))?;
+                iterations += c.3;
+                if best.as_ref().is_none_or(|b| c.4.cost < b.4.cost) {
+                    best = Some(c);
+                }
+            }
+            let worse = best.as_ref().is_none_or(|b| b.4.cost > parent_cost);
+            if !worse || tried_neutral || effects.is_empty() {
+                break;
+            }
+            tried_neutral = true;
+            starts.push(parent_model(true)?);
         }
-        let names = model.parameter_names(effect)?;
+        let mut best = best.ok_or("no start could be fitted")?;
+        best.3 = iterations;
+        Ok(best)
+    }
+
+    /// One calibration from `start` (see [`Self::calibrate`]); `pressure_stage` refits the
+    /// pressure parameters first.
+    fn calibrate_from(
+        &self,
+        data: &EstData,
+        start: VacuumModel,
+        names: &[&'static str],
+        pressure_stage: bool,
+    ) -> Result<Calibrated, String> {
+        let mut model = start;
+        let mut iterations = 0;
         if data.p.is_none() {
-            let (m, r) = self.fit_stage(&model, &names, &data, Residuals::Position, &self.lsq)?;
-            return Ok((m, names, r.ci95, iterations + r.iterations));
+            let (m, r) = self.fit_stage(&model, names, data, Residuals::Position, &self.lsq)?;
+            return Ok((m, names.to_vec(), r.ci95.clone(), r.iterations, r));
         }
         let in_pressure = |n: &&'static str| is_pressure_param(n) || *n == "voltage_gain" || *n == "tau_fall_s";
         let pn: Vec<&'static str> = names.iter().copied().filter(in_pressure).collect();
         let rn: Vec<&'static str> = names.iter().copied().filter(|n| !in_pressure(n)).collect();
-        let ci_p = if pressure_effect {
-            let (m, r) = self.fit_stage(&model, &pn, &data, Residuals::Pressure, &self.lsq)?;
+        let ci_p = if pressure_stage {
+            let (m, r) = self.fit_stage(&model, &pn, data, Residuals::Pressure, &self.lsq)?;
             iterations += r.iterations;
             model = m;
             r.ci95
@@ -758,16 +858,11 @@ impl VacuumFamily {
                 max_iterations: 0,
                 ..self.lsq.clone()
             };
-            self.fit_stage(&model, &pn, &data, Residuals::Pressure, &opts)?.1.ci95
+            self.fit_stage(&model, &pn, data, Residuals::Pressure, &opts)?.1.ci95
         };
-        let (m, r) = self.fit_stage(&model, &rn, &data, Residuals::Position, &self.lsq)?;
+        let (m, r) = self.fit_stage(&model, &rn, data, Residuals::Position, &self.lsq)?;
         iterations += r.iterations;
         model = m;
-        if effect.is_none() {
-            if let Ok(mut guard) = self.baseline_cache.lock() {
-                *guard = Some((key, model));
-            }
-        }
         let ci = names
             .iter()
             .map(|n| {
@@ -779,7 +874,7 @@ impl VacuumFamily {
                 from(&pn, &ci_p).or_else(|| from(&rn, &r.ci95))
             })
             .collect();
-        Ok((model, names, ci, iterations))
+        Ok((model, names.to_vec(), ci, iterations, r))
     }
 
     /// Linear and arctan position maps fitted to the centre of the (pressure, position) band;
@@ -867,7 +962,7 @@ impl VacuumFamily {
             |th: &[f64], out: &mut [f64]| {
                 let mut m = at;
                 for (nm, v) in names.iter().zip(th) {
-                    m.set(nm, *v);
+                    m.set(nm, *v)?;
                 }
                 let a = m.actuator(self.h_max_s)?;
                 for (o, &(pm, xm)) in out.iter_mut().zip(&pts) {
@@ -886,7 +981,7 @@ impl VacuumFamily {
         );
         if let Ok(r) = res {
             for (nm, v) in names.iter().zip(&r.x) {
-                at.set(nm, *v);
+                at.set(nm, *v)?;
             }
             // The arctan must beat the line by 20 % in RMS and the line must miss by > 1 %.
             if 2.0 * r.cost < 0.8 * 0.8 * sse_lin && sse_lin > pts.len() as f64 {
@@ -933,21 +1028,38 @@ impl Family for VacuumFamily {
         &["supply-voltage", "pressure-direction", "coulomb-friction", "backlash"]
     }
 
-    fn fit(&self, effect: Option<&str>, est: &Log, val: &Log) -> Result<Fit, String> {
-        let (model, names, ci95, iterations) = self.calibrate(est, effect)?;
+    fn fit(&self, effects: &[&str], parent: Option<&Fit>, est: &Log, val: &Log) -> Result<Fit, String> {
+        let (model, names, ci95, iterations, last) = self.calibrate(est, effects, parent)?;
+        if effects.is_empty() {
+            if let Ok(mut guard) = self.baseline_cache.lock() {
+                *guard = Some((fingerprint(est), model));
+            }
+        }
         let (x, _) = self.predict(&model, val)?;
         let measured = val
             .col("x_pct")
             .ok_or_else(|| format!("{}: no `x_pct` column", val.file))?
             .to_vec();
-        Ok(Fit::new(
-            effect.unwrap_or("baseline"),
-            model.named(&names),
-            ci95,
-            measured,
-            x,
-            iterations,
-        ))
+        let mut fit = Fit::new(&Fit::label(effects), model.named(&names), ci95, measured, x, iterations);
+        fit.est_cost = last.cost;
+        fit.convergence = format!(
+            "position stage {} ({} iterations over all stages and starts)",
+            crate::lsq::convergence_text(&last),
+            iterations
+        );
+        for (i, n) in names.iter().enumerate() {
+            let (lo, hi) = bounds(n);
+            let v = model.get(n);
+            let tol = 1e-6 * (hi - lo);
+            let neutral_zero = matches!(*n, "fc_kPa" | "backlash_pct") && v <= lo + tol;
+            if (v <= lo + tol || v >= hi - tol) && !neutral_zero {
+                fit.at_bound.push(n.to_string());
+            }
+            if fit.ci95.get(i).copied().flatten().is_none() && !fit.at_bound.iter().any(|b| b == n) && !neutral_zero {
+                fit.not_identifiable.push(n.to_string());
+            }
+        }
+        Ok(fit)
     }
 
     fn regressors(&self, val: &Log) -> Vec<(String, Vec<f64>)> {
@@ -1170,17 +1282,18 @@ mod tests {
             for rod in [RodMap::Linear, RodMap::Arctan] {
                 let m = VacuumModel::baseline_guess(valve, rod);
                 for e in [
-                    None,
-                    Some("supply-voltage"),
-                    Some("pressure-direction"),
-                    Some("coulomb-friction"),
-                    Some("backlash"),
+                    &[][..],
+                    &["supply-voltage"],
+                    &["pressure-direction"],
+                    &["coulomb-friction"],
+                    &["backlash"],
+                    &["supply-voltage", "backlash"],
                 ] {
                     let mut names = m.parameter_names(e).unwrap();
                     names.retain(|n| !n.is_empty());
                     for (i, n) in names.iter().enumerate() {
                         let mut m2 = m;
-                        m2.set(n, 1234.5 + i as f64);
+                        m2.set(n, 1234.5 + i as f64).unwrap();
                         assert_eq!(m2.get(n), 1234.5 + i as f64, "{n}");
                         assert_eq!(m2.u_ref_v, 12.0, "{n} is not a field");
                         let (lo, hi) = bounds(n);
@@ -1190,6 +1303,10 @@ mod tests {
             }
         }
         assert!(m_err().contains("`friction`"));
+        // An unknown name is an error, never a scratch field.
+        let mut m = VacuumModel::baseline_guess(ValveMap::Cubic, RodMap::Linear);
+        assert!(m.set("friction_kPa", 1.0).unwrap_err().contains("`friction_kPa`"));
+        assert!(m.get("friction_kPa").is_nan());
     }
 
     fn m_err() -> String {
@@ -1238,9 +1355,8 @@ mod tests {
         let fam = VacuumFamily::default();
         let got = |effect: &str, seed: u64, name: &str| {
             let (case, est, _) = case_logs(effect, seed);
-            let _ = fam.calibrate(&est, None).unwrap();
-            let (m, _, ci, _) = fam.calibrate(&est, Some(effect)).unwrap();
-            let names = m.parameter_names(Some(effect)).unwrap();
+            let (m, _, ci, _, _) = fam.calibrate(&est, &[effect], None).unwrap();
+            let names = m.parameter_names(&[effect]).unwrap();
             let i = names.iter().position(|n| *n == name).unwrap();
             eprintln!(
                 "{effect} seed {seed}: {name} {:.4} ± {:?}, truth {:.4}",
@@ -1316,7 +1432,7 @@ mod tests {
         assert!(
             d.evidence
                 .iter()
-                .any(|e| e.contains("residual mean differs by supply voltage")),
+                .any(|e| e.contains("residual: mean differs by supply voltage")),
             "{:?}",
             d.evidence
         );

@@ -74,7 +74,7 @@ struct Point {
 
 /// Draws the plant for the estimation and the validation run (they differ only in the belt
 /// disturbance's phase) and the truth.
-fn draw_params(effect: &str, rng: &mut Rng) -> (EvvtParams, EvvtParams, Vec<(String, f64)>) {
+fn draw_params(effects: &[&str], rng: &mut Rng) -> (EvvtParams, EvvtParams, Vec<(String, f64)>) {
     let alpha_scale = rng.uniform(0.6, 1.3);
     let beta_scale = rng.uniform(0.7, 1.3);
     let mut table = EvvtLpvTable::PAPER_DESIGN;
@@ -99,34 +99,36 @@ fn draw_params(effect: &str, rng: &mut Rng) -> (EvvtParams, EvvtParams, Vec<(Str
         ("beta_scale_of_design".into(), beta_scale),
     ];
     let mut belt_phase_validation = 0.0;
-    match effect {
-        "supply-voltage" => {
-            p.nominal_engine_rpm = rng.uniform(1200.0, 1400.0);
-            p.voltage_effect_scale = rng.uniform(0.7, 1.0);
-            truth.push(("voltage_effect_scale".into(), p.voltage_effect_scale));
+    for effect in effects {
+        match *effect {
+            "supply-voltage" => {
+                p.nominal_engine_rpm = rng.uniform(1200.0, 1400.0);
+                p.voltage_effect_scale = rng.uniform(0.7, 1.0);
+                truth.push(("voltage_effect_scale".into(), p.voltage_effect_scale));
+            }
+            "engine-speed" => {
+                p.nominal_voltage_v = rng.uniform(9.5, 10.0);
+                p.engine_speed_effect_scale = rng.uniform(0.7, 1.0);
+                truth.push(("engine_speed_effect_scale".into(), p.engine_speed_effect_scale));
+            }
+            "direction" => {
+                p.advance_alpha_factor = rng.uniform(0.5, 0.75);
+                truth.push(("advance_alpha_factor".into(), p.advance_alpha_factor));
+            }
+            "belt-vibration" => {
+                p.belt_vibration_amplitude_deg = rng.uniform(0.6, 1.5);
+                p.belt_vibration_order = rng.uniform(0.5, 2.0);
+                p.belt_vibration_phase_rad = rng.uniform(-std::f64::consts::PI, std::f64::consts::PI);
+                belt_phase_validation = rng.uniform(-std::f64::consts::PI, std::f64::consts::PI);
+                truth.extend([
+                    ("belt_amplitude_deg".into(), p.belt_vibration_amplitude_deg),
+                    ("belt_order".into(), p.belt_vibration_order),
+                    ("belt_phase_rad".into(), p.belt_vibration_phase_rad),
+                    ("belt_phase_validation_rad".into(), belt_phase_validation),
+                ]);
+            }
+            _ => {}
         }
-        "engine-speed" => {
-            p.nominal_voltage_v = rng.uniform(9.5, 10.0);
-            p.engine_speed_effect_scale = rng.uniform(0.7, 1.0);
-            truth.push(("engine_speed_effect_scale".into(), p.engine_speed_effect_scale));
-        }
-        "direction" => {
-            p.advance_alpha_factor = rng.uniform(0.5, 0.75);
-            truth.push(("advance_alpha_factor".into(), p.advance_alpha_factor));
-        }
-        "belt-vibration" => {
-            p.belt_vibration_amplitude_deg = rng.uniform(0.6, 1.5);
-            p.belt_vibration_order = rng.uniform(0.5, 2.0);
-            p.belt_vibration_phase_rad = rng.uniform(-std::f64::consts::PI, std::f64::consts::PI);
-            belt_phase_validation = rng.uniform(-std::f64::consts::PI, std::f64::consts::PI);
-            truth.extend([
-                ("belt_amplitude_deg".into(), p.belt_vibration_amplitude_deg),
-                ("belt_order".into(), p.belt_vibration_order),
-                ("belt_phase_rad".into(), p.belt_vibration_phase_rad),
-                ("belt_phase_validation_rad".into(), belt_phase_validation),
-            ]);
-        }
-        _ => {}
     }
     // Without the speed or voltage effect the plant is LTI: one α and β, the scaled table at
     // the nominal point, written as a uniform table (what the baseline model assumes).
@@ -259,8 +261,15 @@ struct Run {
 }
 
 /// Runs the bench: each sample the controller reads the quantized phase and commands the
-/// motor; the plant moves for one period with that command.
-fn run_loop(p: &EvvtParams, points: &[Point], point_samples: usize, reference: &[f64]) -> Result<Run, String> {
+/// motor; the plant moves for one period with the command of `delay` periods earlier (0: that
+/// command; the outside effect `command-delay`; the log shows the command as sent).
+fn run_loop_delayed(
+    p: &EvvtParams,
+    points: &[Point],
+    point_samples: usize,
+    reference: &[f64],
+    delay: usize,
+) -> Result<Run, String> {
     let n = reference.len();
     let initial = reference
         .first()
@@ -304,7 +313,12 @@ fn run_loop(p: &EvvtParams, points: &[Point], point_samples: usize, reference: &
         run.rpm.push(pt.engine_rpm);
         run.volt.push(pt.u_batt_v);
         run.phase.push(measured);
-        plant.step(out.motor_cmd_rpm, pt.engine_rpm, pt.u_batt_v, DT_S);
+        let applied = if delay == 0 {
+            out.motor_cmd_rpm
+        } else {
+            k.checked_sub(delay).map_or(0.0, |j| run.cmd[j])
+        };
+        plant.step(applied, pt.engine_rpm, pt.u_batt_v, DT_S);
     }
     Ok(run)
 }
@@ -343,20 +357,43 @@ pub fn generate(effect: &str, seed: u64) -> Result<Case, String> {
 
 /// A case with chosen experiment lengths (e.g. a long log for timing the diagnosis).
 pub fn generate_sized(effect: &str, seed: u64, sizes: &Sizes) -> Result<Case, String> {
+    let parts = super::parse_effects(Plant::Evvt, effect)?;
+    generate_parts(&parts, seed, sizes)
+}
+
+/// A case with the given hidden effects (catalogue or outside), default sizes.
+pub fn generate_effects(parts: &[&str], seed: u64) -> Result<Case, String> {
+    generate_parts(parts, seed, &Sizes::default())
+}
+
+fn generate_parts(parts: &[&str], seed: u64, sizes: &Sizes) -> Result<Case, String> {
+    let effect = if parts.is_empty() {
+        "none".to_string()
+    } else {
+        parts.join("+")
+    };
     let mut rng = Rng::new(seed);
-    let (est_params, val_params, truth) = draw_params(effect, &mut rng);
+    let (est_params, val_params, mut truth) = draw_params(parts, &mut rng);
     let est_points = estimation_points(&mut rng, sizes.estimation_points.max(1));
     let est_per_point = (sizes.estimation_point_s / DT_S).round().max(1.0) as usize;
     let est_ref = prbs_reference(&mut rng, est_per_point * est_points.len())?;
-    let est = run_loop(&est_params, &est_points, est_per_point, &est_ref)?;
     let val_points = validation_points(&mut rng, sizes.validation_points.max(1));
     let val_per_point = (sizes.validation_point_s / DT_S).round().max(1.0) as usize;
     let val_ref = step_ramp_reference(&mut rng, val_per_point * val_points.len());
-    let val = run_loop(&val_params, &val_points, val_per_point, &val_ref)?;
+    // Outside the catalogue: a command delay, drawn last.
+    let delay = if parts.contains(&"command-delay") {
+        let d = (rng.uniform(0.03, 0.06) / DT_S).round() as usize;
+        truth.push(("command_delay_s".into(), d as f64 * DT_S));
+        d
+    } else {
+        0
+    };
+    let est = run_loop_delayed(&est_params, &est_points, est_per_point, &est_ref, delay)?;
+    let val = run_loop_delayed(&val_params, &val_points, val_per_point, &val_ref, delay)?;
     Ok(Case {
         plant: Plant::Evvt,
         seed,
-        effect: effect.to_string(),
+        effect,
         truth,
         estimation_csv: log_text("estimation", seed, &est),
         validation_csv: log_text("validation", seed, &val),
@@ -585,20 +622,20 @@ mod tests {
 
     #[test]
     fn hidden_effects_change_the_response_and_none_is_lti() {
-        let (p, _, _) = draw_params("none", &mut Rng::new(3));
+        let (p, _, _) = draw_params(&[], &mut Rng::new(3));
         let plant = EvvtPlant::<f64>::new(&p).unwrap();
         assert_eq!(plant.alpha_beta(800.0, 9.5), plant.alpha_beta(1400.0, 14.0));
-        let (p, _, _) = draw_params("supply-voltage", &mut Rng::new(3));
+        let (p, _, _) = draw_params(&["supply-voltage"], &mut Rng::new(3));
         let plant = EvvtPlant::<f64>::new(&p).unwrap();
         let (lo, hi) = (plant.alpha_beta(1100.0, 9.5), plant.alpha_beta(1100.0, 14.0));
         assert!(hi.0 / lo.0 > 1.5 && hi.1 / lo.1 > 1.3, "{lo:?} {hi:?}");
         assert_eq!(plant.alpha_beta(800.0, 12.0), plant.alpha_beta(1400.0, 12.0));
-        let (p, _, _) = draw_params("engine-speed", &mut Rng::new(3));
+        let (p, _, _) = draw_params(&["engine-speed"], &mut Rng::new(3));
         let plant = EvvtPlant::<f64>::new(&p).unwrap();
         let (slow, fast) = (plant.alpha_beta(1400.0, 12.0), plant.alpha_beta(800.0, 12.0));
         assert!(fast.0 / slow.0 > 1.5, "{slow:?} {fast:?}");
         assert_eq!(plant.alpha_beta(1100.0, 9.5), plant.alpha_beta(1100.0, 14.0));
-        let (p, v, truth) = draw_params("belt-vibration", &mut Rng::new(3));
+        let (p, v, truth) = draw_params(&["belt-vibration"], &mut Rng::new(3));
         assert!(p.belt_vibration_amplitude_deg >= 0.6 && (0.5..=2.0).contains(&p.belt_vibration_order));
         assert_ne!(p.belt_vibration_phase_rad, v.belt_vibration_phase_rad);
         assert!(truth.iter().any(|(k, _)| k == "belt_order"));

@@ -11,6 +11,7 @@ pub mod evvt;
 pub mod positioner;
 pub mod vacuum;
 
+use crate::diagnose::catalogue;
 use crate::log::{parse_log, Log, Plant};
 
 /// SplitMix64: small, fast, and good enough for test-data generation (not cryptography).
@@ -74,35 +75,83 @@ impl Case {
     }
 }
 
-/// The effects a plant's generator can hide (its catalogue plus `none`).
-pub fn effects(plant: Plant) -> &'static [&'static str] {
+/// The effects a plant's generator can hide one at a time: `none` and the plant's catalogue
+/// (from the typed catalogue, [`crate::diagnose::catalogue`]).
+pub fn effects(plant: Plant) -> Vec<&'static str> {
+    std::iter::once("none")
+        .chain(catalogue::names(plant).iter().copied())
+        .collect()
+}
+
+/// Physics the generator can hide that is *not* in the catalogue (DATA-FORMAT.md): the
+/// diagnosis must call it `unexplained` and never name a catalogue effect for it. Kept out of
+/// the catalogue on purpose.
+pub fn outside_effects(plant: Plant) -> &'static [&'static str] {
     match plant {
-        Plant::Evvt => &["none", "supply-voltage", "engine-speed", "direction", "belt-vibration"],
-        Plant::Positioner => &["none", "coulomb-friction", "asymmetric-friction"],
-        Plant::Vacuum => &[
-            "none",
-            "supply-voltage",
-            "pressure-direction",
-            "coulomb-friction",
-            "backlash",
-        ],
-        Plant::Ehvva => &["none", "viscosity", "pressure-delay", "direction-delay", "snubber"],
+        // The valve acts on the commanded duty 60-150 ms late (a long pneumatic line).
+        Plant::Vacuum => &["duty-delay"],
+        // The motor follows its command 30-60 ms late (driver and CAN latency).
+        Plant::Evvt => &["command-delay"],
+        // The lift stop moves with temperature (thermal growth of the stroke, 0.1-0.2 %/°C).
+        Plant::Ehvva => &["thermal-stroke"],
+        // A position-dependent force (a return spring or a cable, 300-900 N/m).
+        Plant::Positioner => &["position-spring"],
     }
 }
 
-/// Generates a case for `plant` with `effect` (a catalogue name or `none`) from `seed`.
-pub fn generate(plant: Plant, effect: &str, seed: u64) -> Result<Case, String> {
-    if !effects(plant).contains(&effect) {
-        return Err(format!(
-            "no generator for effect `{effect}` of plant `{plant}` (available: {})",
-            effects(plant).join(", ")
-        ));
+/// Two-effect cases a plant's generator writes (`a+b`): every pair of catalogue effects
+/// that do not nest (the positioner's two nest: none).
+pub fn effect_pairs(plant: Plant) -> Vec<String> {
+    let names = catalogue::names(plant);
+    if plant == Plant::Positioner {
+        return Vec::new();
     }
+    let mut out = Vec::new();
+    for (i, a) in names.iter().enumerate() {
+        for b in &names[i + 1..] {
+            out.push(format!("{a}+{b}"));
+        }
+    }
+    out
+}
+
+/// The parts of an effect specification: `none`, one effect, or effects joined by `+`, each
+/// in the plant's catalogue or among its outside effects. Unknown names are refused by name.
+pub fn parse_effects(plant: Plant, spec: &str) -> Result<Vec<&'static str>, String> {
+    if spec == "none" {
+        return Ok(Vec::new());
+    }
+    let mut out: Vec<&'static str> = Vec::new();
+    for part in spec.split('+') {
+        let known = catalogue::names(plant)
+            .iter()
+            .chain(outside_effects(plant))
+            .copied()
+            .find(|n| *n == part);
+        match known {
+            Some(n) if !out.contains(&n) => out.push(n),
+            Some(n) => return Err(format!("effect `{n}` twice in `{spec}`")),
+            None => {
+                return Err(format!(
+                    "no generator for effect `{part}` of plant `{plant}` (available: none, {}; outside the catalogue: {}; two at once as a+b)",
+                    catalogue::names(plant).join(", "),
+                    outside_effects(plant).join(", ")
+                ))
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// Generates a case for `plant` with `effect` (`none`, a catalogue name, an outside effect, or
+/// several joined by `+`) from `seed`.
+pub fn generate(plant: Plant, effect: &str, seed: u64) -> Result<Case, String> {
+    let parts = parse_effects(plant, effect)?;
     match plant {
-        Plant::Evvt => evvt::generate(effect, seed),
-        Plant::Positioner => positioner::generate(effect, seed),
-        Plant::Vacuum => vacuum::generate(effect, seed),
-        Plant::Ehvva => ehvva::generate(effect, seed),
+        Plant::Evvt => evvt::generate_effects(&parts, seed),
+        Plant::Positioner => positioner::generate_effects(&parts, seed),
+        Plant::Vacuum => vacuum::generate_effects(&parts, seed),
+        Plant::Ehvva => ehvva::generate_effects(&parts, seed),
     }
 }
 
@@ -129,5 +178,16 @@ mod tests {
     fn unknown_effects_are_refused_by_name() {
         let e = generate(Plant::Positioner, "backlash", 1).unwrap_err();
         assert!(e.contains("`backlash`") && e.contains("coulomb-friction"));
+        assert!(parse_effects(Plant::Vacuum, "backlash+backlash").is_err());
+        assert_eq!(
+            parse_effects(Plant::Vacuum, "supply-voltage+duty-delay").unwrap(),
+            ["supply-voltage", "duty-delay"]
+        );
+        // The outside effects are no catalogue names.
+        for plant in Plant::ALL {
+            for o in outside_effects(plant) {
+                assert!(catalogue::check(plant, o).is_err(), "{o}");
+            }
+        }
     }
 }

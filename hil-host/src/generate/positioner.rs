@@ -16,7 +16,7 @@ const POS_LSB_M: f64 = 1e-6;
 const FORCE_NOISE_N: f64 = 0.5;
 
 /// Draws the plant: baseline M, Fv, offset; the hidden effect's magnitude on top.
-fn draw_params(effect: &str, rng: &mut Rng) -> (PositionerParams, Vec<(String, f64)>) {
+fn draw_params(effects: &[&str], rng: &mut Rng) -> (PositionerParams, Vec<(String, f64)>) {
     let mut p = PositionerParams::emps().baseline();
     p.mass_kg = rng.uniform(60.0, 130.0);
     p.fv_n_s_per_m = rng.uniform(120.0, 300.0);
@@ -27,6 +27,14 @@ fn draw_params(effect: &str, rng: &mut Rng) -> (PositionerParams, Vec<(String, f
         ("Fv_Ns_per_m".into(), p.fv_n_s_per_m),
         ("offset_N".into(), p.offset_n),
     ];
+    // The two catalogue effects nest: the richer one decides.
+    let effect = if effects.contains(&"asymmetric-friction") {
+        "asymmetric-friction"
+    } else if effects.contains(&"coulomb-friction") {
+        "coulomb-friction"
+    } else {
+        "none"
+    };
     match effect {
         "coulomb-friction" => {
             p.fc_n = rng.uniform(8.0, 35.0);
@@ -127,11 +135,14 @@ fn validation_reference(rng: &mut Rng, duration_s: f64) -> Vec<f64> {
     r
 }
 
-/// Runs the closed loop; returns (force logged, position logged).
+/// Runs the closed loop; returns (force logged, position logged). `spring` = (N/m, m): a
+/// position-dependent force −k (q − q0) on the load (the outside effect `position-spring`;
+/// k = 0 without it).
 fn run_loop(
     p: &PositionerParams,
     reference: &[f64],
     pulses: &[f64],
+    spring: (f64, f64),
     rng: &mut Rng,
 ) -> Result<(Vec<f64>, Vec<f64>), String> {
     let ctrl_p = EmpsControllerParams::emps();
@@ -148,7 +159,7 @@ fn run_loop(
         force_log.push(force + FORCE_NOISE_N * rng.normal());
         pos_log.push(pos_meas);
         for _ in 0..SUBSTEPS {
-            plant.step(force, DT_S / SUBSTEPS as f64);
+            plant.step(force - spring.0 * (plant.pos_m() - spring.1), DT_S / SUBSTEPS as f64);
         }
     }
     Ok((force_log, pos_log))
@@ -188,10 +199,33 @@ pub fn generate(effect: &str, seed: u64) -> Result<Case, String> {
 
 /// A case with chosen experiment lengths in seconds (1 kHz: 100 s is a 100 000-sample log).
 pub fn generate_sized(effect: &str, seed: u64, estimation_s: f64, validation_s: f64) -> Result<Case, String> {
+    let parts = super::parse_effects(Plant::Positioner, effect)?;
+    generate_parts(&parts, seed, estimation_s, validation_s)
+}
+
+/// A case with the given hidden effects (catalogue or outside), default lengths.
+pub fn generate_effects(parts: &[&str], seed: u64) -> Result<Case, String> {
+    generate_parts(parts, seed, 25.0, 15.0)
+}
+
+fn generate_parts(parts: &[&str], seed: u64, estimation_s: f64, validation_s: f64) -> Result<Case, String> {
+    let effect = if parts.is_empty() {
+        "none".to_string()
+    } else {
+        parts.join("+")
+    };
     let mut rng = Rng::new(seed);
-    let (params, truth) = draw_params(effect, &mut rng);
+    let (params, mut truth) = draw_params(parts, &mut rng);
+    // Outside the catalogue: a return spring about the middle of the travel.
+    let spring = if parts.contains(&"position-spring") {
+        let k = rng.uniform(300.0, 900.0);
+        truth.push(("spring_N_per_m".into(), k));
+        (k, 0.12)
+    } else {
+        (0.0, 0.0)
+    };
     let est_ref = estimation_reference(&mut rng, estimation_s);
-    let (ef, ep) = run_loop(&params, &est_ref, &[], &mut rng)?;
+    let (ef, ep) = run_loop(&params, &est_ref, &[], spring, &mut rng)?;
     let val_ref = validation_reference(&mut rng, validation_s);
     // Force pulses on the controller output: 50 ms, ±40..120 N, every 1-2 s.
     let mut pulses = vec![0.0; val_ref.len()];
@@ -203,11 +237,11 @@ pub fn generate_sized(effect: &str, seed: u64, estimation_s: f64, validation_s: 
         }
         k += (rng.uniform(1.0, 2.0) / DT_S) as usize;
     }
-    let (vf, vp) = run_loop(&params, &val_ref, &pulses, &mut rng)?;
+    let (vf, vp) = run_loop(&params, &val_ref, &pulses, spring, &mut rng)?;
     Ok(Case {
         plant: Plant::Positioner,
         seed,
-        effect: effect.to_string(),
+        effect,
         truth,
         estimation_csv: log_text("estimation", seed, &est_ref, &ef, &ep),
         validation_csv: log_text("validation", seed, &val_ref, &vf, &vp),

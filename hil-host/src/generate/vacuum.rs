@@ -38,8 +38,9 @@ const U_NOISE_V: f64 = 0.02;
 const U_LSB_V: f64 = 0.01;
 const DUTY_LSB_PCT: f64 = 0.1;
 
-/// The actuator: preset by the seed, parameters drawn around it, the hidden effect on top.
-fn draw_params(effect: &str, rng: &mut Rng) -> (VacuumParams, &'static str, VacuumParams) {
+/// The actuator: preset by the seed, parameters drawn around it, the hidden effects on top
+/// (each drawn as it is alone, in the order given).
+fn draw_params(effects_on: &[&str], rng: &mut Rng) -> (VacuumParams, &'static str, VacuumParams) {
     let pick = ((rng.unit() * 3.0) as usize).min(2);
     let (preset, name) = [
         (VacuumParams::lpt(), "LPT"),
@@ -101,27 +102,29 @@ fn draw_params(effect: &str, rng: &mut Rng) -> (VacuumParams, &'static str, Vacu
     p.damping_extend_kpa_s_per_pct *= damping;
     p.damping_retract_kpa_s_per_pct *= damping * scale(rng, 0.85, 1.15);
     let mut effects = VacuumEffects::NONE;
-    match effect {
-        "supply-voltage" => effects.supply_voltage = true,
-        "pressure-direction" => {
-            effects.pressure_direction = true;
-            let ratio = rng.uniform(2.2, 3.5);
-            p.tau_fall_s = if rng.coin() {
-                p.tau_rise_s * ratio
-            } else {
-                p.tau_rise_s / ratio
-            };
+    for effect in effects_on {
+        match *effect {
+            "supply-voltage" => effects.supply_voltage = true,
+            "pressure-direction" => {
+                effects.pressure_direction = true;
+                let ratio = rng.uniform(2.2, 3.5);
+                p.tau_fall_s = if rng.coin() {
+                    p.tau_rise_s * ratio
+                } else {
+                    p.tau_rise_s / ratio
+                };
+            }
+            "coulomb-friction" => {
+                effects.coulomb_friction = true;
+                p.fc_kpa = rng.uniform(1.5, 4.0);
+                p.dahl_sigma_kpa_per_pct = p.fc_kpa / rng.uniform(0.2, 0.6);
+            }
+            "backlash" => {
+                effects.backlash = true;
+                p.backlash_pct = rng.uniform(3.0, 8.0);
+            }
+            _ => {}
         }
-        "coulomb-friction" => {
-            effects.coulomb_friction = true;
-            p.fc_kpa = rng.uniform(1.5, 4.0);
-            p.dahl_sigma_kpa_per_pct = p.fc_kpa / rng.uniform(0.2, 0.6);
-        }
-        "backlash" => {
-            effects.backlash = true;
-            p.backlash_pct = rng.uniform(3.0, 8.0);
-        }
-        _ => {}
     }
     (p.with_effects(effects), name, preset)
 }
@@ -259,8 +262,17 @@ fn validation_profile(rng: &mut Rng, dt: f64, p_amb0: f64, seconds: f64, nominal
     pr
 }
 
-/// Runs the bench; returns the log text.
-fn run_bench(p: &VacuumParams, pr: &Profile, dt: f64, rng: &mut Rng, kind: &str, seed: u64) -> Result<String, String> {
+/// Runs the bench; returns the log text. The valve acts on the duty commanded `delay`
+/// samples earlier (0: at once; the outside effect `duty-delay`); the log shows the command.
+fn run_bench(
+    p: &VacuumParams,
+    pr: &Profile,
+    dt: f64,
+    delay: usize,
+    rng: &mut Rng,
+    kind: &str,
+    seed: u64,
+) -> Result<String, String> {
     let mut act = VacuumValveActuator::<f64>::new(p).map_err(|e| format!("{e:?}"))?;
     let tank_hi = rng.uniform(30.0, 38.0);
     let tank_lo = tank_hi - rng.uniform(8.0, 12.0);
@@ -270,7 +282,7 @@ fn run_bench(p: &VacuumParams, pr: &Profile, dt: f64, rng: &mut Rng, kind: &str,
     let n = pr.duty.len();
     let mut cols: [Vec<f64>; 7] = Default::default();
     let input = |k: usize, p_tank: f64| VacuumInputs {
-        duty_pct: pr.duty[k],
+        duty_pct: pr.duty[k.saturating_sub(delay)],
         u_batt_v: pr.u_batt[k],
         p_amb_kpa: pr.p_amb[k],
         p_tank_kpa: p_tank,
@@ -310,12 +322,16 @@ fn run_bench(p: &VacuumParams, pr: &Profile, dt: f64, rng: &mut Rng, kind: &str,
     Ok(format_log(&meta, &columns))
 }
 
-/// The true parameters under the family's names (the effect's own ones included).
-fn truth(p: &VacuumParams, effect: &str, preset: &str) -> Vec<(String, f64)> {
+/// The true parameters under the family's names (the catalogue effects' own ones included).
+fn truth(p: &VacuumParams, effects: &[&str], preset: &str) -> Vec<(String, f64)> {
     let m = VacuumModel::from_params(p);
-    let e = if effect == "none" { None } else { Some(effect) };
+    let catalogue: Vec<&str> = effects
+        .iter()
+        .copied()
+        .filter(|e| crate::diagnose::catalogue::check(Plant::Vacuum, e).is_ok())
+        .collect();
     let mut t = vec![(format!("preset_{preset}"), 1.0)];
-    if let Ok(names) = m.parameter_names(e) {
+    if let Ok(names) = m.parameter_names(&catalogue) {
         t.extend(m.named(&names));
     }
     t
@@ -323,8 +339,23 @@ fn truth(p: &VacuumParams, effect: &str, preset: &str) -> Vec<(String, f64)> {
 
 /// A case with a given estimation length (seconds of validation follow the same sampling).
 pub fn generate_sized(effect: &str, seed: u64, estimation_repeats: usize, validation_s: f64) -> Result<Case, String> {
+    let parts = super::parse_effects(Plant::Vacuum, effect)?;
+    generate_parts(&parts, seed, estimation_repeats, validation_s)
+}
+
+/// A case with the given hidden effects (catalogue or outside), default lengths.
+pub fn generate_effects(parts: &[&str], seed: u64) -> Result<Case, String> {
+    generate_parts(parts, seed, 1, 60.0)
+}
+
+fn generate_parts(parts: &[&str], seed: u64, estimation_repeats: usize, validation_s: f64) -> Result<Case, String> {
+    let effect = if parts.is_empty() {
+        "none".to_string()
+    } else {
+        parts.join("+")
+    };
     let mut rng = Rng::new(seed);
-    let (params, preset, nominal) = draw_params(effect, &mut rng);
+    let (params, preset, nominal) = draw_params(parts, &mut rng);
     let nominal = VacuumStaticModel::<f64>::new(&nominal).map_err(|e| format!("{e:?}"))?;
     let dt = if rng.coin() { 0.01 } else { 0.0125 };
     let p_amb0 = rng.uniform(96.0, 101.5);
@@ -336,13 +367,25 @@ pub fn generate_sized(effect: &str, seed: u64, estimation_repeats: usize, valida
         est.p_amb.extend(more.p_amb);
     }
     let val = validation_profile(&mut rng, dt, p_amb0, validation_s, &nominal);
-    let estimation_csv = run_bench(&params, &est, dt, &mut rng, "estimation", seed)?;
-    let validation_csv = run_bench(&params, &val, dt, &mut rng, "validation", seed)?;
+    // Outside the catalogue: a transport delay of the duty, drawn last (the other draws are
+    // those of the same seed without it).
+    let delay_s = if parts.contains(&"duty-delay") {
+        rng.uniform(0.06, 0.15)
+    } else {
+        0.0
+    };
+    let delay = (delay_s / dt).round() as usize;
+    let estimation_csv = run_bench(&params, &est, dt, delay, &mut rng, "estimation", seed)?;
+    let validation_csv = run_bench(&params, &val, dt, delay, &mut rng, "validation", seed)?;
+    let mut truth = truth(&params, parts, preset);
+    if delay > 0 {
+        truth.push(("duty_delay_s".into(), delay as f64 * dt));
+    }
     Ok(Case {
         plant: Plant::Vacuum,
         seed,
-        effect: effect.to_string(),
-        truth: truth(&params, effect, preset),
+        effect,
+        truth,
         estimation_csv,
         validation_csv,
     })
@@ -396,9 +439,9 @@ mod tests {
     #[test]
     fn hidden_effect_is_in_the_plant_and_only_there() {
         // Same seed: the effect case differs from the control only by the effect's parameters.
-        let none = draw_params("none", &mut Rng::new(5)).0;
+        let none = draw_params(&[], &mut Rng::new(5)).0;
         for effect in ["supply-voltage", "pressure-direction", "coulomb-friction", "backlash"] {
-            let (p, _, _) = draw_params(effect, &mut Rng::new(5));
+            let (p, _, _) = draw_params(&[effect], &mut Rng::new(5));
             assert_eq!(p.static_map, none.static_map);
             assert_eq!(p.tau_rise_s, none.tau_rise_s);
             let on = [

@@ -192,8 +192,9 @@ pub fn check_meta(source: &str, meta: &[MetaEntry], plant_override: Option<Plant
     if !unknown.is_empty() {
         unknown.dedup();
         notices.push(format!(
-            "metadata {} not used by the tools; kept",
-            list_names(unknown.iter().copied(), "key", "keys")
+            "metadata {} {} not used by the tools; kept",
+            list_names(unknown.iter().copied(), "key", "keys"),
+            if unknown.len() == 1 { "is" } else { "are" }
         ));
     }
     let from_meta = seen.get("plant").map(|m| (Plant::from_name(&m.value), m.line));
@@ -298,14 +299,15 @@ pub fn select_columns(
     }
     let mut notices = Vec::new();
     if !ignored.is_empty() {
+        let one = ignored.len() == 1;
+        let what = if one {
+            format!("is not a `{plant}` column")
+        } else {
+            format!("are not `{plant}` columns")
+        };
         notices.push(format!(
-            "{} not `{plant}` {}; ignored",
-            list_names(ignored.into_iter(), "column", "columns"),
-            if names.len() - order.len() == 1 {
-                "column"
-            } else {
-                "columns"
-            }
+            "{} {what}; ignored",
+            list_names(ignored.into_iter(), "column", "columns")
         ));
     }
     Ok(Selection { keep, order, notices })
@@ -487,8 +489,9 @@ pub fn check_samples(
         .map(|(name, _)| name.as_str())
         .collect();
     if !constant.is_empty() {
+        let verb = if constant.len() == 1 { "is" } else { "are" };
         notices.push(format!(
-            "{} constant over all {n} samples (no excitation to identify from)",
+            "{} {verb} constant over all {n} samples (no excitation to identify from)",
             list_names(constant.into_iter(), "column", "columns")
         ));
     }

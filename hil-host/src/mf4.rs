@@ -1,0 +1,582 @@
+//! ASAM MDF 4 (`.mf4`) logs, as loggers (ETAS, Vector, CSS, IPEtronik) record them and asammdf
+//! exports them, read into the same [`Log`] as a DATA-FORMAT CSV file.
+//!
+//! The file format itself (blocks ID, HD, DG, CG, CN, CC, TX/MD, DT, DL, DZ, HL; deflate and
+//! transposed deflate) is decoded by the `falcon_mdf` crate, which is made for reading MF4,
+//! checked by its authors against asammdf, and returns an error rather than partial data on a
+//! malformed file (docs/data-format.md says why it was chosen). This module maps what the
+//! file holds onto the log contract:
+//!
+//! - Channels are found by their DATA-FORMAT names (`phase_deg`), or renamed from the logger's
+//!   names by a [`ChannelMap`] (`"ECU.PhaseCam_deg" = "phase_deg"`).
+//! - Metadata (`plant`, bench constants such as `kp`) come from the header comment: `key: value`
+//!   lines of its text (a leading `#` allowed, as in the CSV), or `<common_properties>` entries
+//!   `<e name="kp">25</e>`; the map file's `[meta]` adds to them and wins over them.
+//! - The time base is the master channel of the channel group that holds the primary output.
+//!   Columns recorded in other channel groups (other rates) are resampled onto it: linearly for
+//!   continuous signals, by zero-order hold (the last value at or before each instant) for 0/1
+//!   flags; a notice says which columns, from which rate, and how.
+//! - The columns then go through the CSV reader's checks (`crate::log::log_from_columns`:
+//!   typed metadata, ranges, flags, uniform and increasing time, required columns), so an MF4
+//!   log and a CSV log of the same samples give the same [`Log`], bit for bit. Errors name the
+//!   file and the channel (and the sample index where one sample is at fault).
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use falcon_mdf::{Channel, Mf4File};
+
+use crate::log::{log_from_columns, Log, LogError, Plant, FLAGS};
+
+/// True when `path` names an MF4 file: the `.mf4`/`.mdf` extension, or the MDF identification
+/// block's signature at the start of the file (a logger's file renamed to `.dat`).
+pub fn is_mf4(path: &Path) -> bool {
+    let by_name = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("mf4") || e.eq_ignore_ascii_case("mdf"));
+    by_name || has_mdf_signature(path)
+}
+
+fn has_mdf_signature(path: &Path) -> bool {
+    use std::io::Read;
+    let mut head = [0u8; 8];
+    std::fs::File::open(path)
+        .and_then(|mut f| f.read_exact(&mut head))
+        .is_ok()
+        && (&head == b"MDF     " || &head == b"UnFinMF ")
+}
+
+/// A channel map: the logger's channel names renamed to DATA-FORMAT column names, and metadata
+/// the file does not carry. Read from a small TOML file (`--channel-map FILE`):
+///
+/// ```toml
+/// [channels]
+/// "ECU.PhaseCam_deg" = "phase_deg"
+/// "ECU.CamCmd" = "motor_cmd_rpm"
+///
+/// [meta]
+/// plant = "evvt"
+/// kp = 25
+/// ```
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ChannelMap {
+    /// The map file, for messages.
+    pub file: String,
+    /// (logger channel name, DATA-FORMAT column name), sorted by channel name.
+    pub channels: Vec<(String, String)>,
+    /// Metadata `key = value` (numbers and booleans as their text), sorted by key.
+    pub meta: Vec<(String, String)>,
+}
+
+impl ChannelMap {
+    /// Reads a map file; errors name the file, line and column (or key).
+    pub fn read(path: &Path) -> Result<ChannelMap, LogError> {
+        let file = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|e| LogError {
+            file: file.clone(),
+            line: None,
+            column: None,
+            message: format!("cannot read the channel map: {e}"),
+        })?;
+        ChannelMap::parse(&file, &text)
+    }
+
+    /// Parses map text; `file` names it in errors.
+    pub fn parse(file: &str, text: &str) -> Result<ChannelMap, LogError> {
+        let err = |line: Option<usize>, column: Option<String>, message: String| LogError {
+            file: file.to_string(),
+            line,
+            column,
+            message,
+        };
+        let table: toml::Table = text.parse().map_err(|e: toml::de::Error| {
+            let (line, col) = e
+                .span()
+                .map(|s| line_col(text, s.start))
+                .map_or((None, None), |(l, c)| (Some(l), Some(format!("{c}"))));
+            err(line, col, format!("not valid TOML: {}", e.message()))
+        })?;
+        let mut map = ChannelMap {
+            file: file.to_string(),
+            ..ChannelMap::default()
+        };
+        let known_columns: Vec<&str> = Plant::ALL
+            .iter()
+            .flat_map(|p| p.columns().iter().map(|(n, _)| *n))
+            .collect();
+        for (section, value) in &table {
+            let toml::Value::Table(entries) = value else {
+                return Err(err(
+                    None,
+                    Some(section.clone()),
+                    format!("`{section}` must be a table ([channels] or [meta])"),
+                ));
+            };
+            match section.as_str() {
+                "channels" => {
+                    for (from, to) in entries {
+                        let toml::Value::String(to) = to else {
+                            return Err(err(
+                                None,
+                                Some(format!("channels.\"{from}\"")),
+                                "the column name must be a string".into(),
+                            ));
+                        };
+                        if !known_columns.contains(&to.as_str()) {
+                            return Err(err(
+                                None,
+                                Some(format!("channels.\"{from}\"")),
+                                format!("`{to}` is not a DATA-FORMAT column of any plant"),
+                            ));
+                        }
+                        if let Some((other, _)) = map.channels.iter().find(|(_, t)| t == to) {
+                            return Err(err(
+                                None,
+                                Some(format!("channels.\"{from}\"")),
+                                format!("column `{to}` is already mapped from channel `{other}`"),
+                            ));
+                        }
+                        map.channels.push((from.clone(), to.clone()));
+                    }
+                }
+                "meta" => {
+                    for (key, v) in entries {
+                        let v = match v {
+                            toml::Value::String(s) => s.clone(),
+                            toml::Value::Integer(i) => i.to_string(),
+                            toml::Value::Float(f) => f.to_string(),
+                            toml::Value::Boolean(b) => b.to_string(),
+                            _ => {
+                                return Err(err(
+                                    None,
+                                    Some(format!("meta.{key}")),
+                                    "a metadata value must be a string, number or boolean".into(),
+                                ))
+                            }
+                        };
+                        map.meta.push((key.clone(), v));
+                    }
+                }
+                _ => {
+                    return Err(err(
+                        None,
+                        Some(section.clone()),
+                        format!("unknown section `[{section}]` (known: [channels], [meta])"),
+                    ))
+                }
+            }
+        }
+        Ok(map)
+    }
+
+    /// The column a logger channel is read as: its mapped name, else its own name.
+    fn column_of<'a>(&'a self, channel: &'a str) -> &'a str {
+        self.channels
+            .iter()
+            .find(|(from, _)| from == channel)
+            .map_or(channel, |(_, to)| to.as_str())
+    }
+}
+
+/// 1-based line and column of a byte offset.
+fn line_col(text: &str, offset: usize) -> (usize, usize) {
+    let before = &text[..offset.min(text.len())];
+    let line = before.matches('\n').count() + 1;
+    let col = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+    (line, col)
+}
+
+/// Metadata from the header comment: `key: value` lines of its text and `<common_properties>`.
+fn header_meta(mdf: &Mf4File) -> Vec<(String, String)> {
+    let mut meta: Vec<(String, String)> = Vec::new();
+    let mut put = |k: &str, v: &str| {
+        let k = k.trim();
+        // A key is one word (the CSV's keys are identifiers); prose with a colon is not metadata.
+        if !k.is_empty() && !k.contains(char::is_whitespace) && !meta.iter().any(|(m, _)| m == k) {
+            meta.push((k.to_string(), v.trim().replace(['\n', '\r'], " ")));
+        }
+    };
+    let text = if mdf.metadata().text().is_empty() {
+        mdf.comment()
+    } else {
+        mdf.metadata().text()
+    };
+    for line in text.lines() {
+        if let Some((k, v)) = line.trim().trim_start_matches('#').split_once(':') {
+            put(k, v);
+        }
+    }
+    for (k, v) in mdf.metadata().properties() {
+        put(k, v);
+    }
+    meta
+}
+
+/// Reads an MF4 log. `plant` overrides the file's `plant` metadata; `map` renames channels and
+/// adds metadata.
+pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> Result<Log, LogError> {
+    let file = path.display().to_string();
+    let err = |column: Option<String>, message: String| LogError {
+        file: file.clone(),
+        line: None,
+        column,
+        message,
+    };
+    let bytes = std::fs::read(path).map_err(|e| err(None, format!("cannot read: {e}")))?;
+    let mdf = Mf4File::from_bytes(bytes).map_err(|e| err(None, format!("not a readable MF4 file: {e}")))?;
+    let empty = ChannelMap::default();
+    let map = map.unwrap_or(&empty);
+    let mut notices = Vec::new();
+
+    // Metadata: the header comment, then the map file's (which wins).
+    let mut meta = header_meta(&mdf);
+    for (k, v) in &map.meta {
+        match meta.iter_mut().find(|(m, _)| m == k) {
+            Some(slot) if slot.1 != *v => {
+                notices.push(format!(
+                    "metadata `{k}`: the channel map's `{v}` replaces the file's `{}`",
+                    slot.1
+                ));
+                slot.1 = v.clone();
+            }
+            Some(_) => {}
+            None => meta.push((k.clone(), v.clone())),
+        }
+    }
+    let plant = match plant {
+        Some(p) => p,
+        None => {
+            let name = meta
+                .iter()
+                .find(|(k, _)| k == "plant")
+                .map(|(_, v)| v.clone())
+                .ok_or_else(|| {
+                    err(
+                        None,
+                        "no `plant` in the header comment or the channel map's [meta], and no plant given (--plant)"
+                            .into(),
+                    )
+                })?;
+            Plant::from_name(&name).ok_or_else(|| {
+                err(
+                    None,
+                    format!("unknown plant `{name}` in metadata (known: vacuum, ehvva, evvt, positioner)"),
+                )
+            })?
+        }
+    };
+
+    // Every non-master channel under the column name it is read as.
+    let mut by_column: BTreeMap<&str, Vec<&Channel>> = BTreeMap::new();
+    let mut ignored: Vec<&str> = Vec::new();
+    let wanted: Vec<&str> = plant.columns().iter().map(|(n, _)| *n).collect();
+    for ch in mdf.channels().filter(|c| !c.is_master()) {
+        let column = map.column_of(&ch.name);
+        if wanted.contains(&column) {
+            by_column.entry(column).or_default().push(ch);
+        } else {
+            ignored.push(&ch.name);
+        }
+    }
+    if !ignored.is_empty() {
+        notices.push(format!(
+            "channel(s) {} are not `{plant}` columns; ignored",
+            ignored.iter().map(|n| format!("`{n}`")).collect::<Vec<_>>().join(", ")
+        ));
+    }
+    for (from, to) in &map.channels {
+        if wanted.contains(&to.as_str()) && !mdf.channels().any(|c| c.name == *from) {
+            notices.push(format!(
+                "channel map {}: channel `{from}` (for `{to}`) is not in the file",
+                map.file
+            ));
+        }
+    }
+    let describe = |column: &str, ch: &Channel| {
+        if ch.name == column {
+            format!("channel `{}`", ch.name)
+        } else {
+            format!("channel `{}` (mapped to `{column}`)", ch.name)
+        }
+    };
+
+    // The time base: the master of the primary output's channel group.
+    let primary = plant.primary_output();
+    let primary_ch = match by_column.get(primary).map(Vec::as_slice) {
+        Some([ch]) => *ch,
+        Some(several) => {
+            return Err(err(
+                Some(primary.into()),
+                format!(
+                "the primary output is in {} channel groups ({}); keep one, or rename the others in the channel map",
+                several.len(),
+                several
+                    .iter()
+                    .map(|c| describe(primary, c))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+            ))
+        }
+        None => return Err(missing(&file, &mdf, map, primary, plant)),
+    };
+    let group = (primary_ch.data_group_index, primary_ch.channel_group_index);
+    let t_s = mdf.channel_timestamps(primary_ch).map_err(|e| {
+        err(
+            Some(primary.into()),
+            format!("{}: time base unreadable: {e}", describe(primary, primary_ch)),
+        )
+    })?;
+    if mdf.data_groups()[group.0].channel_groups[group.1]
+        .master_channel()
+        .is_none()
+    {
+        return Err(err(
+            Some(primary.into()),
+            format!(
+                "{}: its channel group has no master (time) channel",
+                describe(primary, primary_ch)
+            ),
+        ));
+    }
+
+    let mut columns: Vec<(String, Vec<f64>)> = vec![("t_s".into(), t_s.clone())];
+    let mut resampled: Vec<String> = Vec::new();
+    for (column, _) in plant.columns() {
+        let Some(found) = by_column.get(column) else {
+            continue; // A missing required column is the CSV check's error below.
+        };
+        // One channel per column: the one in the primary group when the name is in several.
+        let ch = match found.as_slice() {
+            [ch] => *ch,
+            several => match several
+                .iter()
+                .find(|c| (c.data_group_index, c.channel_group_index) == group)
+            {
+                Some(ch) => {
+                    notices.push(format!(
+                        "column `{column}` is in {} channel groups; the one in the primary output's group is read",
+                        several.len()
+                    ));
+                    *ch
+                }
+                None => {
+                    return Err(err(
+                        Some((*column).into()),
+                        format!(
+                        "in {} channel groups, none the primary output's ({}); rename all but one in the channel map",
+                        several.len(),
+                        several
+                            .iter()
+                            .map(|c| describe(column, c))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                    ))
+                }
+            },
+        };
+        let values = mdf.signal(ch).and_then(|s| s.values_f64()).map_err(|e| {
+            err(
+                Some((*column).into()),
+                format!("{}: unreadable: {e}", describe(column, ch)),
+            )
+        })?;
+        let values = if (ch.data_group_index, ch.channel_group_index) == group {
+            values
+        } else {
+            let t_ch = mdf.channel_timestamps(ch).map_err(|e| {
+                err(
+                    Some((*column).into()),
+                    format!("{}: time base unreadable: {e}", describe(column, ch)),
+                )
+            })?;
+            let flag = FLAGS.contains(column);
+            let (out, outside) = resample(&t_ch, &values, &t_s, flag)
+                .map_err(|m| err(Some((*column).into()), format!("{}: {m}", describe(column, ch))))?;
+            let rate = rate_hz(&t_ch);
+            let mut note = format!(
+                "`{column}` ({}) is in another channel group at {} Hz: resampled onto `{primary}`'s {} Hz time base by {}",
+                describe(column, ch),
+                fmt_hz(rate),
+                fmt_hz(rate_hz(&t_s)),
+                if flag {
+                    "zero-order hold (the last value at or before each instant)"
+                } else {
+                    "linear interpolation"
+                }
+            );
+            if outside > 0 {
+                note.push_str(&format!(
+                    "; {outside} sample(s) outside its recorded span take its first or last value"
+                ));
+            }
+            resampled.push(note);
+            out
+        };
+        if values.len() != t_s.len() {
+            return Err(err(
+                Some((*column).into()),
+                format!(
+                    "{} has {} samples, its time channel {}",
+                    describe(column, ch),
+                    values.len(),
+                    t_s.len()
+                ),
+            ));
+        }
+        columns.push(((*column).to_string(), values));
+    }
+    notices.extend(resampled);
+
+    let names: BTreeMap<&str, String> = by_column
+        .iter()
+        .filter_map(|(col, chs)| chs.first().map(|c| (*col, describe(col, c))))
+        .collect();
+    // The same checks as a CSV file (crate::log::check): errors name the column and the
+    // sample; here they also name the logger's channel.
+    let mut log = log_from_columns(&file, meta, columns, Some(plant)).map_err(|mut e| {
+        if let Some(c) = e.column.as_deref().and_then(|c| names.get(c)) {
+            e.message = format!("{c}: {}", e.message);
+        }
+        // A sample's time helps find it in the logger's tool.
+        if let Some((head, tail)) = e.message.split_once(" (0-based)") {
+            let k = head.rsplit(' ').next().and_then(|k| k.parse::<usize>().ok());
+            if let Some(t) = k.and_then(|k| t_s.get(k)) {
+                e.message = format!("{head} (0-based, t = {t} s){tail}");
+            }
+        }
+        if e.message.contains("is missing") {
+            return missing(&file, &mdf, map, e.column.as_deref().unwrap_or(""), plant);
+        }
+        e
+    })?;
+    log.notices.splice(0..0, notices);
+    Ok(log)
+}
+
+/// The error for a required column that no channel provides, with what the file has.
+fn missing(file: &str, mdf: &Mf4File, map: &ChannelMap, column: &str, plant: Plant) -> LogError {
+    let looked = match map.channels.iter().find(|(_, to)| to == column) {
+        Some((from, _)) => format!("channel `{from}` (channel map {}) or `{column}`", map.file),
+        None => format!("channel `{column}`"),
+    };
+    let mut have: Vec<&str> = mdf
+        .channels()
+        .filter(|c| !c.is_master())
+        .map(|c| c.name.as_str())
+        .collect();
+    have.sort_unstable();
+    have.dedup();
+    LogError {
+        file: file.to_string(),
+        line: None,
+        column: Some(column.to_string()),
+        message: format!(
+            "required `{plant}` column `{column}` is missing: no {looked} in the file (its channels: {}); \
+             rename the logger's channel with --channel-map",
+            have.join(", ")
+        ),
+    }
+}
+
+/// `values` recorded at `t_from` onto the instants `t_to`: linear, or the last value at or
+/// before each instant for flags. Instants outside the recorded span take the first or last
+/// value; their count is returned. The recorded times must increase.
+fn resample(t_from: &[f64], values: &[f64], t_to: &[f64], hold: bool) -> Result<(Vec<f64>, usize), String> {
+    if t_from.is_empty() || t_from.len() != values.len() {
+        return Err(format!("{} samples against {} time stamps", values.len(), t_from.len()));
+    }
+    if let Some(k) = t_from.windows(2).position(|w| !(w[1] > w[0])) {
+        return Err(format!(
+            "its time stamps do not increase at sample {} ({} then {})",
+            k + 1,
+            t_from[k],
+            t_from[k + 1]
+        ));
+    }
+    let last = t_from.len() - 1;
+    let mut out = Vec::with_capacity(t_to.len());
+    let mut outside = 0;
+    let mut j = 0; // t_from[j] <= t < t_from[j + 1] for the current t (instants increase).
+    for &t in t_to {
+        if t < t_from[0] {
+            outside += 1;
+            out.push(values[0]);
+            continue;
+        }
+        if t > t_from[last] {
+            outside += 1;
+            out.push(values[last]);
+            continue;
+        }
+        while j < last && t_from[j + 1] <= t {
+            j += 1;
+        }
+        if j == last || hold || t == t_from[j] {
+            out.push(values[j]);
+        } else {
+            let w = (t - t_from[j]) / (t_from[j + 1] - t_from[j]);
+            out.push(values[j] + w * (values[j + 1] - values[j]));
+        }
+    }
+    Ok((out, outside))
+}
+
+fn rate_hz(t: &[f64]) -> f64 {
+    match (t.first(), t.last()) {
+        (Some(a), Some(b)) if t.len() > 1 && b > a => (t.len() - 1) as f64 / (b - a),
+        _ => f64::NAN,
+    }
+}
+
+fn fmt_hz(hz: f64) -> String {
+    if hz >= 100.0 {
+        format!("{hz:.0}")
+    } else {
+        format!("{hz:.3}")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn resampling_is_linear_for_signals_and_holds_flags() {
+        let t_from = [0.0, 1.0, 2.0];
+        let v = [0.0, 10.0, 0.0];
+        let t_to = [-0.5, 0.0, 0.25, 1.0, 1.5, 2.0, 2.5];
+        let (lin, outside) = resample(&t_from, &v, &t_to, false).unwrap();
+        assert_eq!(lin, [0.0, 0.0, 2.5, 10.0, 5.0, 0.0, 0.0]);
+        assert_eq!(outside, 2);
+        let (zoh, _) = resample(&t_from, &[0.0, 1.0, 0.0], &t_to, true).unwrap();
+        assert_eq!(zoh, [0.0, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0]);
+        assert!(resample(&[0.0, 0.0], &[1.0, 2.0], &t_to, false)
+            .unwrap_err()
+            .contains("do not increase"));
+    }
+
+    #[test]
+    fn channel_maps_are_checked_by_name() {
+        let m = ChannelMap::parse(
+            "m.toml",
+            "[channels]\n\"ECU.PhaseCam_deg\" = \"phase_deg\"\n[meta]\nplant = \"evvt\"\nkp = 25\n",
+        )
+        .unwrap();
+        assert_eq!(m.column_of("ECU.PhaseCam_deg"), "phase_deg");
+        assert_eq!(m.column_of("engine_rpm"), "engine_rpm");
+        assert_eq!(m.meta, [("kp".into(), "25".into()), ("plant".into(), "evvt".into())]);
+
+        let e = ChannelMap::parse("m.toml", "[channels]\n\"A\" = \"phase\"\n").unwrap_err();
+        assert_eq!(e.column.as_deref(), Some("channels.\"A\""));
+        assert!(e.message.contains("`phase` is not a DATA-FORMAT column"), "{e}");
+        let e = ChannelMap::parse("m.toml", "[channels]\n\"A\" = \"phase_deg\"\n\"B\" = \"phase_deg\"\n").unwrap_err();
+        assert!(e.message.contains("already mapped from channel `A`"), "{e}");
+        let e = ChannelMap::parse("m.toml", "[channels]\n\"A\" = phase_deg\n").unwrap_err();
+        assert_eq!(e.line, Some(2), "{e}");
+        let e = ChannelMap::parse("m.toml", "[chanels]\n").unwrap_err();
+        assert!(e.message.contains("unknown section `[chanels]`"), "{e}");
+    }
+}

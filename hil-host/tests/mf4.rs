@@ -1,0 +1,321 @@
+//! MF4 logs (issue #15.1): files written by asammdf (the Python library most logger tools export
+//! with, `tools/py/write_mf4.py`) read into the same log as the CSV they were made from, and
+//! diagnose the same: compressed (deflate, transposed deflate), with logger channel names and a
+//! channel map, metadata from the header comment or the map, and channels in a second channel
+//! group at another rate.
+//!
+//! The files are written by the Python venv `target/py-venv` (tools/test.sh sets it up from
+//! tools/py/requirements.txt). Without it the tests skip with a message, unless HIL_REQUIRE_PY
+//! is set (test.sh sets it), when they fail.
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use hil_host::diagnose::{self, report, Rules};
+use hil_host::generate;
+use hil_host::log::{read_log, read_log_mapped, Log, Plant};
+use hil_host::mf4::ChannelMap;
+use serde_json::Value;
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// The venv's python, or None (skip) when it is missing and HIL_REQUIRE_PY is unset.
+fn python() -> Option<PathBuf> {
+    let target = std::env::var_os("CARGO_TARGET_DIR").map_or_else(|| root().join("target"), PathBuf::from);
+    let py = target.join("py-venv/bin/python");
+    if py.exists() {
+        return Some(py);
+    }
+    if std::env::var_os("HIL_REQUIRE_PY").is_some() {
+        panic!(
+            "HIL_REQUIRE_PY is set but {} is missing: run tools/test.sh (it creates the venv from tools/py/requirements.txt)",
+            py.display()
+        );
+    }
+    eprintln!(
+        "SKIP: {} is missing (python3 -m venv target/py-venv && target/py-venv/bin/pip install -r tools/py/requirements.txt)",
+        py.display()
+    );
+    None
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("hil-mf4-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// Writes `csv` as an MF4 file with asammdf; `args` are write_mf4.py's options.
+fn write_mf4(py: &Path, csv: &Path, out: &Path, args: &[&str]) {
+    let o = Command::new(py)
+        .arg(root().join("tools/py/write_mf4.py"))
+        .arg(csv)
+        .arg(out)
+        .args(args)
+        .output()
+        .expect("python runs");
+    assert!(
+        o.status.success(),
+        "write_mf4.py {args:?} failed:\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
+
+fn diagnose_json(est: &Log, val: &Log) -> Value {
+    let family = diagnose::family_for(est.plant).unwrap();
+    let d = diagnose::diagnose(family.as_ref(), est, val, false, &Rules::default(), &mut |_| {}).unwrap();
+    report::to_json(&d)
+}
+
+/// Every number of two reports within `rel` (relative), every other value equal; file names
+/// may differ.
+fn assert_same_report(a: &Value, b: &Value, path: &str, rel: f64) {
+    match (a, b) {
+        (Value::Number(x), Value::Number(y)) => {
+            let (x, y) = (x.as_f64().unwrap(), y.as_f64().unwrap());
+            assert!(
+                (x - y).abs() <= rel * x.abs().max(y.abs()) + 1e-300,
+                "{path}: CSV {x} vs MF4 {y}"
+            );
+        }
+        (Value::Object(x), Value::Object(y)) => {
+            assert_eq!(x.keys().collect::<Vec<_>>(), y.keys().collect::<Vec<_>>(), "{path}");
+            for (k, v) in x {
+                if k != "file" {
+                    assert_same_report(v, &y[k], &format!("{path}.{k}"), rel);
+                }
+            }
+        }
+        (Value::Array(x), Value::Array(y)) => {
+            assert_eq!(x.len(), y.len(), "{path}");
+            for (i, (u, v)) in x.iter().zip(y).enumerate() {
+                assert_same_report(u, v, &format!("{path}[{i}]"), rel);
+            }
+        }
+        _ => assert_eq!(a, b, "{path}"),
+    }
+}
+
+fn assert_same_columns(csv: &Log, mf4: &Log) {
+    assert_eq!(csv.plant, mf4.plant);
+    for (name, v) in &csv.columns {
+        let w = mf4.col(name).unwrap_or_else(|| panic!("MF4 log lacks `{name}`"));
+        assert_eq!(v.len(), w.len(), "{name}");
+        if let Some(k) = (0..v.len()).find(|&k| v[k].to_bits() != w[k].to_bits()) {
+            panic!("`{name}` differs at sample {k}: CSV {} vs MF4 {}", v[k], w[k]);
+        }
+    }
+    assert_eq!(csv.dt_s, mf4.dt_s);
+}
+
+/// A generated positioner case (hidden Coulomb friction) as a logger would record it:
+/// transposed-deflate compressed, the position under the logger's name `Axis1.Pos_m` (renamed
+/// by a channel map), the metadata as header-comment properties with `gtau` left out (the map
+/// supplies it), and the reference `ref_m` in a second channel group at twice the rate. It must
+/// read to the CSV's columns bit for bit and diagnose the same, to 1e-9.
+#[test]
+fn compressed_mapped_two_rate_mf4_diagnoses_like_its_csv() {
+    let Some(py) = python() else { return };
+    let case = generate::generate(Plant::Positioner, "coulomb-friction", 2024).unwrap();
+    let dir = scratch("positioner");
+    let (est_csv, val_csv) = (dir.join("estimation.csv"), dir.join("validation.csv"));
+    std::fs::write(&est_csv, &case.estimation_csv).unwrap();
+    std::fs::write(&val_csv, &case.validation_csv).unwrap();
+    let csv_est = read_log(&est_csv, None).unwrap();
+    let gtau = csv_est.meta("gtau").expect("the generator writes gtau").to_string();
+    let map_path = dir.join("map.toml");
+    std::fs::write(
+        &map_path,
+        format!("[channels]\n\"Axis1.Pos_m\" = \"pos_m\"\n\n[meta]\ngtau = {gtau}\n"),
+    )
+    .unwrap();
+    let map = ChannelMap::read(&map_path).unwrap();
+    let logger = [
+        "--compression",
+        "2",
+        "--rename",
+        "pos_m=Axis1.Pos_m",
+        "--meta-as",
+        "properties",
+        "--drop-meta",
+        "gtau",
+        "--group2",
+        "ref_m",
+        "--group2-factor",
+        "2",
+    ];
+    let (est_mf4, val_mf4) = (dir.join("estimation.mf4"), dir.join("validation.mf4"));
+    write_mf4(&py, &est_csv, &est_mf4, &logger);
+    write_mf4(&py, &val_csv, &val_mf4, &logger);
+    // Compressed: the samples are in DZ (zipped data) blocks.
+    let bytes = std::fs::read(&est_mf4).unwrap();
+    assert!(bytes.windows(4).any(|w| w == b"##DZ"), "no DZ block in the file");
+
+    // Without the map, the logger's name is not found, and the error says which and where.
+    let e = read_log(&est_mf4, None).unwrap_err();
+    assert_eq!(e.file, est_mf4.display().to_string());
+    assert_eq!(e.column.as_deref(), Some("pos_m"));
+    assert!(
+        e.message.contains("Axis1.Pos_m") && e.message.contains("--channel-map"),
+        "{e}"
+    );
+
+    let mf4_est = read_log_mapped(&est_mf4, None, Some(&map)).unwrap();
+    let mf4_val = read_log_mapped(&val_mf4, None, Some(&map)).unwrap();
+    let csv_val = read_log(&val_csv, None).unwrap();
+    assert_same_columns(&csv_est, &mf4_est);
+    assert_same_columns(&csv_val, &mf4_val);
+    assert_eq!(mf4_est.meta("gtau"), Some(gtau.as_str()));
+    assert_eq!(mf4_est.meta("kp"), csv_est.meta("kp"));
+    let note = mf4_est
+        .notices
+        .iter()
+        .find(|n| n.contains("`ref_m`"))
+        .expect("a notice on the resampled reference");
+    assert!(
+        note.contains("linear interpolation") && note.contains("2000 Hz"),
+        "{note}"
+    );
+
+    let a = diagnose_json(&csv_est, &csv_val);
+    let b = diagnose_json(&mf4_est, &mf4_val);
+    assert_eq!(a["cause"], "coulomb-friction");
+    assert_same_report(&a, &b, "report", 1e-9);
+}
+
+/// An EVVT closed-loop case in a plain-deflate MF4 file with the metadata (`plant`, `kp`, ...)
+/// as `key: value` lines of the header comment, the channels under their DATA-FORMAT names:
+/// `diagnose` reads it with no map and names the same cause with the same numbers.
+#[test]
+fn deflate_mf4_with_header_comment_metadata_diagnoses_like_its_csv() {
+    let Some(py) = python() else { return };
+    let case = generate::generate(Plant::Evvt, "supply-voltage", 11).unwrap();
+    let dir = scratch("evvt");
+    let (est_csv, val_csv) = (dir.join("estimation.csv"), dir.join("validation.csv"));
+    std::fs::write(&est_csv, &case.estimation_csv).unwrap();
+    std::fs::write(&val_csv, &case.validation_csv).unwrap();
+    let (est_mf4, val_mf4) = (dir.join("estimation.mf4"), dir.join("validation.mf4"));
+    write_mf4(&py, &est_csv, &est_mf4, &["--compression", "1"]);
+    write_mf4(&py, &val_csv, &val_mf4, &["--compression", "1"]);
+    let (csv_est, csv_val) = (read_log(&est_csv, None).unwrap(), read_log(&val_csv, None).unwrap());
+    let (mf4_est, mf4_val) = (read_log(&est_mf4, None).unwrap(), read_log(&val_mf4, None).unwrap());
+    assert_same_columns(&csv_est, &mf4_est);
+    assert_eq!(mf4_est.meta, csv_est.meta, "header comment metadata");
+    let a = diagnose_json(&csv_est, &csv_val);
+    let b = diagnose_json(&mf4_est, &mf4_val);
+    assert_eq!(a["cause"], "supply-voltage");
+    assert_same_report(&a, &b, "report", 1e-9);
+}
+
+/// A slower channel group (every 4th sample) holding two flags and the supply pressure of an
+/// EHVVA log: the flags are held (zero-order hold) and the pressure interpolated linearly onto
+/// the lift's 20 kHz time base, the fast group's channels are untouched, and a notice says how.
+#[test]
+fn slower_channel_group_is_held_for_flags_and_interpolated_for_signals() {
+    let Some(py) = python() else { return };
+    let case = generate::generate(Plant::Ehvva, "none", 77_001).unwrap();
+    let dir = scratch("ehvva");
+    let csv = dir.join("estimation.csv");
+    std::fs::write(&csv, &case.estimation_csv).unwrap();
+    let mf4 = dir.join("estimation.mf4");
+    write_mf4(
+        &py,
+        &csv,
+        &mf4,
+        &[
+            "--compression",
+            "2",
+            "--flags",
+            "u_pilot,lift_high,snubber_on",
+            "--group2",
+            "lift_high,snubber_on,p_supply_MPa",
+            "--group2-factor",
+            "-4",
+        ],
+    );
+    let c = read_log(&csv, None).unwrap();
+    let m = read_log(&mf4, None).unwrap();
+    let n = c.len();
+    assert_eq!(m.len(), n);
+    for name in ["t_s", "u_pilot", "p_back_MPa", "temp_C", "lift_mm"] {
+        assert_eq!(c.col(name), m.col(name), "{name} is in the primary group: read as is");
+    }
+    let last = 4 * ((n - 1) / 4); // the slow group's last instant
+    for name in ["lift_high", "snubber_on"] {
+        let (cv, mv) = (c.col(name).unwrap(), m.col(name).unwrap());
+        for k in 0..n {
+            assert_eq!(mv[k], cv[4 * (k / 4)], "{name} held at sample {k}");
+        }
+    }
+    let (t, cv, mv) = (
+        c.col("t_s").unwrap(),
+        c.col("p_supply_MPa").unwrap(),
+        m.col("p_supply_MPa").unwrap(),
+    );
+    let mut moved = 0;
+    for k in 0..n {
+        let expect = if k >= last {
+            cv[last]
+        } else {
+            let (a, b) = (4 * (k / 4), 4 * (k / 4) + 4);
+            cv[a] + (t[k] - t[a]) / (t[b] - t[a]) * (cv[b] - cv[a])
+        };
+        assert!(
+            (mv[k] - expect).abs() <= 1e-12 * expect.abs().max(1.0),
+            "p_supply_MPa at {k}"
+        );
+        moved += usize::from(mv[k] != cv[k]);
+    }
+    assert!(
+        moved > 0,
+        "the supply pressure changes between conditions, so resampling shows"
+    );
+    let note = |col: &str| {
+        m.notices
+            .iter()
+            .find(|s| s.contains(&format!("`{col}`")))
+            .cloned()
+            .unwrap_or_default()
+    };
+    assert!(note("lift_high").contains("zero-order hold") && note("lift_high").contains("5000 Hz"));
+    assert!(note("p_supply_MPa").contains("linear interpolation"));
+    assert!(note("p_supply_MPa").contains("outside its recorded span") == (last < n - 1));
+}
+
+/// Errors name the file and the channel: a value out of its column's range (with the sample
+/// and its time), a file that is not MF4, and a bad channel map (file, line).
+#[test]
+fn errors_name_the_file_and_the_channel() {
+    let Some(py) = python() else { return };
+    let dir = scratch("errors");
+    let csv = dir.join("bad.csv");
+    let mut text = String::from("# plant: positioner\nt_s,force_N,pos_m\n");
+    for k in 0..50 {
+        let pos = if k == 37 { 12.5 } else { 0.001 * k as f64 };
+        text.push_str(&format!("{},{},{}\n", k as f64 * 0.001, k as f64, pos));
+    }
+    std::fs::write(&csv, text).unwrap();
+    let mf4 = dir.join("bad.mf4");
+    write_mf4(&py, &csv, &mf4, &["--rename", "pos_m=Axis1.Pos_m"]);
+    let map = ChannelMap::parse("map.toml", "[channels]\n\"Axis1.Pos_m\" = \"pos_m\"\n").unwrap();
+    let e = read_log_mapped(&mf4, None, Some(&map)).unwrap_err();
+    assert_eq!(e.column.as_deref(), Some("pos_m"));
+    assert!(e.message.contains("channel `Axis1.Pos_m`"), "{e}");
+    assert!(
+        e.message.contains("sample 37 (0-based, t = 0.037 s)") && e.message.contains("range"),
+        "{e}"
+    );
+    assert!(e.to_string().starts_with(&mf4.display().to_string()), "{e}");
+
+    let not_mf4 = dir.join("notes.mf4");
+    std::fs::write(&not_mf4, b"\x00\xffthis is no measurement file").unwrap();
+    let e = read_log(&not_mf4, Some(Plant::Positioner)).unwrap_err();
+    assert!(e.message.contains("not a readable MF4 file"), "{e}");
+
+    // A logger's file without the .mf4 name is still recognised by its signature.
+    let renamed = dir.join("bench.dat");
+    std::fs::copy(&mf4, &renamed).unwrap();
+    let e = read_log_mapped(&renamed, None, Some(&map)).unwrap_err();
+    assert!(e.message.contains("sample 37"), "{e}");
+}
