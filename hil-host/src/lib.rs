@@ -5,6 +5,7 @@ pub mod generate;
 pub mod identify;
 pub mod log;
 pub mod lsq;
+pub mod paper_check;
 pub mod pil;
 pub mod plot;
 pub mod residuals;

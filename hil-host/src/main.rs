@@ -39,6 +39,9 @@ commands:
       instructions per task step (the scenario's first N lockstep steps, default 2000) and
       per plant step (f32, Q32) on the emulated Cortex-M4 (QEMU TCG plugin tools/qemu-plugin),
       with the plant states and actuator frames checked against the host
+  paper-check [--json FILE]
+      each model against its paper: one row per published value (paper, model, relative error,
+      tolerance, pass); exits non-zero when a row fails
 plants: vacuum, ehvva, evvt, positioner
 ";
 
@@ -52,6 +55,7 @@ fn main() -> ExitCode {
         Some("identify") => run_identify(&args[1..]),
         Some("pil") => run_pil(&args[1..]),
         Some("target-bench") => run_target_bench(&args[1..]),
+        Some("paper-check") => run_paper_check(&args[1..]),
         Some("-h") | Some("--help") | Some("help") => {
             print!("{USAGE}");
             Ok(())
@@ -441,4 +445,16 @@ fn identify_ehvva(args: &[String]) -> Result<(), CliError> {
         eprintln!("tables written to {out}");
     }
     Ok(())
+}
+
+fn run_paper_check(args: &[String]) -> Result<(), CliError> {
+    let json = match args {
+        [] => None,
+        [flag, file] if flag == "--json" => Some(PathBuf::from(file)),
+        _ => return Err(CliError::Usage("paper-check takes only --json FILE".into())),
+    };
+    match hil_host::paper_check::run(json.as_deref()).map_err(CliError::Failed)? {
+        true => Ok(()),
+        false => Err(CliError::Failed("paper-check: some rows fail (see FAIL above)".into())),
+    }
 }

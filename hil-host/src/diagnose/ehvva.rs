@@ -619,7 +619,27 @@ impl Family for EhvvaFamily {
                 knobs.push(effect_knob(e)?);
                 let mut x0 = xb.clone();
                 x0.push(1.0);
-                calibrate(&EhvvaParams::baseline(), &knobs, &x0, &de, &self.lsq)?
+                let r = calibrate(&EhvvaParams::baseline(), &knobs, &x0, &de, &self.lsq)?;
+                // A baseline that ended on a knob's bound was bent by the hidden effect (e.g.
+                // τp pinned at its floor to mimic a colder, slower valve) and is a poor start:
+                // the effect fit is also run from the baseline's own first guess with the gain
+                // at either end of the generators' range, the lowest cost kept.
+                let on_bound = BASELINE_KNOBS
+                    .iter()
+                    .zip(&xb)
+                    .any(|(k, &v)| (v - k.lo).min(k.hi - v) <= 1e-4 * (k.hi - k.lo));
+                let mut best = r;
+                if on_bound {
+                    for gain in [0.5, 1.5] {
+                        let mut x1 = self.baseline_start(&de)?;
+                        x1.push(gain);
+                        let r1 = calibrate(&EhvvaParams::baseline(), &knobs, &x1, &de, &self.lsq)?;
+                        if r1.cost < best.cost {
+                            best = r1;
+                        }
+                    }
+                }
+                best
             }
         };
         let p = apply_knobs(&EhvvaParams::baseline(), &knobs, &r.x);
@@ -765,7 +785,9 @@ mod tests {
         // The family scores the skipped samples as measured, for every candidate alike.
         let fit = EhvvaFamily::default().fit(Some("snubber"), &est, &tail).unwrap();
         assert_eq!(&fit.measured[..seated], &tail.col("lift_mm").unwrap()[..seated]);
-        assert!(fit.rmse < 0.008, "validation rmse {} mm", fit.rmse);
+        // 8.8 µm since the top snubber acts only inside its zone (issue #14): the valve enters
+        // the zone faster and seats more abruptly, which the fit reproduces less finely.
+        assert!(fit.rmse < 0.010, "validation rmse {} mm", fit.rmse);
     }
 
     /// The baseline and an extension recover the generator's parameters from the estimation
