@@ -384,6 +384,32 @@ pub fn ehvva_rows(p: &EhvvaParams, with_table2: bool) -> Result<Vec<Row>, String
         ));
     }
 
+    // Table 4's trends (Sec. 5.3: "both opening and closing responses get slower as the
+    // temperature decreases"): each time over its 22 °C value, at −20 and 100 °C.
+    let m22 = reduced_event(&p, &paper_test(9)?)?;
+    for (n, temp_c, tag, vo_paper, vc_paper) in [(8u8, -20.0, "m20C", 8.2, 4.0), (11, 100.0, "100C", 4.4, 2.8)] {
+        let m = reduced_event(&p, &paper_test(n)?)?;
+        let src = format!("Li 2018 Table 4 (tests {n} and 9: 5 MPa, {temp_c} and 22 °C, low lift)");
+        out.push(row(
+            &format!("ehvva.table4.vo_time_ratio.{tag}_over_22C"),
+            &src,
+            "valve opening time over its 22 °C value",
+            "1",
+            vo_paper / 6.2,
+            need(m.opening_time_ms(), "the opening")? / need(m22.opening_time_ms(), "the opening")?,
+            Check::Value,
+        ));
+        out.push(row(
+            &format!("ehvva.table4.vc_time_ratio.{tag}_over_22C"),
+            &src,
+            "valve closing time over its 22 °C value",
+            "1",
+            vc_paper / 3.5,
+            need(m.closing_time_ms(), "the closing")? / need(m22.closing_time_ms(), "the closing")?,
+            Check::Value,
+        ));
+    }
+
     // Fig. 10 (Sec. 5.3): tests 12-15, 8 MPa, 20 ms dwell: at 4 MPa back pressure the full
     // closing is ~7 ms later and the opening ~2 ms faster than at 1 MPa.
     let t12 = reduced_event(&p, &paper_test(12)?)?;
