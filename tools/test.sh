@@ -5,7 +5,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 # Set-up: the embedded target (idempotent; quick when present).
-rustup target add thumbv7em-none-eabihf >/dev/null
+rustup target add thumbv7em-none-eabihf thumbv6m-none-eabi >/dev/null
 # QEMU >= 10 and its instruction-counting plugin for the emulated-board (PIL) tests.
 ./tools/setup-qemu.sh
 
@@ -17,6 +17,9 @@ echo "== clippy, host crates [${SECONDS} s]"
 cargo clippy --workspace --exclude firmware --exclude firmware-qemu --all-targets --locked -- -D warnings
 echo "== clippy, target crates (thumbv7em-none-eabihf) [${SECONDS} s]"
 cargo clippy -p firmware -p firmware-qemu --target thumbv7em-none-eabihf --locked -- -D warnings
+# model-core is for FPU-less ECUs too (Cortex-M0+: no FPU, no 64-bit multiply instruction).
+echo "== model-core for thumbv6m-none-eabi (Cortex-M0+) [${SECONDS} s]"
+cargo check -p model-core --target thumbv6m-none-eabi --locked
 
 # One target directory for everything: host tests, the firmware build.
 # The emulated-board image the PIL tests run under QEMU (built first, so the tests find it).

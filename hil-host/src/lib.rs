@@ -5,6 +5,8 @@ pub mod generate;
 pub mod identify;
 pub mod log;
 pub mod lsq;
+pub mod numbers;
+pub mod output;
 pub mod paper_check;
 pub mod pil;
 pub mod plot;

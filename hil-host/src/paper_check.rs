@@ -125,7 +125,8 @@ pub fn run(json: Option<&Path>) -> Result<bool, String> {
         }
         let text = serde_json::to_string_pretty(&Report { rows: &rows })
             .map_err(|e| format!("paper-check: serialising the report: {e}"))?;
-        std::fs::write(path, text).map_err(|e| format!("paper-check: writing {}: {e}", path.display()))?;
+        crate::output::write_atomic(path, text.as_bytes())
+            .map_err(|e| format!("paper-check: writing {}: {e}", path.display()))?;
     }
     Ok(failing.is_empty())
 }

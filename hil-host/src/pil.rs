@@ -30,20 +30,32 @@ pub const FIRMWARE_PACKAGE: &str = "firmware-qemu";
 pub const QEMU: &str = "qemu-system-arm";
 pub const MACHINE: &str = "netduinoplus2";
 
-/// The workspace root (the directory of the top Cargo.toml), fixed at compile time.
-pub fn workspace_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .map(Path::to_path_buf)
-        .unwrap_or_else(|| PathBuf::from("."))
+/// Whether `dir` is this project's workspace root: a Cargo.toml with a `[workspace]` table and
+/// the firmware-qemu package beside it.
+fn is_workspace_root(dir: &Path) -> bool {
+    dir.join(FIRMWARE_PACKAGE).join("Cargo.toml").is_file()
+        && std::fs::read_to_string(dir.join("Cargo.toml")).is_ok_and(|t| t.lines().any(|l| l.trim() == "[workspace]"))
 }
 
-/// Cargo's target directory: `CARGO_TARGET_DIR` when set (relative to the workspace root),
-/// else `<workspace>/target`.
-pub fn target_dir() -> PathBuf {
+/// The workspace root, found at run time (never baked in at compile time): the nearest
+/// ancestor of the current directory that is this project's workspace, else the nearest of the
+/// running binary's location (`target/release/hil-host` lies inside it). `None` outside a
+/// checkout, as for a hil-host copied elsewhere.
+pub fn workspace_root() -> Option<PathBuf> {
+    let from_cwd = std::env::current_dir().ok();
+    let from_exe = std::env::current_exe().ok().and_then(|e| e.canonicalize().ok());
+    [from_cwd, from_exe]
+        .into_iter()
+        .flatten()
+        .find_map(|start| start.ancestors().find(|d| is_workspace_root(d)).map(Path::to_path_buf))
+}
+
+/// Cargo's target directory of the workspace at `root`: `CARGO_TARGET_DIR` when set (relative
+/// to `root`, where [`build_firmware`] runs cargo), else `<root>/target`.
+pub fn target_dir(root: &Path) -> PathBuf {
     match std::env::var_os("CARGO_TARGET_DIR") {
-        Some(d) => workspace_root().join(d),
-        None => workspace_root().join("target"),
+        Some(d) => root.join(d),
+        None => root.join("target"),
     }
 }
 
@@ -52,18 +64,51 @@ pub fn target_dir() -> PathBuf {
 pub const FIRMWARE_PROFILE: &str = "firmware";
 
 /// Where `cargo build --profile firmware -p firmware-qemu --target thumbv7em-none-eabihf` puts
-/// the ELF.
-pub fn firmware_elf_path() -> PathBuf {
-    target_dir().join(TARGET).join(FIRMWARE_PROFILE).join(FIRMWARE_PACKAGE)
+/// the ELF in the workspace at `root`.
+pub fn firmware_elf_path(root: &Path) -> PathBuf {
+    target_dir(root)
+        .join(TARGET)
+        .join(FIRMWARE_PROFILE)
+        .join(FIRMWARE_PACKAGE)
+}
+
+/// The firmware image for `pil` and `target-bench`, looked up at run time: `elf` when given
+/// (`--elf`); else `firmware-qemu` next to the running hil-host binary (an installed pair);
+/// else the workspace's image (found by [`workspace_root`]), built by [`build_firmware`] so it
+/// is current. The error names every place looked at.
+pub fn find_firmware(elf: Option<&Path>) -> Result<PathBuf, String> {
+    if let Some(e) = elf {
+        return if e.is_file() {
+            Ok(e.to_path_buf())
+        } else {
+            Err(format!("--elf {}: no such firmware image", e.display()))
+        };
+    }
+    let beside = std::env::current_exe()
+        .ok()
+        .and_then(|e| e.parent().map(|d| d.join(FIRMWARE_PACKAGE)));
+    if let Some(b) = beside.as_ref().filter(|b| b.is_file()) {
+        return Ok(b.clone());
+    }
+    if workspace_root().is_some() {
+        return build_firmware();
+    }
+    Err(format!(
+        "no firmware image: pass --elf, put {FIRMWARE_PACKAGE} next to hil-host ({}), or run inside the project's workspace (neither the current directory nor the binary's location is in one)",
+        beside.map_or_else(|| "location unknown".into(), |b| b.display().to_string())
+    ))
 }
 
 /// Builds the firmware image (profile `firmware`, locked, the workspace's target directory) and returns
 /// its path. Must not be called while cargo holds the build lock of the same target
 /// directory (from a build script, say); a running test binary is fine.
 pub fn build_firmware() -> Result<PathBuf, String> {
+    let root = workspace_root().ok_or_else(|| {
+        format!("cannot build {FIRMWARE_PACKAGE}: neither the current directory nor the binary's location is inside the project's workspace")
+    })?;
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
     let status = Command::new(cargo)
-        .current_dir(workspace_root())
+        .current_dir(&root)
         .args([
             "build",
             "--profile",
@@ -79,7 +124,7 @@ pub fn build_firmware() -> Result<PathBuf, String> {
     if !status.success() {
         return Err(format!("building {FIRMWARE_PACKAGE} failed ({status})"));
     }
-    let elf = firmware_elf_path();
+    let elf = firmware_elf_path(&root);
     if elf.is_file() {
         Ok(elf)
     } else {
@@ -100,9 +145,23 @@ pub fn qemu_version() -> Result<String, String> {
     Ok(text.lines().next().unwrap_or("").to_string())
 }
 
-/// The instruction-counting TCG plugin (built by tools/setup-qemu.sh).
-pub fn plugin_path() -> PathBuf {
-    workspace_root().join("tools/qemu-plugin/insn_between.so")
+/// The instruction-counting TCG plugin's file name.
+pub const PLUGIN: &str = "insn_between.so";
+
+/// The instruction-counting TCG plugin (built by tools/setup-qemu.sh), found at run time: next
+/// to the running hil-host binary, else in the workspace's `tools/qemu-plugin/`.
+pub fn plugin_path() -> Result<PathBuf, String> {
+    let beside = std::env::current_exe()
+        .ok()
+        .and_then(|e| e.parent().map(|d| d.join(PLUGIN)));
+    if let Some(b) = beside.filter(|b| b.is_file()) {
+        return Ok(b);
+    }
+    workspace_root()
+        .map(|r| r.join("tools/qemu-plugin").join(PLUGIN))
+        .ok_or_else(|| {
+            format!("{PLUGIN}: not next to hil-host and no workspace found; run tools/setup-qemu.sh in the project")
+        })
 }
 
 /// How QEMU is started.
@@ -122,8 +181,12 @@ pub struct QemuOptions {
 pub struct QemuBoard {
     child: Child,
     stream: TcpStream,
-    /// QEMU's stdout: the firmware's defmt frames (decode with `defmt-print -e <elf>`).
+    /// QEMU's stdout: the firmware's defmt frames (decode with `defmt-print -e <elf>`), in
+    /// place once the board is dropped (QEMU streams into a temporary file until then).
     pub defmt_log: PathBuf,
+    /// Where QEMU streams while it runs: stdout, stderr.
+    live: [PathBuf; 2],
+    /// QEMU's stderr, in place once the board is dropped.
     stderr_log: PathBuf,
 }
 
@@ -131,7 +194,20 @@ impl Drop for QemuBoard {
     fn drop(&mut self) {
         let _ = self.child.kill();
         let _ = self.child.wait();
+        // Whole streams only under their final names: a killed host leaves the previous run's
+        // files (or none) and the temporaries.
+        let _ = std::fs::rename(&self.live[0], &self.defmt_log);
+        let _ = std::fs::rename(&self.live[1], &self.stderr_log);
     }
+}
+
+/// The temporary name QEMU streams `file` into while it runs.
+fn live_name(file: &Path) -> PathBuf {
+    let name = file
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    file.with_file_name(format!("{}{name}", crate::output::TMP_PREFIX))
 }
 
 impl QemuBoard {
@@ -147,6 +223,10 @@ impl QemuBoard {
         std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
         let defmt_log = dir.join("defmt.bin");
         let stderr_log = dir.join("qemu-stderr.txt");
+        for f in [&defmt_log, &stderr_log] {
+            crate::output::check_not_input(f).map_err(|e| e.to_string())?;
+        }
+        let live = [live_name(&defmt_log), live_name(&stderr_log)];
         // A port that was free a moment ago; QEMU failing to bind it (a race with another
         // process) is retried on a new one.
         let mut last_err = String::new();
@@ -166,8 +246,8 @@ impl QemuBoard {
             if let Some(p) = &opts.plugin {
                 cmd.args(["-plugin", p]);
             }
-            let out = File::create(&defmt_log).map_err(|e| format!("{}: {e}", defmt_log.display()))?;
-            let err = File::create(&stderr_log).map_err(|e| format!("{}: {e}", stderr_log.display()))?;
+            let out = File::create(&live[0]).map_err(|e| format!("{}: {e}", live[0].display()))?;
+            let err = File::create(&live[1]).map_err(|e| format!("{}: {e}", live[1].display()))?;
             let child = cmd
                 .stdin(Stdio::null())
                 .stdout(out)
@@ -175,25 +255,29 @@ impl QemuBoard {
                 .spawn()
                 .map_err(|e| format!("cannot start {QEMU} ({e}); run tools/setup-qemu.sh"))?;
             let mut board = Pending { child: Some(child) };
-            match connect(&mut board, port, &stderr_log) {
+            match connect(&mut board, port, &live[1]) {
                 Ok(stream) => {
                     let child = board.child.take().ok_or("QEMU process lost")?;
                     return Ok(QemuBoard {
                         child,
                         stream,
                         defmt_log,
+                        live,
                         stderr_log,
                     });
                 }
                 Err(e) => last_err = e,
             }
         }
+        // QEMU's last words stay readable under the usual name.
+        let _ = std::fs::remove_file(&live[0]);
+        let _ = std::fs::rename(&live[1], &stderr_log);
         Err(last_err)
     }
 
     /// What QEMU printed on stderr so far.
     pub fn stderr_text(&self) -> String {
-        std::fs::read_to_string(&self.stderr_log).unwrap_or_default()
+        std::fs::read_to_string(&self.live[1]).unwrap_or_default()
     }
 
     /// Whether QEMU is still running.
@@ -666,7 +750,7 @@ pub fn plant_bench_native() -> Result<Vec<u64>, String> {
 /// Runs the firmware's bench mode under the instruction-counting plugin: the plant steps,
 /// then `frames` through the lockstep link with every task counted.
 pub fn target_bench(elf: &Path, frames: &[SensorFrame], log_dir: &Path) -> Result<TargetBench, String> {
-    let plugin = plugin_path();
+    let plugin = plugin_path()?;
     if !plugin.is_file() {
         return Err(format!(
             "{}: missing; run tools/setup-qemu.sh (it builds the plugin with gcc)",

@@ -186,7 +186,7 @@ pub fn diagnosis_plots(d: &Diagnosis, dir: &Path) -> std::io::Result<Vec<PathBuf
     let mut written = Vec::new();
     let mut put = |name: &str, svg: String| -> std::io::Result<()> {
         let p = dir.join(name);
-        fs::write(&p, svg)?;
+        crate::output::write_atomic(&p, svg.as_bytes())?;
         written.push(p);
         Ok(())
     };

@@ -64,16 +64,36 @@ impl Profile {
         if self.0.is_empty() {
             return Err(format!("profile `{name}` is empty"));
         }
+        if self.0.len() > MAX_PROFILE_POINTS {
+            return Err(format!(
+                "profile `{name}` has {} points; at most {MAX_PROFILE_POINTS}",
+                self.0.len()
+            ));
+        }
+        if let Some((t, v)) = self.0.iter().find(|(t, v)| !t.is_finite() || !v.is_finite()) {
+            return Err(format!("profile `{name}` has a non-finite value ([{t}, {v}])"));
+        }
+        if let Some((t, _)) = self.0.iter().find(|(t, _)| *t < 0.0) {
+            return Err(format!("profile `{name}`: time {t} s is before the start (0 s)"));
+        }
         for w in self.0.windows(2) {
-            if w[1].0 <= w[0].0 || w[1].0.is_nan() {
+            if w[1].0 <= w[0].0 {
                 return Err(format!(
                     "profile `{name}`: times must increase ({} then {})",
                     w[0].0, w[1].0
                 ));
             }
         }
-        if self.0.iter().any(|(t, v)| !t.is_finite() || !v.is_finite()) {
-            return Err(format!("profile `{name}` has a non-finite value"));
+        Ok(())
+    }
+
+    /// [`Profile::check`], then every value within `lo..=hi` (`unit` for the message).
+    fn check_range(&self, name: &str, (lo, hi): (f64, f64), unit: &str) -> Result<(), String> {
+        self.check(name)?;
+        if let Some((t, v)) = self.0.iter().find(|(_, v)| !(lo..=hi).contains(v)) {
+            return Err(format!(
+                "profile `{name}` at {t} s: {v} {unit} is outside {lo}..{hi} {unit}"
+            ));
         }
         Ok(())
     }
@@ -187,10 +207,16 @@ impl FaultSpec {
     fn active(&self, t: f64) -> bool {
         t >= self.start_s && self.end_s.is_none_or(|e| t < e)
     }
-    fn check(&self, i: usize) -> Result<(), String> {
+    fn check(&self, i: usize, duration_s: f64) -> Result<(), String> {
         let at = |what: String| Err(format!("fault #{} (`{}`): {what}", i + 1, self.kind.name()));
         if !(self.start_s.is_finite() && self.start_s >= 0.0) {
             return at(format!("start_s = {} must be a time ≥ 0", self.start_s));
+        }
+        if self.start_s >= duration_s {
+            return at(format!(
+                "start_s = {} is not within the run (duration_s = {duration_s}): the fault would never act",
+                self.start_s
+            ));
         }
         if let Some(e) = self.end_s {
             if !(e.is_finite() && e > self.start_s) {
@@ -259,6 +285,79 @@ pub struct Scenario {
     pub snubber_on: Switch,
     #[serde(default, rename = "fault")]
     pub faults: Vec<FaultSpec>,
+}
+
+/// Shortest run: 10 EVVT log rows (10 ms each), several engine cycles at idle.
+pub const MIN_DURATION_S: f64 = 0.1;
+/// Most breakpoints in one profile (each step looks its value up).
+pub const MAX_PROFILE_POINTS: usize = 10_000;
+/// Longest scenario name (it names the output folder).
+pub const MAX_NAME_CHARS: usize = 64;
+
+/// A scenario's name names its output folder (`out/<name>`): a name, never a path. Letters,
+/// digits, `-`, `_` and `.`, not starting with `.` (so no `..`, no hidden folder), no separators.
+pub fn check_name(name: &str) -> Result<(), String> {
+    let bad = |why: &str| {
+        Err(format!(
+            "name = {name:?} {why}; a name is letters, digits, `-`, `_` and `.`"
+        ))
+    };
+    if name.is_empty() {
+        return bad("is empty");
+    }
+    if name.chars().count() > MAX_NAME_CHARS {
+        return bad(&format!("is longer than {MAX_NAME_CHARS} characters"));
+    }
+    if name.contains(['/', '\\']) {
+        return bad("contains a path separator");
+    }
+    if name.starts_with('.') {
+        return bad("starts with `.` (`..` or a hidden folder)");
+    }
+    if let Some(c) = name
+        .chars()
+        .find(|c| !(c.is_alphanumeric() || matches!(c, '-' | '_' | '.')))
+    {
+        return bad(&format!("contains {c:?}"));
+    }
+    Ok(())
+}
+
+/// The physical range and unit of each profile: what the plant models and the ECU are made
+/// for, and within the ranges of the log columns they end up in (DATA-FORMAT.md).
+fn profile_range(name: &str) -> ((f64, f64), &'static str) {
+    match name {
+        "engine_rpm" => ((0.0, 12_000.0), "rpm"),
+        "u_batt_v" => ((0.0, 32.0), "V"),
+        "temp_c" => ((-40.0, 150.0), "°C"),
+        "temp_ecu_c" => ((-40.0, 125.0), "°C"),
+        "p_supply_mpa" => ((0.5, 25.0), "MPa"),
+        "p_back_mpa" => ((0.0, 5.0), "MPa"),
+        "p_amb_kpa" => ((50.0, 110.0), "kPa"),
+        "cam_phase_setpoint_deg" => ((-30.0, 90.0), "crank deg"),
+        "valve_open_deg" | "valve_close_deg" => ((0.0, 720.0), "crank deg"),
+        // the three vacuum set-points
+        _ => ((0.0, 100.0), "%"),
+    }
+}
+
+/// The line where `key` is set in a scenario's TOML (`fault#n`: the n-th `[[fault]]`).
+fn key_line(text: &str, key: &str) -> Option<usize> {
+    if let Some(n) = key.strip_prefix("fault#").and_then(|n| n.parse::<usize>().ok()) {
+        return text
+            .lines()
+            .enumerate()
+            .filter(|(_, l)| l.trim_start().starts_with("[[fault]]"))
+            .nth(n.checked_sub(1)?)
+            .map(|(i, _)| i + 1);
+    }
+    text.lines()
+        .position(|l| {
+            l.trim_start()
+                .strip_prefix(key)
+                .is_some_and(|rest| rest.trim_start().starts_with('='))
+        })
+        .map(|i| i + 1)
 }
 
 fn d_engine() -> Profile {
@@ -346,35 +445,57 @@ impl Scenario {
         }
     }
 
-    /// Parses and checks a scenario; every error starts with the file name (and, from the
-    /// TOML parser, the line and column).
+    /// Parses and checks a scenario; every error starts with the file name and, where the
+    /// problem has one, the line (from the TOML parser, or the line of the key at fault).
     pub fn from_toml(file: &Path, text: &str) -> Result<Self, String> {
         let s: Scenario = toml::from_str(text).map_err(|e| format!("{}: {e}", file.display()))?;
-        s.check().map_err(|e| format!("{}: {e}", file.display()))?;
+        s.check().map_err(|(key, e)| match key_line(text, &key) {
+            Some(line) => format!("{}:{line}: {e}", file.display()),
+            None => format!("{}: {e}", file.display()),
+        })?;
         Ok(s)
     }
 
-    fn check(&self) -> Result<(), String> {
-        // The logs are held in memory until written (the EHVVA log at 20 kHz: ~90 B a row).
-        if !(self.duration_s > 0.0 && self.duration_s <= MAX_DURATION_S) {
-            return Err(format!(
-                "duration_s = {} must lie in (0, {MAX_DURATION_S}] s",
+    /// Every value against its physical range before a run (so that a run cannot write a log
+    /// its own `check` refuses, or a summary of NaN). The error comes with the key it is about
+    /// (`fault` for the n-th `[[fault]]`, as `fault#n`).
+    fn check(&self) -> Result<(), (String, String)> {
+        fn key(k: &str) -> impl Fn(String) -> (String, String) + '_ {
+            move |e| (k.to_string(), e)
+        }
+        check_name(&self.name).map_err(key("name"))?;
+        // The logs are held in memory until written (the EHVVA log at 20 kHz: ~90 B a row);
+        // the shortest run still gives every log enough rows for its summary.
+        if !(self.duration_s >= MIN_DURATION_S && self.duration_s <= MAX_DURATION_S) {
+            return Err(key("duration_s")(format!(
+                "duration_s = {} must lie in {MIN_DURATION_S}..{MAX_DURATION_S} s",
                 self.duration_s
-            ));
+            )));
         }
         if !(self.p_tank_initial_kpa.is_finite() && (1.0..=110.0).contains(&self.p_tank_initial_kpa)) {
-            return Err(format!(
-                "p_tank_initial_kpa = {} must lie in 1..110",
+            return Err(key("p_tank_initial_kpa")(format!(
+                "p_tank_initial_kpa = {} must lie in 1..110 kPa",
                 self.p_tank_initial_kpa
-            ));
+            )));
         }
         for (name, p) in self.profiles() {
-            p.check(name)?;
+            let (range, unit) = profile_range(name);
+            p.check_range(name, range, unit).map_err(key(name))?;
         }
-        self.lift_high.check("lift_high")?;
-        self.snubber_on.check("snubber_on")?;
+        // The back pressure stays below the supply (both piecewise linear: their breakpoints
+        // are where the difference can be least).
+        for &(t, _) in self.p_supply_mpa.0.iter().chain(&self.p_back_mpa.0) {
+            let (ph, pl) = (self.p_supply_mpa.at(t), self.p_back_mpa.at(t));
+            if !(ph > pl) {
+                return Err(key("p_back_mpa")(format!(
+                    "at {t} s the back pressure p_back_mpa = {pl} MPa is not below the supply p_supply_mpa = {ph} MPa"
+                )));
+            }
+        }
+        self.lift_high.check("lift_high").map_err(key("lift_high"))?;
+        self.snubber_on.check("snubber_on").map_err(key("snubber_on"))?;
         for (i, f) in self.faults.iter().enumerate() {
-            f.check(i)?;
+            f.check(i, self.duration_s).map_err(key(&format!("fault#{}", i + 1)))?;
         }
         Ok(())
     }
@@ -569,10 +690,15 @@ impl Summary {
                 None => s += &format!("       step at {t:.2} s did not settle (±2 %)\n"),
             }
         }
-        s += &format!(
-            "EHVVA  {} valve events: opening error mean {:+.2} / max |{:.2}| crank deg, closing error mean {:+.2} / max |{:.2}| crank deg\n",
-            self.ehvva_events, self.ehvva_open_error_deg.0, self.ehvva_open_error_deg.1, self.ehvva_close_error_deg.0, self.ehvva_close_error_deg.1
-        );
+        if self.ehvva_events == 0 {
+            // No event, no timing error to average (a stopped engine, or a run shorter than a cycle).
+            s += "EHVVA  no valve events\n";
+        } else {
+            s += &format!(
+                "EHVVA  {} valve events: opening error mean {:+.2} / max |{:.2}| crank deg, closing error mean {:+.2} / max |{:.2}| crank deg\n",
+                self.ehvva_events, self.ehvva_open_error_deg.0, self.ehvva_open_error_deg.1, self.ehvva_close_error_deg.0, self.ehvva_close_error_deg.1
+            );
+        }
         if let Some(v) = self.ehvva_seating_velocity_m_s {
             s += &format!("       seating velocity {:.2} m/s (largest)\n", v);
         }
@@ -1022,7 +1148,8 @@ pub fn write_outputs(sc: &Scenario, o: &RunOutput, dir: &Path) -> std::io::Resul
     let mut written = Vec::new();
     let mut put = |name: &str, text: String| -> std::io::Result<()> {
         let p = dir.join(name);
-        std::fs::write(&p, text)?;
+        // Whole files only (a killed run leaves the old file or none), never over an input.
+        crate::output::write_atomic(&p, text.as_bytes())?;
         written.push(p);
         Ok(())
     };

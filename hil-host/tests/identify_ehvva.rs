@@ -221,7 +221,9 @@ fn tables_from_reduced_model_logs_match_the_generating_ones() {
     let [onset, cd_condition, tau_condition] = worst_onset_and_cd(&id, &p);
     assert!(onset.0 < 0.05, "{}", onset.1);
     assert!(cd_condition.0 < 0.05, "{}", cd_condition.1);
-    assert!(tau_condition.0 < 0.05, "{}", tau_condition.1);
+    // τp per condition: 3.7 % before the issue #14 EHVVA refit, 5.4 % after it (7 MPa, −20 °C,
+    // where the opening now depends on Cd through the narrower supply edge): 6 %.
+    assert!(tau_condition.0 < 0.06, "{}", tau_condition.1);
     // td VO and τp trade off (later onset = slower rise): negative correlation at every
     // condition. Below −0.8 before the issue #14 refit; the narrower supply edge (5.9 mm²)
     // makes the opening depend on Cd too, which takes part of the trade-off (worst −0.43).
@@ -251,7 +253,9 @@ fn tables_from_noisy_reduced_model_logs() {
     let [onset, cd_condition, tau_condition] = worst_onset_and_cd(&id, &p);
     assert!(onset.0 < 0.05, "{}", onset.1);
     assert!(cd_condition.0 < 0.05, "{}", cd_condition.1);
-    assert!(tau_condition.0 < 0.05, "{}", tau_condition.1);
+    // τp per condition: 3.7 % before the issue #14 EHVVA refit, 5.4 % after it (7 MPa, −20 °C,
+    // where the opening now depends on Cd through the narrower supply edge): 6 %.
+    assert!(tau_condition.0 < 0.06, "{}", tau_condition.1);
 }
 
 /// MARKED for the lead (issue #14): ignored since the EHVVA refit narrowed the main valve's

@@ -186,6 +186,30 @@ pub struct Diagnosis {
     pub gain_pct: f64,
     /// Sentences for the human summary.
     pub evidence: Vec<String>,
+    /// Input columns that never vary in the estimation or the validation data, with where when
+    /// only one is (`duty_pct`, `u_batt_V (validation data only)`): no excitation, so what depends on them cannot be
+    /// computed (the report says so instead of printing NaN or a perfect fit).
+    pub unexcited: Vec<String>,
+}
+
+/// The plant's input columns that are constant in `est` or `val` (see [`Diagnosis::unexcited`]).
+pub fn unexcited_inputs(est: &Log, val: &Log) -> Vec<String> {
+    let constant = |log: &Log, name: &str| {
+        log.columns
+            .get(name)
+            .is_some_and(|v| v.iter().all(|x| *x == v[0] || (x.is_nan() && v[0].is_nan())))
+    };
+    est.plant
+        .columns()
+        .iter()
+        .filter(|(_, role)| *role == crate::log::Role::Input)
+        .filter_map(|(name, _)| match (constant(est, name), constant(val, name)) {
+            (true, true) => Some(name.to_string()),
+            (true, false) => Some(format!("{name} (estimation data only)")),
+            (false, true) => Some(format!("{name} (validation data only)")),
+            (false, false) => None,
+        })
+        .collect()
 }
 
 /// Splits one log into estimation head and validation tail (`tail` fraction held out).
@@ -424,6 +448,7 @@ fn diagnose_fits(
         extended,
         gain_pct,
         evidence,
+        unexcited: unexcited_inputs(est, val),
     })
 }
 

@@ -1,0 +1,408 @@
+//! One function per command: read the inputs, call the library, write the outputs safely
+//! (hil_host::output: atomic files, inputs never overwritten, output directories claimed).
+
+use std::path::{Path, PathBuf};
+
+use hil_host::diagnose::{self, report, Rules};
+use hil_host::log::{read_log, Log, Plant};
+use hil_host::numbers::{sig, tidy_json};
+use hil_host::output::{self, Claim, OutputDir};
+use hil_host::run::Scenario;
+
+use super::progress::{self, Counter, Spinner};
+use super::{
+    CheckArgs, Cli, Command, DiagnoseArgs, GenerateArgs, IdentifyArgs, IdentifyCommand, PaperCheckArgs, PilArgs,
+    RunArgs, TargetBenchArgs,
+};
+
+/// A failed command (exit status 1); usage errors are clap's (exit status 2).
+pub struct Failure(pub String);
+
+macro_rules! failure_from {
+    ($($t:ty),*) => {$(
+        impl From<$t> for Failure {
+            fn from(e: $t) -> Self {
+                Failure(e.to_string())
+            }
+        }
+    )*};
+}
+failure_from!(
+    hil_host::output::OutputError,
+    hil_host::log::LogError,
+    std::io::Error,
+    serde_json::Error
+);
+
+type Result<T> = std::result::Result<T, Failure>;
+
+fn fail(message: impl Into<String>) -> Failure {
+    Failure(message.into())
+}
+
+/// Runs the parsed command.
+pub fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Check(a) => check(a),
+        Command::Diagnose(a) => diagnose(a),
+        Command::Run(a) => run_scenario(a),
+        Command::Generate(a) => generate(a),
+        Command::Identify(IdentifyCommand::Evvt(a)) => identify_evvt(a),
+        Command::Identify(IdentifyCommand::Ehvva(a)) => identify_ehvva(a),
+        Command::Pil(a) => pil(a),
+        Command::TargetBench(a) => target_bench(a),
+        Command::PaperCheck(a) => paper_check(a),
+        Command::Completions { shell } => {
+            use clap::CommandFactory;
+            clap_complete::generate(shell, &mut Cli::command(), "hil-host", &mut std::io::stdout());
+            Ok(())
+        }
+    }
+}
+
+/// Reads a log with a spinner (big logs take seconds).
+fn read(path: &Path, plant: Option<Plant>) -> Result<Log> {
+    let _spinner = progress::reading(path);
+    Ok(read_log(path, plant)?)
+}
+
+/// A JSON report, rounded and free of nulls, written atomically (never over an input).
+fn write_json(path: &Path, mut value: serde_json::Value) -> Result<()> {
+    tidy_json(&mut value);
+    let text = serde_json::to_string_pretty(&value)? + "\n";
+    output::write_atomic(path, text.as_bytes()).map_err(|e| fail(format!("{}: {e}", path.display())))
+}
+
+fn check(a: CheckArgs) -> Result<()> {
+    let log = read(&a.log, a.plant.map(Plant::from))?;
+    println!(
+        "{}: plant {}, {} samples at {} s, columns {}",
+        log.file,
+        log.plant,
+        log.len(),
+        sig(log.dt_s, 6),
+        log.order.join(", ")
+    );
+    for n in &log.notices {
+        println!("notice: {n}");
+    }
+    Ok(())
+}
+
+fn diagnose(a: DiagnoseArgs) -> Result<()> {
+    let inputs: Vec<&PathBuf> = std::iter::once(&a.estimation).chain(&a.validation).collect();
+    output::protect_inputs(&inputs);
+    // Refuse a bad output before the fits run, not after.
+    if let Some(json) = &a.json {
+        output::check_not_input(json)?;
+    }
+    let plant = a.plant.map(Plant::from);
+    let est_full = read(&a.estimation, plant)?;
+    let plant = est_full.plant;
+    let (est, val, tail) = match &a.validation {
+        Some(v) => (est_full, read(v, Some(plant))?, false),
+        None => {
+            let (e, v) = diagnose::split_tail(&est_full, 0.3);
+            (e, v, true)
+        }
+    };
+    for n in est.notices.iter().chain(&val.notices) {
+        eprintln!("notice: {n}");
+    }
+    let plots = match &a.plots {
+        Some(dir) => {
+            let identity = format!("plots of {}", canonical(&a.estimation));
+            Some(OutputDir::open(dir, Claim::new("diagnose", identity), a.force)?)
+        }
+        None => None,
+    };
+    let family = diagnose::family_for(plant).map_err(fail)?;
+    let mut line = diagnose::progress::ProgressLine::for_stderr();
+    let mut show = |p: &diagnose::Progress| {
+        if let Some(text) = line.render(p) {
+            eprint!("{text}");
+        }
+    };
+    let d = diagnose::diagnose(family.as_ref(), &est, &val, tail, &Rules::default(), &mut show);
+    if let Some(text) = line.finish() {
+        eprint!("{text}");
+    }
+    let d = d.map_err(fail)?;
+    print!("{}", report::summary(&d));
+    if let Some(out) = &a.json {
+        write_json(out, report::to_json(&d))?;
+        eprintln!("report written to {}", out.display());
+    }
+    if let Some(mut dir) = plots {
+        let written = hil_host::plot::diagnosis_plots(&d, dir.dir())
+            .map_err(|e| fail(format!("{}: {e}", dir.dir().display())))?;
+        for w in &written {
+            dir.record(w);
+            eprintln!("plot written to {}", w.display());
+        }
+        dir.finish()?;
+    }
+    Ok(())
+}
+
+fn canonical(p: &Path) -> String {
+    p.canonicalize()
+        .unwrap_or_else(|_| p.to_path_buf())
+        .display()
+        .to_string()
+}
+
+/// The scenario file (protected as an input), or the built-in default.
+fn load_scenario(file: Option<&Path>) -> Result<Scenario> {
+    match file {
+        None => Ok(Scenario::default_scenario()),
+        Some(f) => {
+            output::protect_inputs(&[f]);
+            let text = std::fs::read_to_string(f).map_err(|e| fail(format!("{}: {e}", f.display())))?;
+            Scenario::from_toml(f, &text).map_err(fail)
+        }
+    }
+}
+
+fn run_scenario(a: RunArgs) -> Result<()> {
+    use hil_host::run::{run_with, write_outputs, NativeLink, RunOptions};
+    let scenario = load_scenario(a.scenario.as_deref())?;
+    let out = a.out.unwrap_or_else(|| PathBuf::from(format!("out/{}", scenario.name)));
+    let mut dir = OutputDir::open(&out, Claim::new("run", format!("scenario {}", scenario.name)), a.force)?;
+    let o = {
+        let _s = Spinner::start(&format!("running scenario `{}`", scenario.name), true);
+        run_with(&scenario, &mut NativeLink::new().map_err(fail)?, &RunOptions::default()).map_err(fail)?
+    };
+    let written = write_outputs(&scenario, &o, &out).map_err(|e| fail(format!("{}: {e}", out.display())))?;
+    for w in &written {
+        dir.record(w);
+    }
+    dir.finish()?;
+    print!("{}", o.summary.text(&scenario.name));
+    println!("logs (DATA-FORMAT) and plots in {}", out.display());
+    Ok(())
+}
+
+fn generate(a: GenerateArgs) -> Result<()> {
+    let plant = Plant::from(a.plant);
+    let seed = a.seed.unwrap_or_else(|| {
+        std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(1, |d| d.as_nanos() as u64)
+    });
+    let out = a
+        .out
+        .unwrap_or_else(|| PathBuf::from(format!("out/{}-{}-seed{seed}", plant.name(), a.effect)));
+    let claim = Claim::new("generate", format!("{} {} --seed {seed}", plant.name(), a.effect));
+    let known = hil_host::generate::effects(plant);
+    let prbs_grid = plant == Plant::Evvt && a.effect == "prbs-grid";
+    if !(known.contains(&a.effect.as_str()) || prbs_grid) {
+        use clap::CommandFactory;
+        let mut cmd = Cli::command();
+        cmd.build();
+        let msg = format!(
+            "invalid value '{}' for '<EFFECT>': {} has no such effect\n  [possible values: {}{}]",
+            a.effect,
+            plant.name(),
+            known.join(", "),
+            if plant == Plant::Evvt { ", prbs-grid" } else { "" }
+        );
+        let sub = cmd.find_subcommand_mut("generate").map(|c| c.clone());
+        sub.unwrap_or(cmd)
+            .error(clap::error::ErrorKind::InvalidValue, msg)
+            .exit();
+    }
+    // The directory is judged before the (seconds of) generation.
+    let mut dir = OutputDir::open(&out, claim, a.force)?;
+    if plant == Plant::Evvt && a.effect == "prbs-grid" {
+        let logs = {
+            let _s = Spinner::start("generating the EVVT PRBS identification logs", true);
+            hil_host::generate::evvt::identification_grid(seed).map_err(fail)?
+        };
+        for (name, text) in logs {
+            dir.write(&name, text.as_bytes())?;
+        }
+        dir.finish()?;
+        println!(
+            "seed {seed}: wrote the nine EVVT PRBS identification logs (design table) to {}",
+            out.display()
+        );
+        return Ok(());
+    }
+    let case = {
+        let _s = Spinner::start(&format!("generating {} {}", plant.name(), a.effect), true);
+        hil_host::generate::generate(plant, &a.effect, seed).map_err(fail)?
+    };
+    let truth: serde_json::Map<String, serde_json::Value> = case
+        .truth
+        .iter()
+        .map(|(k, v)| (k.clone(), serde_json::json!(v)))
+        .collect();
+    let mut truth = serde_json::json!({"plant": plant.name(), "effect": case.effect, "seed": seed, "params": truth});
+    tidy_json(&mut truth);
+    // The set as a whole: the old truth goes first and the new one comes last, so no reader
+    // sees new logs next to an old truth.json; the manifest says when the set is complete.
+    dir.remove_old("truth.json")?;
+    dir.write("estimation.csv", case.estimation_csv.as_bytes())?;
+    dir.write("validation.csv", case.validation_csv.as_bytes())?;
+    dir.write("truth.json", (serde_json::to_string_pretty(&truth)? + "\n").as_bytes())?;
+    dir.finish()?;
+    println!(
+        "seed {seed}: wrote {}/estimation.csv, validation.csv and truth.json",
+        out.display()
+    );
+    Ok(())
+}
+
+fn identify_evvt(a: IdentifyArgs) -> Result<()> {
+    use hil_host::identify::evvt;
+    output::protect_inputs(&a.logs);
+    if let Some(json) = &a.json {
+        output::check_not_input(json)?;
+    }
+    let opts = evvt::EvvtIdentifyOptions::default();
+    let counter = Counter::new("identify evvt: log", a.logs.len() as u64);
+    let mut points = Vec::new();
+    for (k, path) in a.logs.iter().enumerate() {
+        counter.step(k as u64 + 1, a.logs.len() as u64);
+        let log = read(path, Some(Plant::Evvt))?;
+        for n in &log.notices {
+            eprintln!("notice: {}: {n}", log.file);
+        }
+        let p = evvt::identify_log(&log, &opts).map_err(fail)?;
+        print!("{}", p.report);
+        points.push(p);
+    }
+    drop(counter);
+    print!("{}", evvt::tables_text(&points));
+    if let Some(out) = &a.json {
+        write_json(out, evvt::to_json(&points))?;
+        eprintln!("tables written to {}", out.display());
+    }
+    Ok(())
+}
+
+fn identify_ehvva(a: IdentifyArgs) -> Result<()> {
+    use hil_host::diagnose::ehvva::Events;
+    use hil_host::identify::ehvva;
+    output::protect_inputs(&a.logs);
+    if let Some(json) = &a.json {
+        output::check_not_input(json)?;
+    }
+    let mut sets = Vec::new();
+    for path in &a.logs {
+        let log = read(path, Some(Plant::Ehvva))?;
+        for n in &log.notices {
+            eprintln!("notice: {}: {n}", log.file);
+        }
+        sets.push(Events::from_log(&log).map_err(fail)?);
+    }
+    let id = {
+        let counter = Counter::new("condition", 1);
+        ehvva::identify(&sets, &ehvva::default_options(), &mut |k, n| {
+            counter.step(k as u64, n as u64)
+        })
+        .map_err(fail)?
+    };
+    print!("{}", id.text());
+    if let Some(out) = &a.json {
+        write_json(out, id.json())?;
+        eprintln!("tables written to {}", out.display());
+    }
+    Ok(())
+}
+
+/// `pil`: the scenario with the ECU core on QEMU (hil_host::pil).
+fn pil(a: PilArgs) -> Result<()> {
+    use hil_host::pil::{self, LinkFaults};
+    let scenario = load_scenario(a.scenario.as_deref())?;
+    let out = a
+        .out
+        .unwrap_or_else(|| PathBuf::from(format!("out/{}-pil", scenario.name)));
+    let elf = pil::find_firmware(a.elf.as_deref()).map_err(fail)?;
+    output::protect_inputs(&[&elf]);
+    let mut dir = OutputDir::open(&out, Claim::new("pil", format!("scenario {}", scenario.name)), a.force)?;
+    let faults = LinkFaults {
+        corrupt_every: a.corrupt_every,
+        drop_every: a.drop_every,
+    };
+    let r = {
+        let _s = Spinner::start(&format!("PIL run of `{}` on QEMU", scenario.name), true);
+        pil::run_scenario(&scenario, &elf, faults, a.until, a.compare_native, &out).map_err(fail)?
+    };
+    print!("{}", r.output.summary.text(&scenario.name));
+    print!("{}", r.text());
+    let written = hil_host::run::write_outputs(&scenario, &r.output, &out)
+        .map_err(|e| fail(format!("{}: {e}", out.display())))?;
+    for w in written
+        .iter()
+        .chain(&[out.join("defmt.bin"), out.join("qemu-stderr.txt")])
+    {
+        dir.record(w);
+    }
+    dir.finish()?;
+    println!(
+        "logs (DATA-FORMAT), plots and the firmware's defmt stream (defmt.bin: defmt-print -e {} < defmt.bin) in {} ({} files)",
+        elf.display(),
+        out.display(),
+        written.len()
+    );
+    if r.first_difference.is_some() {
+        return Err(fail("the PIL run differs from the native run"));
+    }
+    Ok(())
+}
+
+/// `target-bench`: instruction counts on the emulated target (hil_host::pil::target_bench).
+fn target_bench(a: TargetBenchArgs) -> Result<()> {
+    use hil_host::pil;
+    use hil_host::run::{run_with, NativeLink, RunOptions};
+    let scenario = load_scenario(a.scenario.as_deref())?;
+    let elf = pil::find_firmware(a.elf.as_deref()).map_err(fail)?;
+    output::protect_inputs(&[&elf]);
+    let mut dir = OutputDir::open(
+        &a.out,
+        Claim::new("target-bench", format!("scenario {}", scenario.name)),
+        a.force,
+    )?;
+    // The sensor frames of the scenario's first `steps` lockstep steps, closed loop natively;
+    // the target then steps its core on the same frames with every task counted.
+    let until_s = f64::from(a.steps) * f64::from(model_core::ecu::lockstep::STEP_US) * 1e-6;
+    let native = {
+        let _s = Spinner::start(&format!("native run of the first {} steps", a.steps), true);
+        run_with(
+            &scenario,
+            &mut NativeLink::new().map_err(fail)?,
+            &RunOptions {
+                until_s: Some(until_s),
+                keep_frames: true,
+            },
+        )
+        .map_err(fail)?
+    };
+    let frames: Vec<_> = native.frames.iter().map(|(s, _)| *s).collect();
+    let b = {
+        let _s = Spinner::start("counting instructions on the emulated Cortex-M4", true);
+        pil::target_bench(&elf, &frames, &a.out).map_err(fail)?
+    };
+    for name in ["insn-counts.txt", "defmt.bin", "qemu-stderr.txt"] {
+        dir.record(&a.out.join(name));
+    }
+    dir.finish()?;
+    print!("{}", b.text());
+    println!("raw counts in {}", a.out.join("insn-counts.txt").display());
+    let n = model_core::plant_bench::N_STATE;
+    if b.plant_bits_target[n..] != b.plant_bits_host[n..] || !b.answers_equal_native {
+        return Err(fail("the target's results differ from the host's"));
+    }
+    Ok(())
+}
+
+/// `paper-check`: every model against its paper (hil_host::paper_check).
+fn paper_check(a: PaperCheckArgs) -> Result<()> {
+    if hil_host::paper_check::run(a.json.as_deref()).map_err(fail)? {
+        Ok(())
+    } else {
+        Err(fail("paper-check: some rows fail (marked FAIL above)"))
+    }
+}

@@ -1,0 +1,291 @@
+//! The command line, declared with clap: every command, its options, its help with examples.
+//! Each command is a thin layer over a library function ([`commands`]).
+
+pub mod commands;
+pub mod progress;
+
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use hil_host::log::Plant;
+
+const MAIN_EXAMPLES: &str = "\
+Examples:
+  hil-host check ../shared/data/emps/emps-estimation.csv
+  hil-host diagnose est.csv --validation val.csv --json report.json --plots plots/
+  hil-host run scenarios/default.toml
+  hil-host generate vacuum backlash --seed 3 --out cases/backlash-3
+  hil-host identify evvt prbs/*.csv --json evvt.json
+  hil-host pil --until 0.5 --compare-native
+  hil-host completions bash > ~/.local/share/bash-completion/completions/hil-host
+
+Exit status: 0 on success, 1 when a command fails, 2 for a usage error.";
+
+/// Host tools for the engine actuators: logs, diagnosis, identification, closed-loop runs
+/// (natively and with the ECU on QEMU).
+#[derive(Debug, Parser)]
+#[command(
+    name = "hil-host",
+    version,
+    arg_required_else_help = true,
+    propagate_version = true,
+    after_help = MAIN_EXAMPLES
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// A plant of DATA-FORMAT.md.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum PlantArg {
+    Vacuum,
+    Ehvva,
+    Evvt,
+    Positioner,
+}
+
+impl From<PlantArg> for Plant {
+    fn from(p: PlantArg) -> Plant {
+        match p {
+            PlantArg::Vacuum => Plant::Vacuum,
+            PlantArg::Ehvva => Plant::Ehvva,
+            PlantArg::Evvt => Plant::Evvt,
+            PlantArg::Positioner => Plant::Positioner,
+        }
+    }
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Read a log strictly and summarise it (plant, samples, step, columns)
+    #[command(after_help = "Examples:\n  hil-host check bench.csv\n  hil-host check bench.csv --plant vacuum")]
+    Check(CheckArgs),
+    /// Name the cause of a model mismatch: calibrate the baseline, test its residuals, fit every
+    /// catalogue effect, measure the gain on validation data
+    #[command(after_help = "\
+Without --validation the last 30 % of the estimation log is held out as validation data.
+
+Examples:
+  hil-host diagnose est.csv --validation val.csv
+  hil-host diagnose est.csv --json report.json --plots plots/
+  hil-host diagnose emps-estimation.csv --validation emps-validation.csv")]
+    Diagnose(DiagnoseArgs),
+    /// Closed loop of all three actuators natively: the ECU core against the plant models;
+    /// logs and plots go to --out
+    #[command(after_help = "\
+Without a scenario file the built-in default scenario runs.
+
+Examples:
+  hil-host run
+  hil-host run scenarios/fault-crank-lost.toml --out out/crank")]
+    Run(RunArgs),
+    /// Write a bench-like estimation and validation log pair with one hidden effect (the truth
+    /// goes to truth.json beside them)
+    #[command(after_help = generate_help())]
+    Generate(GenerateArgs),
+    /// Identify actuator models from bench logs
+    #[command(subcommand)]
+    Identify(IdentifyCommand),
+    /// Processor in the loop: the closed loop of `run` with the ECU core as firmware on QEMU's
+    /// emulated STM32F405, in lockstep over its UART
+    #[command(after_help = "\
+The firmware image: --elf, else firmware-qemu next to the hil-host binary, else the
+workspace's target/thumbv7em-none-eabihf/firmware/firmware-qemu (CARGO_TARGET_DIR honoured),
+built first so it is current.
+
+Examples:
+  hil-host pil --until 0.5 --compare-native
+  hil-host pil --until 0.2 --corrupt-every 7 --drop-every 40
+  hil-host pil scenarios/default.toml --elf firmware-qemu.elf --out out/pil")]
+    Pil(PilArgs),
+    /// Instructions per task step and per plant step on the emulated Cortex-M4 (QEMU TCG
+    /// plugin), with the results checked against the host
+    #[command(after_help = "\
+Examples:
+  hil-host target-bench
+  hil-host target-bench --steps 20000 --out out/bench")]
+    TargetBench(TargetBenchArgs),
+    /// Each model against its paper: one row per published value (paper, model, relative
+    /// error, tolerance, pass); exit status 1 when a row fails
+    #[command(after_help = "\
+Examples:
+  hil-host paper-check
+  hil-host paper-check --json out/paper-check.json")]
+    PaperCheck(PaperCheckArgs),
+    /// Print a shell completion script
+    #[command(after_help = "\
+Examples:
+  hil-host completions bash > ~/.local/share/bash-completion/completions/hil-host
+  hil-host completions zsh > ~/.zfunc/_hil-host
+  hil-host completions fish > ~/.config/fish/completions/hil-host.fish")]
+    Completions {
+        /// The shell
+        shell: clap_complete::Shell,
+    },
+}
+
+fn generate_help() -> String {
+    let mut s = String::from("Effects by plant (or `none`, the control case):\n");
+    for p in Plant::ALL {
+        let effects: Vec<&str> = hil_host::generate::effects(p)
+            .iter()
+            .copied()
+            .filter(|e| *e != "none")
+            .collect();
+        s += &format!("  {:<11} {}\n", p.name(), effects.join(", "));
+    }
+    s += "  evvt        prbs-grid: the nine closed-loop PRBS identification logs instead\n";
+    s += "\nExamples:\n  hil-host generate vacuum backlash --seed 3\n  hil-host generate positioner none --seed=7 --out cases/control\n  hil-host generate evvt prbs-grid --out prbs";
+    s
+}
+
+#[derive(Debug, Args)]
+pub struct CheckArgs {
+    /// The log (DATA-FORMAT.md)
+    pub log: PathBuf,
+    /// The plant, when the log does not say
+    #[arg(long, value_enum)]
+    pub plant: Option<PlantArg>,
+}
+
+#[derive(Debug, Args)]
+pub struct DiagnoseArgs {
+    /// The estimation log
+    pub estimation: PathBuf,
+    /// A second log for validation (default: the estimation log's last 30 %)
+    #[arg(long, value_name = "LOG")]
+    pub validation: Option<PathBuf>,
+    /// The plant, when the log does not say
+    #[arg(long, value_enum)]
+    pub plant: Option<PlantArg>,
+    /// Write the JSON report here
+    #[arg(long, value_name = "FILE")]
+    pub json: Option<PathBuf>,
+    /// Write SVG plots into this directory
+    #[arg(long, value_name = "DIR")]
+    pub plots: Option<PathBuf>,
+    /// Write the plots into a directory that holds other files or another run's outputs
+    #[arg(long)]
+    pub force: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct RunArgs {
+    /// The scenario (TOML; default: the built-in default scenario)
+    pub scenario: Option<PathBuf>,
+    /// Directory for the logs and plots [default: out/<scenario name>]
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+    /// Write into a directory that holds other files or another run's outputs
+    #[arg(long)]
+    pub force: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct GenerateArgs {
+    /// The plant
+    #[arg(value_enum)]
+    pub plant: PlantArg,
+    /// The hidden effect (catalogue name), `none`, or for evvt `prbs-grid`
+    pub effect: String,
+    /// Random seed (default: from the clock, printed)
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Output directory [default: out/<plant>-<effect>-seed<N>]
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+    /// Write into a directory that holds other files or another run's outputs
+    #[arg(long)]
+    pub force: bool,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum IdentifyCommand {
+    /// EVVT plant α/(s(s+β)) per operating point from closed-loop PRBS logs (Yang 2015) and the
+    /// LPV tables α(N, V), β(N, V)
+    #[command(after_help = "\
+Examples:
+  hil-host generate evvt prbs-grid --out prbs
+  hil-host identify evvt prbs/*.csv --json evvt.json")]
+    Evvt(IdentifyArgs),
+    /// EHVVA calibration (Li 2018 Sec. 5.2): td(Ph, T), τp(Ph, T), Cd(T) from a test matrix of
+    /// valve events
+    #[command(after_help = "\
+Examples:
+  hil-host identify ehvva bench-*.csv --json ehvva.json")]
+    Ehvva(IdentifyArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct IdentifyArgs {
+    /// The logs
+    #[arg(required = true, value_name = "LOG")]
+    pub logs: Vec<PathBuf>,
+    /// Write the tables as JSON here
+    #[arg(long, value_name = "FILE")]
+    pub json: Option<PathBuf>,
+}
+
+#[derive(Debug, Args)]
+pub struct PilArgs {
+    /// The scenario (TOML; default: the built-in default scenario)
+    pub scenario: Option<PathBuf>,
+    /// The firmware-qemu image [default: found at run time, see below]
+    #[arg(long, value_name = "PATH")]
+    pub elf: Option<PathBuf>,
+    /// Directory for the logs, plots and the firmware's defmt stream [default: out/<scenario name>-pil]
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+    /// Stop after this many simulated seconds
+    #[arg(long, value_name = "S")]
+    pub until: Option<f64>,
+    /// Corrupt every n-th sensor frame (retransmitted: lossless)
+    #[arg(long, value_name = "N")]
+    pub corrupt_every: Option<u32>,
+    /// Drop every m-th sensor frame (retransmitted: lossless)
+    #[arg(long, value_name = "M")]
+    pub drop_every: Option<u32>,
+    /// Also run natively and compare every actuator frame
+    #[arg(long)]
+    pub compare_native: bool,
+    /// Write into a directory that holds other files or another run's outputs
+    #[arg(long)]
+    pub force: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct TargetBenchArgs {
+    /// The scenario (TOML; default: the built-in default scenario)
+    pub scenario: Option<PathBuf>,
+    /// The firmware-qemu image [default: found at run time as for `pil`]
+    #[arg(long, value_name = "PATH")]
+    pub elf: Option<PathBuf>,
+    /// Directory for the raw counts and QEMU's logs
+    #[arg(long, value_name = "DIR", default_value = "out/target-bench")]
+    pub out: PathBuf,
+    /// Lockstep steps of the scenario to count
+    #[arg(long, value_name = "N", default_value_t = 2000)]
+    pub steps: u32,
+    /// Write into a directory that holds other files or another run's outputs
+    #[arg(long)]
+    pub force: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct PaperCheckArgs {
+    /// Also write the rows as JSON, `{"rows": [...]}`
+    #[arg(long, value_name = "FILE")]
+    pub json: Option<PathBuf>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    #[test]
+    fn the_command_line_is_consistent() {
+        Cli::command().debug_assert();
+    }
+}

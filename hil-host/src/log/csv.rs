@@ -1,0 +1,528 @@
+//! The CSV reader: streams a log line by line (no whole-file string), accepts the bench-tool
+//! dialects of `shared/DATA-FORMAT.md` and says what it normalised, and hands the columns to
+//! the same checks every log goes through ([`super::check`]) with each sample's file line.
+//!
+//! Bounds (each an error naming the line when crossed, so no input can take unbounded memory):
+//! [`MAX_LINE_BYTES`] per line, [`MAX_META_LINES`] lines before the header,
+//! [`super::check::MAX_COLUMNS`] columns, [`MAX_ROWS`] data rows.
+
+use std::io::{BufRead, Read};
+
+use super::check::{check_meta, finish, select_columns, MetaEntry, RowLines};
+use super::{Log, LogError, Plant, FLAGS};
+
+/// Longest accepted line (bytes, without its line end).
+pub const MAX_LINE_BYTES: usize = 1 << 20;
+/// Most lines (metadata, comments, blank) before the header.
+pub const MAX_META_LINES: usize = 10_000;
+/// Most data rows (a 20 kHz log of 40 min; an EHVVA log of this length takes 3.2 GB).
+pub const MAX_ROWS: usize = 50_000_000;
+
+/// Reads the file's lines: bounded length, line ends (`\n`, `\r\n`) and a leading UTF-8
+/// byte-order mark removed, UTF-8 checked, blank lines counted.
+struct Lines<R: BufRead> {
+    input: R,
+    buf: Vec<u8>,
+    /// The 1-based number of the line in `buf`.
+    number: usize,
+    source: String,
+    crlf: bool,
+    bom: bool,
+    /// Set once the header is known, so that a bad byte is named by its column.
+    sep: Option<u8>,
+    names: Vec<String>,
+}
+
+impl<R: BufRead> Lines<R> {
+    fn error(&self, column: Option<String>, message: String) -> LogError {
+        LogError {
+            file: self.source.clone(),
+            line: Some(self.number),
+            column,
+            message,
+        }
+    }
+
+    /// The next line, `None` at the end of the input.
+    fn next_line(&mut self) -> Result<Option<(usize, &str)>, LogError> {
+        self.buf.clear();
+        let limit = MAX_LINE_BYTES as u64 + 1;
+        let got = (&mut self.input).take(limit).read_until(b'\n', &mut self.buf);
+        self.number += 1;
+        match got {
+            Err(e) => return Err(self.error(None, format!("cannot read: {e}"))),
+            Ok(0) => return Ok(None),
+            Ok(_) => {}
+        }
+        if self.buf.last() == Some(&b'\n') {
+            self.buf.pop();
+        } else if self.buf.len() > MAX_LINE_BYTES {
+            return Err(self.error(
+                None,
+                format!("line longer than {MAX_LINE_BYTES} bytes (not a log, or a line end is missing)"),
+            ));
+        }
+        if self.buf.last() == Some(&b'\r') {
+            self.buf.pop();
+            self.crlf = true;
+        }
+        let mut start = 0;
+        if self.number == 1 {
+            if self.buf.starts_with(&[0xEF, 0xBB, 0xBF]) {
+                start = 3;
+                self.bom = true;
+            } else if self.buf.starts_with(&[0xFF, 0xFE]) || self.buf.starts_with(&[0xFE, 0xFF]) {
+                return Err(self.error(
+                    None,
+                    "UTF-16 text (byte-order mark at the start); save the log as UTF-8".into(),
+                ));
+            }
+        }
+        match std::str::from_utf8(&self.buf[start..]) {
+            Ok(s) => Ok(Some((self.number, s))),
+            Err(e) => {
+                let at = start + e.valid_up_to();
+                let column = self.sep.and_then(|sep| {
+                    let cell = self.buf[start..at].iter().filter(|&&b| b == sep).count();
+                    self.names.get(cell).cloned()
+                });
+                Err(self.error(
+                    column,
+                    format!(
+                        "not valid UTF-8 (byte 0x{:02X} at byte {} of the line)",
+                        self.buf[at],
+                        at + 1
+                    ),
+                ))
+            }
+        }
+    }
+}
+
+/// A cell of a split line: a byte range of the line (inside the quotes for a quoted cell).
+#[derive(Clone, Copy, Debug)]
+struct Cell {
+    start: usize,
+    end: usize,
+    quoted: bool,
+    /// A quoted cell with `""` inside (an escaped quote).
+    escaped: bool,
+}
+
+impl Cell {
+    fn text(self, line: &str) -> &str {
+        &line[self.start..self.end]
+    }
+}
+
+/// The separator and the decimal mark, found from the header.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Dialect {
+    sep: u8,
+    /// `,` accepted as decimal mark (when `;` or tab separates).
+    decimal_comma: bool,
+}
+
+impl Dialect {
+    /// `;` if the header has one outside quotes, else tab if it has one, else `,`.
+    fn detect(header: &str) -> Dialect {
+        let (mut semicolons, mut tabs, mut quoted) = (0, 0, false);
+        for b in header.bytes() {
+            match b {
+                b'"' => quoted = !quoted,
+                b';' if !quoted => semicolons += 1,
+                b'\t' if !quoted => tabs += 1,
+                _ => {}
+            }
+        }
+        match (semicolons, tabs) {
+            (s, _) if s > 0 => Dialect {
+                sep: b';',
+                decimal_comma: true,
+            },
+            (_, t) if t > 0 => Dialect {
+                sep: b'\t',
+                decimal_comma: true,
+            },
+            _ => Dialect {
+                sep: b',',
+                decimal_comma: false,
+            },
+        }
+    }
+}
+
+/// Splits a line into cells (RFC 4180 quoting within the line; a quote cannot span lines, so
+/// line numbers stay the file's). An error gives the byte (1-based) and what is wrong.
+fn split(line: &str, sep: u8, cells: &mut Vec<Cell>) -> Result<(), (usize, &'static str)> {
+    cells.clear();
+    let b = line.as_bytes();
+    let blank = |c: u8| c == b' ' || (c == b'\t' && sep != b'\t');
+    let mut i = 0;
+    loop {
+        let mut j = i;
+        while j < b.len() && blank(b[j]) {
+            j += 1;
+        }
+        if j < b.len() && b[j] == b'"' {
+            let start = j + 1;
+            let mut k = start;
+            let mut escaped = false;
+            loop {
+                match b.get(k) {
+                    None => return Err((j + 1, "quote not closed on this line")),
+                    Some(b'"') if b.get(k + 1) == Some(&b'"') => {
+                        escaped = true;
+                        k += 2;
+                    }
+                    Some(b'"') => break,
+                    Some(_) => k += 1,
+                }
+            }
+            let end = k;
+            k += 1;
+            while k < b.len() && blank(b[k]) {
+                k += 1;
+            }
+            cells.push(Cell {
+                start,
+                end,
+                quoted: true,
+                escaped,
+            });
+            if k == b.len() {
+                return Ok(());
+            }
+            if b[k] != sep {
+                return Err((k + 1, "text after a closing quote"));
+            }
+            i = k + 1;
+        } else {
+            let end = b[i..].iter().position(|&c| c == sep).map_or(b.len(), |p| i + p);
+            cells.push(Cell {
+                start: i,
+                end,
+                quoted: false,
+                escaped: false,
+            });
+            if end == b.len() {
+                return Ok(());
+            }
+            i = end + 1;
+        }
+    }
+}
+
+/// A cell's number: `.` or (in a decimal-comma dialect) `,` as decimal mark. `None` when it
+/// is not a number; NaN and infinity parse (the samples' check names them).
+fn number(cell: &str, decimal_comma: bool) -> Option<f64> {
+    let s = cell.trim();
+    if decimal_comma && s.contains(',') {
+        // Bounded copy on the stack: a number has no business being longer.
+        let mut buf = [0u8; 64];
+        if s.len() > buf.len() || s.matches(',').count() > 1 || s.contains('.') {
+            return None;
+        }
+        for (d, c) in buf.iter_mut().zip(s.bytes()) {
+            *d = if c == b',' { b'.' } else { c };
+        }
+        return std::str::from_utf8(&buf[..s.len()]).ok()?.parse().ok();
+    }
+    s.parse().ok()
+}
+
+/// The unit spellings accepted in a units row under a column (from its name's suffix).
+fn units_for(name: &str) -> Option<&'static [&'static str]> {
+    if FLAGS.contains(&name) {
+        return Some(&["-", "1", "0/1", "bool", "flag"]);
+    }
+    let (_, suffix) = name.rsplit_once('_')?;
+    Some(match suffix {
+        "s" => &["s", "sec"],
+        "pct" => &["%", "pct"],
+        "V" => &["V"],
+        "kPa" => &["kPa"],
+        "MPa" => &["MPa"],
+        "C" => &["C", "°C", "degC", "deg C"],
+        "mm" => &["mm"],
+        "m" => &["m"],
+        "deg" => &["deg", "°", "°CA", "degCA", "deg CA", "°KW"],
+        "rpm" => &["rpm", "1/min", "min^-1", "U/min", "rev/min"],
+        "N" => &["N"],
+        _ => return None,
+    })
+}
+
+/// A unit cell without its brackets: `[kPa]` and `(kPa)` are `kPa`.
+fn bare_unit(cell: &str) -> &str {
+    let s = cell.trim();
+    for (open, close) in [('[', ']'), ('(', ')')] {
+        if let Some(inner) = s.strip_prefix(open).and_then(|r| r.strip_suffix(close)) {
+            return inner.trim();
+        }
+    }
+    s
+}
+
+/// Reads a CSV log from `input`, checking it whole; `source` names it in errors.
+/// `plant_override` (from `--plant`) wins over `# plant:`.
+pub fn read_csv(source: &str, input: impl BufRead, plant_override: Option<Plant>) -> Result<Log, LogError> {
+    let mut lines = Lines {
+        input,
+        buf: Vec::new(),
+        number: 0,
+        source: source.to_string(),
+        crlf: false,
+        bom: false,
+        sep: None,
+        names: Vec::new(),
+    };
+    let err = |line: usize, column: Option<&str>, message: String| LogError {
+        file: source.to_string(),
+        line: Some(line),
+        column: column.map(str::to_string),
+        message,
+    };
+
+    // Metadata, then the header.
+    let mut entries: Vec<MetaEntry> = Vec::new();
+    let mut notices: Vec<String> = Vec::new();
+    let mut comments = Vec::new();
+    let header = loop {
+        let Some((number, l)) = lines.next_line()? else {
+            return Err(LogError {
+                file: source.to_string(),
+                line: None,
+                column: None,
+                message: "no header row (file is empty or only metadata)".into(),
+            });
+        };
+        if number > MAX_META_LINES {
+            return Err(err(
+                number,
+                None,
+                format!("no header row within the first {MAX_META_LINES} lines"),
+            ));
+        }
+        if l.trim().is_empty() {
+            continue;
+        }
+        if let Some(body) = l.strip_prefix('#') {
+            match body.trim_start_matches('#').split_once(':') {
+                Some((k, v)) if !k.trim().is_empty() => entries.push(MetaEntry {
+                    key: k.trim().to_string(),
+                    value: v.trim().to_string(),
+                    line: Some(number),
+                }),
+                _ => comments.push(number),
+            }
+            continue;
+        }
+        break l.to_string();
+    };
+    let header_line = lines.number;
+    if !comments.is_empty() {
+        notices.push(format!(
+            "{} comment line(s) without `key: value` ignored (first: line {})",
+            comments.len(),
+            comments[0]
+        ));
+    }
+    let (plant, meta, meta_notices) = check_meta(source, &entries, plant_override)?;
+    drop(entries);
+
+    let dialect = Dialect::detect(&header);
+    let mut cells: Vec<Cell> = Vec::new();
+    let mut quoted_seen = false;
+    split(&header, dialect.sep, &mut cells)
+        .map_err(|(at, what)| err(header_line, None, format!("{what} (byte {at})")))?;
+    let names: Vec<String> = cells
+        .iter()
+        .map(|c| {
+            quoted_seen |= c.quoted;
+            let t = c.text(&header).trim();
+            if c.escaped {
+                t.replace("\"\"", "\"")
+            } else {
+                t.to_string()
+            }
+        })
+        .collect();
+    let sel = select_columns(source, plant, &names, Some(header_line))?;
+    lines.sep = Some(dialect.sep);
+    lines.names = names;
+    let width = sel.keep.len();
+    let t_index = sel.keep.iter().position(|s| s.is_some_and(|s| sel.order[s] == "t_s"));
+
+    let mut columns: Vec<Vec<f64>> = vec![Vec::new(); sel.order.len()];
+    let mut rows = RowLines::default();
+    let mut n_rows = 0usize;
+    let mut units_line = None;
+    let mut comma_decimals = false;
+    let mut first_data = true;
+    while let Some((n, l)) = lines.next_line()? {
+        if l.trim().is_empty() {
+            continue;
+        }
+        if l.starts_with('#') {
+            return Err(err(n, None, "metadata line after the header".into()));
+        }
+        split(l, dialect.sep, &mut cells).map_err(|(at, what)| err(n, None, format!("{what} (byte {at})")))?;
+        if cells.len() != width {
+            return Err(err(n, None, format!("{} cells, header has {width}", cells.len())));
+        }
+        if std::mem::take(&mut first_data) {
+            // A units row: right under the header, its time cell no number, no cell a number.
+            let is_units = t_index.is_some_and(|i| {
+                let t = cells[i].text(l).trim();
+                !t.is_empty() && number(t, dialect.decimal_comma).is_none()
+            }) && cells.iter().all(|c| number(c.text(l), dialect.decimal_comma).is_none());
+            if is_units {
+                for (c, slot) in cells.iter().zip(&sel.keep) {
+                    let Some(slot) = slot else { continue };
+                    quoted_seen |= c.quoted;
+                    let name = &sel.order[*slot];
+                    let unit = bare_unit(c.text(l));
+                    if unit.is_empty() {
+                        continue;
+                    }
+                    if let Some(ok) = units_for(name) {
+                        if !ok.contains(&unit) {
+                            return Err(err(
+                                n,
+                                Some(name),
+                                format!(
+                                    "unit `{unit}` in the units row, but the column's name says `{}`",
+                                    ok.join("` or `")
+                                ),
+                            ));
+                        }
+                    }
+                }
+                units_line = Some(n);
+                continue;
+            }
+        }
+        if n_rows == MAX_ROWS {
+            return Err(err(n, None, format!("more than {MAX_ROWS} data rows")));
+        }
+        for (c, slot) in cells.iter().zip(&sel.keep) {
+            let Some(slot) = slot else { continue };
+            quoted_seen |= c.quoted;
+            let text = c.text(l).trim();
+            let name = &sel.order[*slot];
+            let v = if c.escaped {
+                None
+            } else {
+                number(text, dialect.decimal_comma)
+            };
+            let Some(v) = v else {
+                let what = if text.is_empty() {
+                    "empty cell, a number is needed".to_string()
+                } else {
+                    format!("`{}` is not a number", truncate(text, 40))
+                };
+                return Err(err(n, Some(name), what));
+            };
+            comma_decimals |= dialect.decimal_comma && text.contains(',');
+            columns[*slot].push(v);
+        }
+        rows.push(n_rows, n);
+        n_rows += 1;
+    }
+
+    // What was normalised, in the order a reader meets it.
+    let mut normalised = Vec::new();
+    if lines.bom {
+        normalised.push("UTF-8 byte-order mark removed".to_string());
+    }
+    if lines.crlf {
+        normalised.push("CRLF line ends".to_string());
+    }
+    match dialect.sep {
+        b';' => normalised.push(format!(
+            "`;` separator{}",
+            if comma_decimals {
+                " with `,` as decimal mark"
+            } else {
+                ""
+            }
+        )),
+        b'\t' => normalised.push(format!(
+            "tab separator{}",
+            if comma_decimals {
+                " with `,` as decimal mark"
+            } else {
+                ""
+            }
+        )),
+        _ => {}
+    }
+    if let Some(u) = units_line {
+        normalised.push(format!(
+            "units row on line {u} checked against the column names and skipped"
+        ));
+    }
+    if quoted_seen {
+        normalised.push("quoted cells unquoted".to_string());
+    }
+    let mut all_notices = Vec::new();
+    if !normalised.is_empty() {
+        all_notices.push(format!("dialect normalised: {}", normalised.join("; ")));
+    }
+    all_notices.extend(meta_notices);
+    all_notices.extend(notices);
+    all_notices.extend(sel.notices);
+    let columns: Vec<(String, Vec<f64>)> = sel.order.into_iter().zip(columns).collect();
+    finish(source, plant, meta, columns, &rows, all_notices)
+}
+
+/// At most `max` characters of `s` (on a character boundary), with `…` when cut.
+fn truncate(s: &str, max: usize) -> String {
+    match s.char_indices().nth(max) {
+        Some((i, _)) => format!("{}…", &s[..i]),
+        None => s.to_string(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cells_of(line: &str, sep: u8) -> Result<Vec<String>, (usize, &'static str)> {
+        let mut cells = Vec::new();
+        split(line, sep, &mut cells)?;
+        Ok(cells.iter().map(|c| c.text(line).to_string()).collect())
+    }
+
+    #[test]
+    fn split_handles_quotes_empty_cells_and_bad_quoting() {
+        assert_eq!(
+            cells_of("a,b,,c,", b','),
+            Ok(vec!["a", "b", "", "c", ""].into_iter().map(String::from).collect())
+        );
+        assert_eq!(cells_of(r#""a;b" ; "1,5";x"#, b';').unwrap(), ["a;b", "1,5", "x"]);
+        assert_eq!(cells_of(r#""say ""hi""",2"#, b',').unwrap(), [r#"say ""hi"""#, "2"]);
+        assert_eq!(cells_of(r#"1,"2"#, b','), Err((3, "quote not closed on this line")));
+        assert_eq!(cells_of(r#""1"x,2"#, b','), Err((4, "text after a closing quote")));
+        assert_eq!(cells_of("", b',').unwrap(), [""]);
+    }
+
+    #[test]
+    fn numbers_with_decimal_comma() {
+        assert_eq!(number(" 1,5 ", true), Some(1.5));
+        assert_eq!(number("1.5", true), Some(1.5));
+        assert_eq!(number("-2,5e-3", true), Some(-2.5e-3));
+        assert_eq!(number("1.234,5", true), None);
+        assert_eq!(number("1,5", false), None);
+        assert_eq!(number(&"1".repeat(60), true), "1".repeat(60).parse().ok());
+        assert_eq!(number(&format!("{},5", "1".repeat(100)), true), None);
+    }
+
+    #[test]
+    fn dialect_from_the_header() {
+        assert_eq!(Dialect::detect("t_s;x_pct").sep, b';');
+        assert_eq!(Dialect::detect("t_s\tx_pct").sep, b'\t');
+        assert_eq!(Dialect::detect("\"a;b\",x_pct").sep, b',');
+    }
+}

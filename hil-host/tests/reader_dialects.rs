@@ -1,0 +1,222 @@
+//! The bench-tool dialects of `shared/DATA-FORMAT.md` (issue #15.2): each reads to the same
+//! numbers as the plain CSV, the reader says what it normalised, and errors name the file's
+//! own line and the column.
+
+use hil_host::log::{parse_log, Log, LogError};
+
+/// A plain vacuum log: metadata, header, 6 rows with values that print differently in every
+/// dialect (decimals, negative, exponent).
+fn plain() -> String {
+    let mut s = String::from(
+        "# plant: vacuum\n# source: dialect test\nt_s,duty_pct,u_batt_V,p_amb_kPa,p_tank_kPa,x_pct,u_pilot_extra\n",
+    );
+    for i in 0..6 {
+        let t = i as f64 * 0.002;
+        s.push_str(&format!(
+            "{t},{},{},101.325,{},{},x\n",
+            10.0 + 7.25 * i as f64,
+            13.5 - 0.125 * i as f64,
+            35.0 + 1e-3 * i as f64,
+            -0.5 + 12.75 * i as f64
+        ));
+    }
+    s
+}
+
+/// Rewrites the plain log's header and data lines (metadata stays) cell by cell.
+fn dialect(sep: &str, decimal_comma: bool, quote: bool, units: Option<&str>, crlf: bool, bom: bool) -> String {
+    let plain = plain();
+    let mut out = String::new();
+    if bom {
+        out.push('\u{feff}');
+    }
+    let eol = if crlf { "\r\n" } else { "\n" };
+    for (k, line) in plain.lines().enumerate() {
+        if line.starts_with('#') {
+            out.push_str(line);
+        } else {
+            let cells: Vec<String> = line
+                .split(',')
+                .map(|c| {
+                    let c = if decimal_comma {
+                        c.replace('.', ",")
+                    } else {
+                        c.to_string()
+                    };
+                    if quote {
+                        format!("\"{c}\"")
+                    } else {
+                        c
+                    }
+                })
+                .collect();
+            out.push_str(&cells.join(sep));
+            if k == 2 {
+                if let Some(u) = units {
+                    out.push_str(eol);
+                    out.push_str(&u.replace(',', sep));
+                }
+            }
+        }
+        out.push_str(eol);
+    }
+    out
+}
+
+fn read(name: &str, text: &str) -> Log {
+    parse_log(name, text, None).unwrap_or_else(|e| panic!("{name}: {e}"))
+}
+
+fn same_numbers(a: &Log, b: &Log) {
+    assert_eq!(a.order, b.order);
+    for name in &a.order {
+        let (x, y) = (a.col(name).unwrap(), b.col(name).unwrap());
+        assert_eq!(x.len(), y.len(), "{name}");
+        for (p, q) in x.iter().zip(y) {
+            assert_eq!(p.to_bits(), q.to_bits(), "{}: {name} {p} vs {q}", b.file);
+        }
+    }
+    assert_eq!(a.dt_s.to_bits(), b.dt_s.to_bits());
+    assert_eq!(a.meta, b.meta);
+}
+
+fn normalised(log: &Log) -> &str {
+    log.notices
+        .iter()
+        .find(|n| n.starts_with("dialect normalised"))
+        .map_or("", String::as_str)
+}
+
+#[test]
+fn every_dialect_reads_to_the_plain_numbers_and_says_what_it_normalised() {
+    let base = read("plain.csv", &plain());
+    assert_eq!(base.len(), 6);
+    assert_eq!(normalised(&base), "", "{:?}", base.notices);
+    let cases: [(&str, String, &[&str]); 9] = [
+        (
+            "bom.csv",
+            dialect(",", false, false, None, false, true),
+            &["byte-order mark"],
+        ),
+        ("crlf.csv", dialect(",", false, false, None, true, false), &["CRLF"]),
+        (
+            "semicolon.csv",
+            dialect(";", true, false, None, false, false),
+            &["`;` separator with `,` as decimal mark"],
+        ),
+        (
+            "semicolon-dot.csv",
+            dialect(";", false, false, None, false, false),
+            &["`;` separator"],
+        ),
+        (
+            "tab.csv",
+            dialect("\t", false, false, None, false, false),
+            &["tab separator"],
+        ),
+        (
+            "tab-comma.csv",
+            dialect("\t", true, false, None, false, false),
+            &["tab separator with `,` as decimal mark"],
+        ),
+        (
+            "units.csv",
+            dialect(",", false, false, Some("s,%,V,kPa,kPa,%,"), false, false),
+            &["units row on line 4"],
+        ),
+        (
+            "units-brackets.csv",
+            dialect(",", false, false, Some("[s],[%],[V],[kPa],[kPa],[%],[-]"), false, false),
+            &["units row on line 4"],
+        ),
+        (
+            "quoted.csv",
+            dialect(",", false, true, None, false, false),
+            &["quoted cells"],
+        ),
+    ];
+    for (name, text, says) in cases {
+        let log = read(name, &text);
+        same_numbers(&base, &log);
+        for s in says {
+            assert!(normalised(&log).contains(s), "{name}: {:?}", log.notices);
+        }
+    }
+    // All at once: a German Excel export.
+    let text = dialect(
+        ";",
+        true,
+        true,
+        Some("\"[s]\";\"[%]\";\"[V]\";\"[kPa]\";\"[kPa]\";\"[%]\";\"\""),
+        true,
+        true,
+    );
+    let log = read("excel.csv", &text);
+    same_numbers(&base, &log);
+    let n = normalised(&log);
+    for s in [
+        "byte-order mark",
+        "CRLF",
+        "`;` separator with `,` as decimal mark",
+        "units row on line 4",
+        "quoted",
+    ] {
+        assert!(n.contains(s), "{n}");
+    }
+}
+
+fn error(name: &str, text: &str) -> LogError {
+    match parse_log(name, text, None) {
+        Ok(_) => panic!("{name} was accepted"),
+        Err(e) => e,
+    }
+}
+
+#[test]
+fn errors_name_the_files_own_line_and_the_column_in_every_dialect() {
+    // Line 8 of the file is the 4th data row with a units row (line 4) and a blank line (6).
+    for (name, sep, comma) in [("c.csv", ",", false), ("s.csv", ";", true), ("t.csv", "\t", false)] {
+        let mut text = dialect(sep, comma, false, Some("s,%,V,kPa,kPa,%,-"), true, true);
+        let lines: Vec<&str> = text.split("\r\n").collect();
+        let mut l: Vec<String> = lines.iter().map(|s| s.to_string()).collect();
+        l.insert(5, String::new());
+        // Line 8: x_pct unreadable.
+        let cells: Vec<&str> = l[7].split(sep).collect();
+        let mut bad: Vec<String> = cells.iter().map(|s| s.to_string()).collect();
+        bad[5] = "12..5".into();
+        l[7] = bad.join(sep);
+        text = l.join("\r\n");
+        let e = error(name, &text);
+        assert_eq!((e.line, e.column.as_deref()), (Some(8), Some("x_pct")), "{name}: {e}");
+        assert!(e.to_string().starts_with(&format!("{name}:8, column x_pct:")), "{e}");
+
+        // A non-finite value, found by the shared samples' check, is named by its line too.
+        let text = text.replace("12..5", "NaN");
+        let e = error(name, &text);
+        assert_eq!((e.line, e.column.as_deref()), (Some(8), Some("x_pct")), "{name}: {e}");
+    }
+}
+
+#[test]
+fn a_units_row_that_contradicts_a_column_name_is_an_error() {
+    let text = dialect(",", false, false, Some("s,%,V,kPa,MPa,%,"), false, false);
+    let e = error("u.csv", &text);
+    assert_eq!((e.line, e.column.as_deref()), (Some(4), Some("p_tank_kPa")), "{e}");
+    assert!(e.message.contains("`MPa`"), "{e}");
+    // Milli- and mega-pascal differ by case: no case folding.
+    let text = dialect(",", false, false, Some("s,%,V,kpa,kPa,%,"), false, false);
+    assert_eq!(error("u.csv", &text).column.as_deref(), Some("p_amb_kPa"));
+}
+
+#[test]
+fn broken_quoting_and_ragged_rows_name_the_line() {
+    let text = dialect(",", false, true, None, false, false);
+    let mut l: Vec<String> = text.lines().map(String::from).collect();
+    l[4] = l[4].replacen("\",\"", ",\"", 1);
+    let e = error("q.csv", &(l.join("\n") + "\n"));
+    assert_eq!(e.line, Some(5), "{e}");
+    let text = plain().replace("0.002,17.25", "0.002,17.25,1");
+    let e = error("r.csv", &text);
+    assert_eq!(e.line, Some(5), "{e}");
+    assert!(e.message.contains("8 cells, header has 7"), "{e}");
+}
