@@ -1,6 +1,8 @@
-//! ECU firmware (STM32F405RG, embassy): one task per actuator plus a supervisor. All control
-//! logic is in `model_core::ecu` (host-tested); the tasks in `tasks.rs` only move values
-//! between the board traits and those state machines.
+//! ECU firmware (STM32F405RG, embassy): one task per part of the ECU's one composition
+//! (`model_core::ecu::schedule::Ecu`: supervisor, EHVVA, EVVT, vacuum). The composition (periods,
+//! input assembly, safe states, watchdog decision) is in model-core and is what `hil-host run`
+//! and the QEMU image run too; the tasks in `tasks.rs` are a timer and a call of the part's
+//! `run` with this board.
 //!
 //! Priorities: the EHVVA task runs on an interrupt executor above the others, so that a
 //! vacuum model step or an ADC conversion never delays a pilot edge; the rest share the
@@ -19,13 +21,10 @@ use embassy_executor::{InterruptExecutor, Spawner};
 use embassy_stm32::interrupt;
 use embassy_stm32::interrupt::{InterruptExt, Priority};
 use embassy_stm32::pac;
-use model_core::ecu::ehvva_task::{EhvvaTask, EhvvaTaskConfig};
-use model_core::ecu::evvt_task::{EvvtTask, EvvtTaskConfig};
-use model_core::ecu::supervisor::{Supervisor, SupervisorConfig};
-use model_core::ecu::vacuum_task::{VacuumTask, VacuumTaskConfig};
-use model_core::ehvva::{EhvvaParams, EhvvaTables};
+use model_core::ecu::lockstep::EcuCoreConfig;
+use model_core::ecu::schedule::{outputs_off, Ecu, EhvvaPart, EvvtPart, SupervisorPart, VacuumPart};
 
-use board::ecu::{EcuAdc, EcuBoard, EcuEhvvaIo, EcuEvvtIo, EcuVacuumIo};
+use board::ecu::{EcuAdc, EcuBoard, EcuEhvvaIo, EcuEvvtIo, EcuVacuumIo, EcuWatchdog};
 use board::EmbassyClock;
 
 defmt::timestamp!("{=u64:us}", embassy_time::Instant::now().as_micros());
@@ -39,29 +38,24 @@ unsafe fn UART5() {
 }
 
 #[embassy_executor::task]
-async fn ehvva_task(mut io: EcuEhvvaIo, task: EhvvaTask<EhvvaTables<f32>>) -> ! {
-    tasks::ehvva(&mut io, task).await
+async fn ehvva_task(mut io: EcuEhvvaIo, part: EhvvaPart) -> ! {
+    tasks::ehvva(&mut io, part).await
 }
 
 #[embassy_executor::task]
-async fn evvt_task(mut io: EcuEvvtIo, task: EvvtTask) -> ! {
-    let fault_n = io.driver_fault_n;
-    tasks::evvt(&mut io.motor, move || fault_n.is_low(), EmbassyClock, task).await
+async fn evvt_task(mut io: EcuEvvtIo, part: EvvtPart) -> ! {
+    tasks::evvt(&mut io, EmbassyClock, part).await
 }
 
 #[embassy_executor::task]
-async fn vacuum_task(mut io: EcuVacuumIo, task: VacuumTask) -> ! {
-    tasks::vacuum(&mut io.valves, &mut io.pump, EmbassyClock, task).await
+async fn vacuum_task(mut io: EcuVacuumIo, part: VacuumPart) -> ! {
+    tasks::vacuum(&mut io, EmbassyClock, part).await
 }
 
 #[embassy_executor::task]
-async fn supervisor_task(
-    mut adc: EcuAdc,
-    mut wdg: embassy_stm32::wdg::IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG>,
-    sup: Supervisor,
-) -> ! {
-    wdg.unleash();
-    tasks::supervisor(&mut adc, move || wdg.pet(), EmbassyClock, sup).await
+async fn supervisor_task(mut adc: EcuAdc, mut wdg: EcuWatchdog, part: SupervisorPart) -> ! {
+    wdg.0.unleash();
+    tasks::supervisor(&mut adc, &mut wdg, EmbassyClock, part).await
 }
 
 /// A calibration that does not validate: outputs stay off, the reason is logged, no task runs.
@@ -79,13 +73,18 @@ async fn main(spawner: Spawner) {
         defmt::warn!("restarted by the watchdog");
     }
     pac::RCC.csr().modify(|w| w.set_rmvf(true));
-    let board = EcuBoard::new(p);
+    let mut board = EcuBoard::new(p);
+    outputs_off(&mut board.ehvva, &mut board.evvt, &mut board.vacuum);
 
-    let tables = EhvvaTables::<f32>::new(&EhvvaParams::paper_default()).unwrap_or_else(|_| halt("EHVVA delay tables"));
-    let ehvva = EhvvaTask::new(EhvvaTaskConfig::default(), tables).unwrap_or_else(|e| halt(e));
-    let evvt = EvvtTask::new(EvvtTaskConfig::default()).unwrap_or_else(|_| halt("EVVT controller"));
-    let vacuum = VacuumTask::new(VacuumTaskConfig::default()).unwrap_or_else(|_| halt("vacuum models"));
-    let sup = Supervisor::new(SupervisorConfig::default());
+    // The composition's parts, each moved into its task; their shared values start as
+    // `EcuShared::BOOT` in `shared.rs` (every actuator safe until the first supervisor scan).
+    let Ecu {
+        supervisor,
+        ehvva,
+        evvt,
+        vacuum,
+        shared: _,
+    } = Ecu::new(EcuCoreConfig::default()).unwrap_or_else(|what| halt(what));
 
     interrupt::UART5.set_priority(Priority::P6);
     let high = EXECUTOR_HIGH.start(interrupt::UART5);
@@ -96,7 +95,7 @@ async fn main(spawner: Spawner) {
     match (
         evvt_task(board.evvt, evvt),
         vacuum_task(board.vacuum, vacuum),
-        supervisor_task(board.adc, board.watchdog, sup),
+        supervisor_task(board.adc, board.watchdog, supervisor),
     ) {
         (Ok(a), Ok(b), Ok(c)) => {
             spawner.spawn(a);

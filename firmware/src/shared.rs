@@ -1,25 +1,17 @@
-//! Latest-value cells between the tasks (copy in, copy out under a critical section: no
-//! queues, no allocation), and the tasks' heartbeats for the watchdog.
+//! What the tasks share: the composition's [`EcuShared`] (measurements, faults, safe state,
+//! engine view, the vacuum part's reports, heartbeats) in one cell behind a critical-section
+//! mutex, and the set-points. A part copies the cell in and out under the lock (about 130
+//! bytes, well under a microsecond), never while it computes, so the EHVVA task on the
+//! interrupt executor is never held up by a slower task's step.
 
 use core::cell::Cell;
-use core::sync::atomic::{AtomicU32, Ordering};
 
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::blocking_mutex::Mutex;
-use model_core::ecu::ehvva_task::{EngineSnapshot, ValveRequest};
-use model_core::ecu::supervisor::{FaultSet, Measurements, SafeState};
-
-type Shared<T> = Mutex<CriticalSectionRawMutex, Cell<T>>;
+use model_core::ecu::ehvva_task::ValveRequest;
+use model_core::ecu::schedule::{EcuShared, Setpoints, SharedAccess};
 
 /// What the engine management asks for (until a bus interface writes these: fixed values).
-#[derive(Clone, Copy)]
-pub struct Setpoints {
-    pub valve: ValveRequest,
-    pub cam_phase_deg: f32,
-    /// LPT, HPT, HPC positions.
-    pub vacuum_x_pct: [f32; 3],
-}
-
 pub const DEFAULT_SETPOINTS: Setpoints = Setpoints {
     valve: ValveRequest {
         open_deg: 340.0,
@@ -32,67 +24,23 @@ pub const DEFAULT_SETPOINTS: Setpoints = Setpoints {
     vacuum_x_pct: [0.0; 3],
 };
 
-/// Flags the vacuum task reports to the supervisor.
-#[derive(Clone, Copy, Default)]
-pub struct VacuumReport {
-    pub stuck: bool,
-    pub abnormal_leak: bool,
-}
+static SHARED: Mutex<CriticalSectionRawMutex, Cell<EcuShared>> = Mutex::new(Cell::new(EcuShared::BOOT));
+static SETPOINTS: Mutex<CriticalSectionRawMutex, Cell<Setpoints>> = Mutex::new(Cell::new(DEFAULT_SETPOINTS));
 
-static SETPOINTS: Shared<Setpoints> = Mutex::new(Cell::new(DEFAULT_SETPOINTS));
-static MEASUREMENTS: Shared<Option<Measurements>> = Mutex::new(Cell::new(None));
-static FAULTS: Shared<FaultSet> = Mutex::new(Cell::new(FaultSet(0)));
-static ENGINE: Shared<Option<EngineSnapshot>> = Mutex::new(Cell::new(None));
-static VACUUM: Shared<VacuumReport> = Mutex::new(Cell::new(VacuumReport {
-    stuck: false,
-    abnormal_leak: false,
-}));
+/// The parts' access to the shared cell.
+pub struct Shared;
 
-/// Heartbeats: EHVVA, EVVT, vacuum. The supervisor pets the watchdog only while all move.
-pub static HEARTBEATS: [AtomicU32; 3] = [AtomicU32::new(0), AtomicU32::new(0), AtomicU32::new(0)];
-pub const HB_EHVVA: usize = 0;
-pub const HB_EVVT: usize = 1;
-pub const HB_VACUUM: usize = 2;
-
-pub fn beat(task: usize) {
-    if let Some(h) = HEARTBEATS.get(task) {
-        h.fetch_add(1, Ordering::Relaxed);
+impl SharedAccess for Shared {
+    fn with<R>(&mut self, f: impl FnOnce(&mut EcuShared) -> R) -> R {
+        SHARED.lock(|c| {
+            let mut v = c.get();
+            let r = f(&mut v);
+            c.set(v);
+            r
+        })
     }
 }
 
 pub fn setpoints() -> Setpoints {
     SETPOINTS.lock(|c| c.get())
-}
-
-/// Until the supervisor's first scan, the defaults (and its faults start empty, but every
-/// task also starts in its safe state until the engine turns).
-pub fn measurements() -> Measurements {
-    MEASUREMENTS.lock(|c| c.get()).unwrap_or_default()
-}
-pub fn set_measurements(m: Measurements) {
-    MEASUREMENTS.lock(|c| c.set(Some(m)));
-}
-
-pub fn faults() -> FaultSet {
-    FAULTS.lock(|c| c.get())
-}
-pub fn safe() -> SafeState {
-    faults().safe_state()
-}
-pub fn set_faults(f: FaultSet) {
-    FAULTS.lock(|c| c.set(f));
-}
-
-pub fn engine() -> Option<EngineSnapshot> {
-    ENGINE.lock(|c| c.get())
-}
-pub fn set_engine(e: EngineSnapshot) {
-    ENGINE.lock(|c| c.set(Some(e)));
-}
-
-pub fn vacuum_report() -> VacuumReport {
-    VACUUM.lock(|c| c.get())
-}
-pub fn set_vacuum_report(r: VacuumReport) {
-    VACUUM.lock(|c| c.set(r));
 }

@@ -1,21 +1,278 @@
 //! `hil-host run` with injected faults: each scenario file under `scenarios/fault-*.toml` runs
-//! the ECU's code (model-core `EcuCore`, lockstep every 50 µs) against the plants, and the
-//! designed safe reaction is asserted on the actuator frames and the plants' states.
+//! the ECU's code against the plants, and the designed safe reaction is asserted on the
+//! actuator frames and the plants' states.
+//!
+//! Every run goes through two ECUs fed the same sensor frames, and every actuator frame of one
+//! must equal the other's bit for bit: model-core's `EcuCore` (what `hil-host run` and the QEMU
+//! image run), and the firmware's task layer on mock boards ([`FirmwareTasks`]): the
+//! composition's parts split as `firmware/src/main.rs` splits them, each called through its
+//! `run` method with boards shaped like the ECU's (a capture queue of 8 edges that drops when
+//! full, an active-low driver fault pin, ADC channels read one by one, PWM outputs that clamp),
+//! sharing their values through a copy-in/copy-out cell as `firmware/src/shared.rs` does. So
+//! the fault reactions asserted here are those of the composition that ships.
+use std::cell::Cell;
+
 use hil_host::run::{run_with, EcuLink, NativeLink, RunOptions, RunOutput, Scenario};
-use model_core::ecu::board::SolenoidCmd;
+use model_core::ecu::board::{AnalogIn, Capture, Edge, PwmOut, SolenoidCmd, SolenoidDriver, SwitchOut};
 use model_core::ecu::frame::{ActuatorFrame, SensorFrame};
-use model_core::ecu::supervisor::{Fault, FaultSet, SupervisorConfig};
+use model_core::ecu::lockstep::{setpoints_of, EcuCoreConfig};
+use model_core::ecu::schedule::{
+    AnalogBank, Ecu, EcuShared, EhvvaBoard, EhvvaPart, EvvtBoard, EvvtPart, Schedule, SharedAccess, SupervisorPart,
+    VacuumBoard, VacuumPart, Watchdog,
+};
+use model_core::ecu::supervisor::{Fault, FaultSet, SupervisorConfig, N_CHANNELS};
 use model_core::peak_hold::{plan, SolenoidParams};
 
-/// The native link, with the EVVT task's scheduled gain recorded per step (not in the frame).
+/// A PWM output as the ECU's timers have it: the duty clamped to 0..1 (NaN to 0).
+#[derive(Clone, Copy, Default)]
+struct Pwm(f32);
+impl PwmOut for Pwm {
+    fn set_duty(&mut self, duty: f32) {
+        self.0 = if duty.is_nan() { 0.0 } else { duty.clamp(0.0, 1.0) };
+    }
+    fn disable(&mut self) {
+        self.0 = 0.0;
+    }
+}
+#[derive(Clone, Copy, Default)]
+struct Pin(bool);
+impl SwitchOut for Pin {
+    fn set(&mut self, on: bool) {
+        self.0 = on;
+    }
+}
+#[derive(Clone, Copy)]
+struct Pilot(SolenoidCmd);
+impl SolenoidDriver for Pilot {
+    fn off(&mut self) {
+        self.0 = SolenoidCmd::Off;
+    }
+    fn full_on(&mut self) {
+        self.0 = SolenoidCmd::Full;
+    }
+    fn pwm(&mut self, duty: f32) {
+        self.0 = SolenoidCmd::Pwm(duty);
+    }
+}
+
+/// TIM2's captures in a queue of 8 (the firmware's `Deque<Edge, 8>`), the pilot stage, the
+/// lift and snubber valves.
+struct EhvvaIo {
+    pending: std::collections::VecDeque<Edge>,
+    pilot: Pilot,
+    lift: Pin,
+    snubber: Pin,
+}
+impl Capture for EhvvaIo {
+    fn next_edge(&mut self) -> Option<Edge> {
+        self.pending.pop_front()
+    }
+}
+impl EhvvaBoard for EhvvaIo {
+    type Pilot = Pilot;
+    type Switch = Pin;
+    fn pilot(&mut self) -> &mut Pilot {
+        &mut self.pilot
+    }
+    fn lift_valve(&mut self) -> &mut Pin {
+        &mut self.lift
+    }
+    fn snubber_valve(&mut self) -> &mut Pin {
+        &mut self.snubber
+    }
+}
+/// PB7's speed command, PB15's level (low = fault).
+struct EvvtIo {
+    motor: Pwm,
+    fault_pin_high: bool,
+}
+impl EvvtBoard for EvvtIo {
+    type Motor = Pwm;
+    fn motor(&mut self) -> &mut Pwm {
+        &mut self.motor
+    }
+    fn driver_fault(&mut self) -> bool {
+        !self.fault_pin_high
+    }
+}
+struct VacuumIo {
+    valves: [Pwm; 3],
+    pump: Pin,
+}
+impl VacuumBoard for VacuumIo {
+    type Valve = Pwm;
+    type Pump = Pin;
+    fn valves(&mut self) -> &mut [Pwm; 3] {
+        &mut self.valves
+    }
+    fn pump(&mut self) -> &mut Pin {
+        &mut self.pump
+    }
+}
+/// ADC1: one conversion per channel read, counting the reads.
+struct Adc {
+    counts: [u16; N_CHANNELS],
+    reads: usize,
+}
+struct Conversion(u16);
+impl AnalogIn for Conversion {
+    fn read_counts(&mut self) -> u16 {
+        self.0
+    }
+}
+impl AnalogBank for Adc {
+    type In<'a> = Conversion;
+    fn analog(&mut self, index: usize) -> Conversion {
+        self.reads += 1;
+        Conversion(self.counts[index])
+    }
+}
+struct Iwdg {
+    pets: u32,
+}
+impl Watchdog for Iwdg {
+    fn pet(&mut self) {
+        self.pets += 1;
+    }
+}
+
+/// The shared values as the firmware keeps them: one cell, copied in and out per access.
+struct CellShared(Cell<EcuShared>);
+impl SharedAccess for &CellShared {
+    fn with<R>(&mut self, f: impl FnOnce(&mut EcuShared) -> R) -> R {
+        let mut v = self.0.get();
+        let r = f(&mut v);
+        self.0.set(v);
+        r
+    }
+}
+
+/// The firmware's task layer on mock boards, stepped on the lockstep grid.
+struct FirmwareTasks {
+    supervisor: SupervisorPart,
+    ehvva: EhvvaPart,
+    evvt: EvvtPart,
+    vacuum: VacuumPart,
+    shared: CellShared,
+    schedule: Schedule,
+    ehvva_io: EhvvaIo,
+    evvt_io: EvvtIo,
+    vacuum_io: VacuumIo,
+    adc: Adc,
+    iwdg: Iwdg,
+}
+
+impl FirmwareTasks {
+    fn new() -> Self {
+        let Ecu {
+            supervisor,
+            ehvva,
+            evvt,
+            vacuum,
+            shared: _,
+        } = Ecu::new(EcuCoreConfig::default()).unwrap();
+        Self {
+            supervisor,
+            ehvva,
+            evvt,
+            vacuum,
+            shared: CellShared(Cell::new(EcuShared::BOOT)),
+            schedule: Schedule::default(),
+            ehvva_io: EhvvaIo {
+                pending: Default::default(),
+                pilot: Pilot(SolenoidCmd::Off),
+                lift: Pin(false),
+                snubber: Pin(false),
+            },
+            evvt_io: EvvtIo {
+                motor: Pwm(0.0),
+                fault_pin_high: true,
+            },
+            vacuum_io: VacuumIo {
+                valves: [Pwm(0.0); 3],
+                pump: Pin(false),
+            },
+            adc: Adc {
+                counts: [0; N_CHANNELS],
+                reads: 0,
+            },
+            iwdg: Iwdg { pets: 0 },
+        }
+    }
+
+    fn step(&mut self, s: &SensorFrame) -> ActuatorFrame {
+        for e in s.edges() {
+            if self.ehvva_io.pending.len() < 8 {
+                self.ehvva_io.pending.push_back(*e);
+            }
+        }
+        self.adc.counts = s.adc_counts;
+        self.evvt_io.fault_pin_high = !s.motor_driver_fault;
+        let set = setpoints_of(s);
+        let now = s.t_us;
+        let mut sh = &self.shared;
+        if self.schedule.supervisor.due(now) {
+            self.supervisor.run(&mut sh, &mut self.adc, &mut self.iwdg, now);
+        }
+        self.ehvva.run(&mut sh, &mut self.ehvva_io, &set.valve, now);
+        if self.schedule.evvt.due(now) {
+            self.evvt.run(&mut sh, &mut self.evvt_io, set.cam_phase_deg, now);
+        }
+        if self.schedule.vacuum.due(now) {
+            self.vacuum.run(&mut sh, &mut self.vacuum_io, set.vacuum_x_pct, now);
+        }
+        ActuatorFrame {
+            seq: s.seq,
+            t_us: now,
+            pilot: self.ehvva_io.pilot.0,
+            lift_valve_on: self.ehvva_io.lift.0,
+            snubber_on: self.ehvva_io.snubber.0,
+            motor_duty: self.evvt_io.motor.0,
+            vacuum_duty: self.vacuum_io.valves.map(|v| v.0),
+            pump_on: self.vacuum_io.pump.0,
+            faults: self.shared.0.get().faults.0,
+            bad_frames: 0,
+        }
+    }
+}
+
+/// The bits of every field (f32 compared as bits, so -0.0 and NaN differences count).
+fn bits(a: &ActuatorFrame) -> (u32, u32, bool, bool, u32, [u32; 3], bool, u32) {
+    let pilot = match a.pilot {
+        SolenoidCmd::Off => 0,
+        SolenoidCmd::Full => 1,
+        SolenoidCmd::Pwm(d) => 2 ^ d.to_bits(),
+    };
+    (
+        a.seq,
+        pilot,
+        a.lift_valve_on,
+        a.snubber_on,
+        a.motor_duty.to_bits(),
+        a.vacuum_duty.map(f32::to_bits),
+        a.pump_on,
+        a.faults,
+    )
+}
+
+/// The native link, with the firmware's task layer run beside it and compared every step, and
+/// the EVVT task's scheduled gain recorded per step (not in the frame).
 struct Observed {
     link: NativeLink,
+    firmware: FirmwareTasks,
     kp: Vec<f32>,
 }
 
 impl EcuLink for Observed {
     fn exchange(&mut self, s: &SensorFrame) -> Result<ActuatorFrame, String> {
         let a = self.link.exchange(s)?;
+        let f = self.firmware.step(s);
+        if bits(&a) != bits(&f) {
+            return Err(format!(
+                "step {} ({} µs): EcuCore {a:?}, firmware task layer {f:?}",
+                s.seq, s.t_us
+            ));
+        }
         self.kp.push(self.link.core().evvt().map_or(0.0, |e| e.kp_rpm_per_deg));
         Ok(a)
     }
@@ -30,6 +287,7 @@ fn run(name: &str) -> (Scenario, RunOutput, Vec<f32>) {
     let sc = load(name);
     let mut link = Observed {
         link: NativeLink::new().unwrap(),
+        firmware: FirmwareTasks::new(),
         kp: Vec::new(),
     };
     let o = run_with(
@@ -41,6 +299,12 @@ fn run(name: &str) -> (Scenario, RunOutput, Vec<f32>) {
         },
     )
     .unwrap();
+    // Both ECUs petted the watchdog every 50 ms (no task stalled) and read every ADC channel
+    // at every 10 ms scan.
+    let scans = o.frames.len().div_ceil(200);
+    assert_eq!(link.firmware.adc.reads, scans * N_CHANNELS);
+    assert_eq!(link.firmware.iwdg.pets as usize, scans / 5);
+    assert_eq!(link.link.core().watchdog_pets(), link.firmware.iwdg.pets);
     (sc, o, link.kp)
 }
 
@@ -371,4 +635,15 @@ fn motor_driver_fault_pin_parks_the_phaser() {
     // Valve events and vacuum go on.
     assert!(events(&o, 1.0, 2.0).len() >= 11);
     assert!(o.frames.last().unwrap().1.vacuum_duty[0] > 0.1);
+}
+
+/// The default scenario (speed ramps, phase and wastegate steps, battery sag) closed loop over
+/// its 10 s: the firmware's task layer equals `EcuCore` in every actuator frame (checked in
+/// `run`), valve events happen and no fault is raised.
+#[test]
+fn default_scenario_runs_the_same_composition_on_the_firmware_task_layer() {
+    let (sc, o, _) = run("default");
+    assert_eq!(o.frames.len() as f64, (sc.duration_s / STEP_S).round());
+    assert_eq!(only_faults(&o), FaultSet::default(), "{:?}", o.summary.fault_events);
+    assert!(events(&o, 0.0, sc.duration_s).len() > 50);
 }

@@ -33,9 +33,10 @@ use embassy_stm32::{bind_interrupts, pac, Peri, Peripherals};
 use embassy_time::Timer;
 use heapless::Deque;
 use model_core::ecu::board::{until_us, AnalogIn, Capture, Clock, Edge, EdgeSource, PwmOut, SolenoidDriver, SwitchOut};
+use model_core::ecu::schedule::{AnalogBank, EhvvaBoard, EvvtBoard, VacuumBoard, Watchdog};
 use model_core::ecu::supervisor::N_CHANNELS;
 
-use super::{AnalogBank, EhvvaIo};
+use super::EhvvaIo;
 
 bind_interrupts!(pub struct Irqs {
     TIM2 => embassy_stm32::timer::CaptureCompareInterruptHandler<TIM2>;
@@ -150,10 +151,21 @@ impl EcuEhvvaIo {
     }
 }
 
-impl EhvvaIo for EcuEhvvaIo {
+impl EhvvaBoard for EcuEhvvaIo {
     type Pilot = Pwm4;
     type Switch = Switch;
+    fn pilot(&mut self) -> &mut Pwm4 {
+        &mut self.pilot
+    }
+    fn lift_valve(&mut self) -> &mut Switch {
+        &mut self.lift
+    }
+    fn snubber_valve(&mut self) -> &mut Switch {
+        &mut self.snubber
+    }
+}
 
+impl EhvvaIo for EcuEhvvaIo {
     async fn wait_edge_or(&mut self, wake_at_us: u32) {
         let sleep_us = until_us(self.now_us(), wake_at_us);
         let crank = select(
@@ -175,15 +187,6 @@ impl EhvvaIo for EcuEhvvaIo {
                 t_us,
             });
         }
-    }
-    fn pilot(&mut self) -> &mut Pwm4 {
-        &mut self.pilot
-    }
-    fn lift_valve(&mut self) -> &mut Switch {
-        &mut self.lift
-    }
-    fn snubber_valve(&mut self) -> &mut Switch {
-        &mut self.snubber
     }
 }
 
@@ -224,10 +227,41 @@ pub struct EcuVacuumIo {
     pub pump: Switch,
 }
 
-/// All outputs of the EVVT task.
+impl VacuumBoard for EcuVacuumIo {
+    type Valve = Pwm<TIM3>;
+    type Pump = Switch;
+    fn valves(&mut self) -> &mut [Pwm<TIM3>; 3] {
+        &mut self.valves
+    }
+    fn pump(&mut self) -> &mut Switch {
+        &mut self.pump
+    }
+}
+
+/// The EVVT task's output and the motor driver's fault pin.
 pub struct EcuEvvtIo {
     pub motor: Pwm4,
     pub driver_fault_n: Input<'static>,
+}
+
+impl EvvtBoard for EcuEvvtIo {
+    type Motor = Pwm4;
+    fn motor(&mut self) -> &mut Pwm4 {
+        &mut self.motor
+    }
+    /// PB15 low = fault.
+    fn driver_fault(&mut self) -> bool {
+        self.driver_fault_n.is_low()
+    }
+}
+
+/// The IWDG (200 ms, started by `unleash`).
+pub struct EcuWatchdog(pub embassy_stm32::wdg::IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG>);
+
+impl Watchdog for EcuWatchdog {
+    fn pet(&mut self) {
+        self.0.pet();
+    }
 }
 
 /// The whole board, split by task.
@@ -236,7 +270,7 @@ pub struct EcuBoard {
     pub evvt: EcuEvvtIo,
     pub vacuum: EcuVacuumIo,
     pub adc: EcuAdc,
-    pub watchdog: embassy_stm32::wdg::IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG>,
+    pub watchdog: EcuWatchdog,
 }
 
 impl EcuBoard {
@@ -317,7 +351,10 @@ impl EcuBoard {
                 pump: switch(p.PB12),
             },
             adc: EcuAdc { adc, channels },
-            watchdog: embassy_stm32::wdg::IndependentWatchdog::new(p.IWDG, 200_000),
+            watchdog: EcuWatchdog(embassy_stm32::wdg::IndependentWatchdog::new(
+                p.IWDG,
+                model_core::ecu::schedule::WATCHDOG_TIMEOUT_US,
+            )),
         }
     }
 }

@@ -3,34 +3,41 @@
 //! [`SensorFrame`] and apply the [`ActuatorFrame`] it returns, so the two runs of a scenario
 //! can be compared step by step.
 //!
-//! The schedule is the firmware's: the EHVVA task every step (it runs on crank edges and its
-//! own deadlines on the ECU; 50 µs is 0.45 crank degrees at 1500 rpm), the supervisor and
-//! the EVVT task every 10 ms, the vacuum task every 12.5 ms (80 Hz). The supervisor runs
-//! first in its tick so the tasks see the measurements and faults of that scan, as on the
-//! ECU where the scan completes before the slower tasks' ticks.
+//! `EcuCore` is a thin driver of the one composition, [`super::schedule::Ecu`]: the sensor
+//! frame and the actuator frame are its board ([`FrameBoard`]: the frame's edges are the
+//! capture timer, its counts the ADC, its set-points the engine management, the actuator
+//! frame the output pins, which hold their value between the parts' runs as the ECU's do),
+//! and [`Ecu::step_on`] runs the parts' `run` methods, the ones the firmware's tasks call, on
+//! the lockstep grid: the supervisor and the EVVT part every 10 ms, the vacuum part every
+//! 12.5 ms, the EHVVA part every step (on the ECU it runs on crank edges and its own
+//! deadlines; 50 µs is 0.45 crank degrees at 1500 rpm).
 
-use super::board::{elapsed_us, SolenoidCmd};
-use super::ehvva_task::{EhvvaStepInputs, EhvvaTask, EhvvaTaskConfig, EngineSnapshot};
-use super::evvt_task::{EvvtTask, EvvtTaskConfig, EvvtTaskInputs, EvvtTaskOutputs};
-use super::frame::{ActuatorFrame, SensorFrame};
-use super::supervisor::{FaultSet, Measurements, SafeState, Supervisor, SupervisorConfig, TaskReports};
-use super::vacuum_task::{VacuumTask, VacuumTaskConfig, VacuumTaskInputs, VacuumTaskOutputs};
-use crate::ehvva::{EhvvaParams, EhvvaTables};
+use super::board::{AnalogIn, Capture, Edge, PwmOut, SolenoidCmd, SolenoidDriver, SwitchOut};
+use super::ehvva_task::{EhvvaTaskConfig, EngineSnapshot};
+use super::evvt_task::{EvvtTaskConfig, EvvtTaskOutputs};
+use super::frame::{ActuatorFrame, SensorFrame, MAX_EDGES};
+use super::schedule::{AnalogBank, Boards, Ecu, EhvvaBoard, EvvtBoard, Schedule, Setpoints, VacuumBoard, Watchdog};
+use super::supervisor::{FaultSet, Measurements, SupervisorConfig, N_CHANNELS};
+use super::vacuum_task::{VacuumTaskConfig, VacuumTaskOutputs};
+use crate::ehvva::EhvvaParams;
+
+pub use super::schedule::{StepPart, EVVT_PERIOD_US, SUPERVISOR_PERIOD_US, VACUUM_PERIOD_US};
 
 /// The lockstep period.
 pub const STEP_US: u32 = 50;
-pub const SUPERVISOR_PERIOD_US: u32 = 10_000;
-pub const EVVT_PERIOD_US: u32 = 10_000;
-pub const VACUUM_PERIOD_US: u32 = 12_500;
 
 /// The calibration of every task (the firmware's defaults).
 #[derive(Clone, Debug)]
 pub struct EcuCoreConfig {
+    /// ADC scales, battery and temperature limits.
     pub supervisor: SupervisorConfig,
+    /// Trigger wheel, pilot coil, speed range, slow-valve timing.
     pub ehvva: EhvvaTaskConfig,
     /// The valve model whose delay tables td(Ph, T) advance the pilot command.
     pub ehvva_model: EhvvaParams,
+    /// Cam phase controller and phase measurement.
     pub evvt: EvvtTaskConfig,
+    /// Vacuum actuator models, position control, pump and diagnosis.
     pub vacuum: VacuumTaskConfig,
 }
 
@@ -46,89 +53,253 @@ impl Default for EcuCoreConfig {
     }
 }
 
-/// A periodic task's next due time on the wrapping µs clock.
+/// One output pin that remembers what it was told (a PWM duty, a switch).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Latch<T>(pub T);
+
+impl PwmOut for Latch<f32> {
+    fn set_duty(&mut self, duty: f32) {
+        // The duty as the task computed it (the frame carries it; the board clamps).
+        self.0 = duty;
+    }
+    fn disable(&mut self) {
+        self.0 = 0.0;
+    }
+}
+
+impl SwitchOut for Latch<bool> {
+    fn set(&mut self, on: bool) {
+        self.0 = on;
+    }
+}
+
+impl SolenoidDriver for Latch<SolenoidCmd> {
+    fn off(&mut self) {
+        self.0 = SolenoidCmd::Off;
+    }
+    fn full_on(&mut self) {
+        self.0 = SolenoidCmd::Full;
+    }
+    fn pwm(&mut self, duty: f32) {
+        self.0 = SolenoidCmd::Pwm(duty);
+    }
+}
+
+impl AnalogIn for Latch<u16> {
+    fn read_counts(&mut self) -> u16 {
+        self.0
+    }
+}
+
+/// The EHVVA part's side of [`FrameBoard`].
 #[derive(Clone, Copy, Debug)]
-struct Period {
-    period_us: u32,
-    next_us: Option<u32>,
+pub struct FrameEhvva {
+    edges: [Edge; MAX_EDGES],
+    n_edges: usize,
+    next_edge: usize,
+    /// The pilot stage's last command.
+    pub pilot: Latch<SolenoidCmd>,
+    /// The lift valve.
+    pub lift: Latch<bool>,
+    /// The snubber switch valve.
+    pub snubber: Latch<bool>,
 }
 
-impl Period {
-    const fn new(period_us: u32) -> Self {
+impl Capture for FrameEhvva {
+    fn next_edge(&mut self) -> Option<Edge> {
+        if self.next_edge >= self.n_edges {
+            return None;
+        }
+        let e = self.edges.get(self.next_edge).copied();
+        self.next_edge += 1;
+        e
+    }
+}
+
+impl EhvvaBoard for FrameEhvva {
+    type Pilot = Latch<SolenoidCmd>;
+    type Switch = Latch<bool>;
+    fn pilot(&mut self) -> &mut Self::Pilot {
+        &mut self.pilot
+    }
+    fn lift_valve(&mut self) -> &mut Self::Switch {
+        &mut self.lift
+    }
+    fn snubber_valve(&mut self) -> &mut Self::Switch {
+        &mut self.snubber
+    }
+}
+
+/// The EVVT part's side of [`FrameBoard`].
+#[derive(Clone, Copy, Debug)]
+pub struct FrameEvvt {
+    driver_fault: bool,
+    /// The speed command's duty.
+    pub motor: Latch<f32>,
+}
+
+impl EvvtBoard for FrameEvvt {
+    type Motor = Latch<f32>;
+    fn motor(&mut self) -> &mut Self::Motor {
+        &mut self.motor
+    }
+    fn driver_fault(&mut self) -> bool {
+        self.driver_fault
+    }
+}
+
+/// The vacuum part's side of [`FrameBoard`].
+#[derive(Clone, Copy, Debug)]
+pub struct FrameVacuum {
+    /// LPT, HPT, HPC valve duties.
+    pub valves: [Latch<f32>; 3],
+    /// The pump relay.
+    pub pump: Latch<bool>,
+}
+
+impl VacuumBoard for FrameVacuum {
+    type Valve = Latch<f32>;
+    type Pump = Latch<bool>;
+    fn valves(&mut self) -> &mut [Self::Valve; 3] {
+        &mut self.valves
+    }
+    fn pump(&mut self) -> &mut Self::Pump {
+        &mut self.pump
+    }
+}
+
+/// The ADC of [`FrameBoard`]: the frame's counts.
+#[derive(Clone, Copy, Debug)]
+pub struct FrameAdc(pub [u16; N_CHANNELS]);
+
+impl AnalogBank for FrameAdc {
+    type In<'a> = Latch<u16>;
+    fn analog(&mut self, index: usize) -> Latch<u16> {
+        Latch(self.0.get(index).copied().unwrap_or(0))
+    }
+}
+
+/// Counts the pets (lockstep has no reset: the count is for tests and logs).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct PetCounter(pub u32);
+
+impl Watchdog for PetCounter {
+    fn pet(&mut self) {
+        self.0 = self.0.wrapping_add(1);
+    }
+}
+
+/// The sensor frame and the actuator frame as the ECU's board: inputs replaced by each frame,
+/// outputs held between the parts' runs (all off at start, as on the ECU at boot).
+#[derive(Clone, Copy, Debug)]
+pub struct FrameBoard {
+    /// Edges in, pilot, lift and snubber out.
+    pub ehvva: FrameEhvva,
+    /// Driver fault pin in, speed command out.
+    pub evvt: FrameEvvt,
+    /// Valves and pump out.
+    pub vacuum: FrameVacuum,
+    /// The frame's ADC counts.
+    pub adc: FrameAdc,
+    /// The watchdog's pets.
+    pub watchdog: PetCounter,
+}
+
+impl Default for FrameBoard {
+    fn default() -> Self {
         Self {
-            period_us,
-            next_us: None,
-        }
-    }
-    /// Due at the first call, then every period; a late call (a gap in the frames) does
-    /// not make it run several times in a row, it restarts the grid.
-    fn due(&mut self, now_us: u32) -> bool {
-        match self.next_us {
-            Some(next) if elapsed_us(now_us, next) > u32::MAX / 2 => false,
-            Some(next) => {
-                let late = elapsed_us(now_us, next);
-                self.next_us = Some(if late >= self.period_us {
-                    now_us.wrapping_add(self.period_us)
-                } else {
-                    next.wrapping_add(self.period_us)
-                });
-                true
-            }
-            None => {
-                self.next_us = Some(now_us.wrapping_add(self.period_us));
-                true
-            }
+            ehvva: FrameEhvva {
+                edges: [SensorFrame::NO_EDGE; MAX_EDGES],
+                n_edges: 0,
+                next_edge: 0,
+                pilot: Latch(SolenoidCmd::Off),
+                lift: Latch(false),
+                snubber: Latch(false),
+            },
+            evvt: FrameEvvt {
+                driver_fault: false,
+                motor: Latch(0.0),
+            },
+            vacuum: FrameVacuum {
+                valves: [Latch(0.0); 3],
+                pump: Latch(false),
+            },
+            adc: FrameAdc([0; N_CHANNELS]),
+            watchdog: PetCounter(0),
         }
     }
 }
 
-/// The tasks of one step, as [`EcuCore::step_probed`] reports them.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum StepPart {
-    Supervisor,
-    /// The crank/cam edges of the frame and the EHVVA task's step.
-    Ehvva,
-    Evvt,
-    Vacuum,
+impl FrameBoard {
+    /// The inputs of `s` (edges, counts, driver fault pin).
+    pub fn load(&mut self, s: &SensorFrame) {
+        self.ehvva.edges = s.edges;
+        self.ehvva.n_edges = (s.n_edges as usize).min(MAX_EDGES);
+        self.ehvva.next_edge = 0;
+        self.adc = FrameAdc(s.adc_counts);
+        self.evvt.driver_fault = s.motor_driver_fault;
+    }
+
+    /// The outputs as an actuator frame answering `seq` at `t_us`.
+    pub fn outputs(&self, seq: u32, t_us: u32, faults: FaultSet) -> ActuatorFrame {
+        ActuatorFrame {
+            seq,
+            t_us,
+            pilot: self.ehvva.pilot.0,
+            lift_valve_on: self.ehvva.lift.0,
+            snubber_on: self.ehvva.snubber.0,
+            motor_duty: self.evvt.motor.0,
+            vacuum_duty: self.vacuum.valves.map(|v| v.0),
+            pump_on: self.vacuum.pump.0,
+            faults: faults.0,
+            bad_frames: 0,
+        }
+    }
 }
 
-/// Supervisor + EHVVA + EVVT + vacuum tasks with their schedule and the values they share.
+impl FrameBoard {
+    /// Every part's board.
+    pub fn boards(&mut self) -> Boards<'_, FrameEhvva, FrameEvvt, FrameVacuum, FrameAdc, PetCounter> {
+        Boards {
+            ehvva: &mut self.ehvva,
+            evvt: &mut self.evvt,
+            vacuum: &mut self.vacuum,
+            adc: &mut self.adc,
+            watchdog: &mut self.watchdog,
+        }
+    }
+}
+
+/// The set-points a sensor frame carries.
+pub fn setpoints_of(s: &SensorFrame) -> Setpoints {
+    Setpoints {
+        valve: s.valve,
+        cam_phase_deg: s.cam_phase_set_deg,
+        vacuum_x_pct: s.vacuum_x_set_pct,
+    }
+}
+
+/// The composition ([`Ecu`]) on the lockstep grid with the frames as its board.
 #[derive(Clone, Debug)]
 pub struct EcuCore {
-    sup: Supervisor,
-    ehvva: EhvvaTask<EhvvaTables<f32>>,
-    evvt: EvvtTask,
-    vacuum: VacuumTask,
-    sup_period: Period,
-    evvt_period: Period,
-    vacuum_period: Period,
-    meas: Measurements,
-    faults: FaultSet,
-    safe: SafeState,
-    engine: Option<EngineSnapshot>,
+    ecu: Ecu,
+    schedule: Schedule,
+    board: FrameBoard,
+    started: bool,
     last_evvt: Option<EvvtTaskOutputs>,
     last_vacuum: Option<VacuumTaskOutputs>,
-    motor_duty: f32,
 }
 
 impl EcuCore {
+    /// The composition from `cfg`; an error names the part of the calibration refused.
     pub fn new(cfg: EcuCoreConfig) -> Result<Self, &'static str> {
-        let tables = EhvvaTables::<f32>::new(&cfg.ehvva_model).map_err(|_| "EHVVA delay tables")?;
         Ok(Self {
-            sup: Supervisor::new(cfg.supervisor),
-            ehvva: EhvvaTask::new(cfg.ehvva, tables)?,
-            evvt: EvvtTask::new(cfg.evvt).map_err(|_| "EVVT controller calibration")?,
-            vacuum: VacuumTask::new(cfg.vacuum).map_err(|_| "vacuum task calibration")?,
-            sup_period: Period::new(SUPERVISOR_PERIOD_US),
-            evvt_period: Period::new(EVVT_PERIOD_US),
-            vacuum_period: Period::new(VACUUM_PERIOD_US),
-            meas: Measurements::default(),
-            faults: FaultSet::default(),
-            safe: SafeState::default(),
-            engine: None,
+            ecu: Ecu::new(cfg)?,
+            schedule: Schedule::default(),
+            board: FrameBoard::default(),
+            started: false,
             last_evvt: None,
             last_vacuum: None,
-            motor_duty: 0.0,
         })
     }
 
@@ -157,97 +328,32 @@ impl EcuCore {
 
     /// [`Self::step`] with `probe(part, true)` before and `probe(part, false)` after each
     /// task that runs (the emulated target counts instructions per task with it).
-    pub fn step_probed(&mut self, s: &SensorFrame, mut probe: impl FnMut(StepPart, bool)) -> ActuatorFrame {
-        let now = s.t_us;
-        if self.sup_period.due(now) {
-            let vac = self.last_vacuum;
-            let reports = TaskReports {
-                crank_lost: self.engine.is_some_and(|e| e.crank_lost),
-                cam_lost: self.engine.is_some_and(|e| e.cam_lost),
-                vacuum_stuck: vac.is_some_and(|v| v.stuck.iter().any(|x| *x)),
-                abnormal_leak: vac.is_some_and(|v| v.abnormal_leak),
-            };
-            probe(StepPart::Supervisor, true);
-            let out = self.sup.step(&s.adc_counts, &reports, now);
-            probe(StepPart::Supervisor, false);
-            self.meas = out.measurements;
-            self.faults = out.active;
-            self.safe = out.safe;
+    pub fn step_probed(&mut self, s: &SensorFrame, probe: impl FnMut(StepPart, bool)) -> ActuatorFrame {
+        self.board.load(s);
+        let r = self
+            .ecu
+            .step_on(&mut self.schedule, self.board.boards(), &setpoints_of(s), s.t_us, probe);
+        self.started = true;
+        if r.evvt.is_some() {
+            self.last_evvt = r.evvt;
         }
-        let m = self.meas;
-        probe(StepPart::Ehvva, true);
-        for &edge in s.edges() {
-            self.ehvva.on_edge(edge);
+        if r.vacuum.is_some() {
+            self.last_vacuum = r.vacuum;
         }
-        let e = self.ehvva.step(
-            &EhvvaStepInputs {
-                request: s.valve,
-                p_supply_mpa: m.p_supply_mpa,
-                temp_oil_c: m.temp_oil_c,
-                u_batt_v: m.u_batt_v,
-                force_safe: self.safe.ehvva_closed,
-            },
-            now,
-        );
-        probe(StepPart::Ehvva, false);
-        self.engine = Some(e.engine);
-        if self.evvt_period.due(now) {
-            probe(StepPart::Evvt, true);
-            let o = self.evvt.step(
-                &EvvtTaskInputs {
-                    engine: e.engine,
-                    setpoint_deg: s.cam_phase_set_deg,
-                    u_batt_v: m.u_batt_v,
-                    faults: self.faults,
-                    motor_driver_fault: s.motor_driver_fault,
-                },
-                now,
-            );
-            probe(StepPart::Evvt, false);
-            self.motor_duty = o.motor_duty;
-            self.last_evvt = Some(o);
-        }
-        if self.vacuum_period.due(now) {
-            probe(StepPart::Vacuum, true);
-            let o = self.vacuum.step(
-                &VacuumTaskInputs {
-                    x_set_pct: s.vacuum_x_set_pct,
-                    x_meas_pct: m.x_pct,
-                    p_tank_kpa: m.p_tank_kpa,
-                    p_amb_kpa: m.p_amb_kpa,
-                    u_batt_v: m.u_batt_v,
-                    safe: self.safe,
-                },
-                now,
-            );
-            probe(StepPart::Vacuum, false);
-            self.last_vacuum = Some(o);
-        }
-        let vac = self.last_vacuum;
-        ActuatorFrame {
-            seq: s.seq,
-            t_us: now,
-            pilot: e.pilot,
-            lift_valve_on: e.lift_valve_on,
-            snubber_on: e.snubber_switch_on,
-            motor_duty: self.motor_duty,
-            vacuum_duty: vac.map_or([0.0; 3], |v| v.duty),
-            pump_on: vac.is_some_and(|v| v.pump_on),
-            faults: self.faults.0,
-            bad_frames: 0,
-        }
+        self.board.outputs(s.seq, s.t_us, self.ecu.shared.faults)
     }
 
     /// The supervisor's converted measurements of its last scan.
     pub fn measurements(&self) -> Measurements {
-        self.meas
+        self.ecu.shared.measurements
     }
+    /// The supervisor's active faults.
     pub fn faults(&self) -> FaultSet {
-        self.faults
+        self.ecu.shared.faults
     }
-    /// The crank decoder's view of the engine after the last step.
+    /// The crank decoder's view of the engine after the last step (`None` before the first).
     pub fn engine(&self) -> Option<EngineSnapshot> {
-        self.engine
+        self.started.then_some(self.ecu.shared.engine)
     }
     /// The EVVT task's last outputs (measured phase, mode, scheduled gain).
     pub fn evvt(&self) -> Option<EvvtTaskOutputs> {
@@ -256,6 +362,14 @@ impl EcuCore {
     /// The vacuum task's last outputs (pump target, leak residual, stuck flags).
     pub fn vacuum(&self) -> Option<VacuumTaskOutputs> {
         self.last_vacuum
+    }
+    /// How often the supervisor petted the watchdog (every 50 ms while every task runs).
+    pub fn watchdog_pets(&self) -> u32 {
+        self.board.watchdog.0
+    }
+    /// The composition (parts and shared values).
+    pub fn ecu(&self) -> &Ecu {
+        &self.ecu
     }
 }
 
@@ -314,6 +428,8 @@ mod tests {
             }
         }
     }
+
+    use crate::ecu::schedule::Period;
 
     #[test]
     fn schedule_runs_each_task_at_its_rate() {

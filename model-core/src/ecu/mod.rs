@@ -10,8 +10,12 @@
 //!   compensation, pump on the needed pressure, tank leak residual, stuck actuators.
 //! - [`supervisor`]: ADC range checks, fault debouncing, the safe state of each actuator.
 //! - [`crank_sim`]: the crank and cam edges a turning engine produces (for benches).
-//! - [`lockstep`] and [`frame`]: the whole ECU as one function of sensor frames, and the
-//!   CRC-checked frames that carry them over a UART (hardware/processor in the loop).
+//! - [`schedule`]: the one composition of these tasks (what they share, periods, order,
+//!   input assembly from the board, watchdog decision) that the firmware, the QEMU image and
+//!   the host runs all execute.
+//! - [`lockstep`] and [`frame`]: the whole ECU as one function of sensor frames (the
+//!   composition with the frames as its board), and the CRC-checked frames that carry them
+//!   over a UART (hardware/processor in the loop).
 //!
 //! Everything runs in f32 (the target's FPU type).
 
@@ -21,11 +25,12 @@ pub mod ehvva_task;
 pub mod evvt_task;
 pub mod frame;
 pub mod lockstep;
+pub mod schedule;
 pub mod supervisor;
 pub mod vacuum_task;
 
 /// Every fault reaction end to end on the test doubles: the whole ECU ([`lockstep::EcuCore`],
-/// the four state machines on the firmware's schedule) fed by a turning engine and the
+/// the composition [`schedule::Ecu`] the firmware runs) fed by a turning engine and the
 /// doubles' readings, its outputs written to the doubles, a fault injected through them, and
 /// the outputs checked against the fault's safe state.
 #[cfg(test)]

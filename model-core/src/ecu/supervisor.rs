@@ -318,18 +318,26 @@ pub struct Measurements {
     pub temp_ecu_c: f32,
 }
 
+impl Measurements {
+    /// The values before the first scan (nominal: 13.5 V, Ph 6 MPa, Pl 2 MPa, oil 22 °C,
+    /// 100 kPa tank and ambient, positions 0 %, ECU 25 °C); a const so that the firmware's
+    /// shared cell can start with them.
+    pub const BOOT: Self = Self {
+        u_batt_v: 13.5,
+        p_supply_mpa: 6.0,
+        p_back_mpa: 2.0,
+        temp_oil_c: 22.0,
+        p_tank_kpa: 100.0,
+        p_amb_kpa: 100.0,
+        x_pct: [0.0; 3],
+        temp_ecu_c: 25.0,
+    };
+}
+
 impl Default for Measurements {
+    /// [`Measurements::BOOT`].
     fn default() -> Self {
-        Self {
-            u_batt_v: 13.5,
-            p_supply_mpa: 6.0,
-            p_back_mpa: 2.0,
-            temp_oil_c: 22.0,
-            p_tank_kpa: 100.0,
-            p_amb_kpa: 100.0,
-            x_pct: [0.0; 3],
-            temp_ecu_c: 25.0,
-        }
+        Self::BOOT
     }
 }
 
