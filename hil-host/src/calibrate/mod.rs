@@ -134,8 +134,12 @@ fn ehvva(logs: &[Log], out: &mut Outcome, progress: &mut dyn FnMut(&str)) -> Res
     cal.check()
         .map_err(|e| format!("refused: {e} (identify ehvva on {})", files.join(", ")))?;
     progress("EHVVA valve motion from the identified tables");
-    cal.valve_motion = ValveMotionData::from_model(&cal.ehvva_model(), VALVE_MOTION_P_BACK_MPA)
-        .map_err(|e| format!("EHVVA valve motion with the identified tables: {e:?}"))?;
+    // The reduced model's motion with the identified tables; where it cannot run them (a td
+    // longer than its delay line holds), the paper valve's motion stays, said in the sources.
+    let motion = ValveMotionData::from_model(&cal.ehvva_model(), VALVE_MOTION_P_BACK_MPA);
+    if let Ok(m) = motion {
+        cal.valve_motion = m;
+    }
     out.notes.push(format!(
         "EHVVA: {} test conditions identified from {} (td VO/VC, tau_p, Cd per condition)",
         found.conditions.len(),
@@ -171,12 +175,20 @@ fn ehvva(logs: &[Log], out: &mut Outcome, progress: &mut dyn FnMut(&str)) -> Res
         .map(|c| c.name)
         .filter(|n| n.starts_with("ehvva.motion"))
     {
-        set_source_exact(
-            out,
-            name,
-            &files,
-            "derived: the reduced model's valve motion after td with the identified tables",
-        );
+        match &motion {
+            Ok(_) => set_source_exact(
+                out,
+                name,
+                &files,
+                "derived: the reduced model's valve motion after td with the identified tables",
+            ),
+            Err(e) => set_source_exact(
+                out,
+                name,
+                &[],
+                &format!("paper default: the reduced model cannot run the identified tables ({e:?})"),
+            ),
+        }
     }
     Ok(())
 }
@@ -455,6 +467,24 @@ pub fn unit_from_truth(path: &Path) -> Result<Unit, String> {
                     .ok_or_else(|| bad(&format!("params.{} missing", k.name)))?
                     .1;
                 (k.apply)(&mut p, x);
+            }
+            // The rest of the unit, where the generator drew it (issue #12's real units).
+            let get = |n: &str| params.iter().find(|(k, _)| k == n).map(|(_, v)| *v);
+            let fields: [(&str, &mut f64); 9] = [
+                ("spring_N_per_mm", &mut p.spring_n_per_mm),
+                ("spring_preload_mm", &mut p.spring_preload_mm),
+                ("friction_N_per_m_s", &mut p.friction_n_per_m_s),
+                ("area_top_mm2", &mut p.area_top_mm2),
+                ("area_bottom_mm2", &mut p.area_bottom_mm2),
+                ("area_main_mm2", &mut p.area_main_mm2),
+                ("area_top_orifice_mm2", &mut p.area_top_orifice_mm2),
+                ("area_top_switch_orifice_mm2", &mut p.area_top_switch_orifice_mm2),
+                ("area_bottom_port_mm2", &mut p.area_bottom_port_mm2),
+            ];
+            for (name, field) in fields {
+                if let Some(v) = get(name) {
+                    *field = v;
+                }
             }
             p.validate().map_err(|e| bad(&format!("{e:?}")))?;
             unit.ehvva = p;
