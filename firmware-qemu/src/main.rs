@@ -11,6 +11,7 @@
 
 mod bench;
 mod board;
+mod calibration;
 mod lockstep;
 
 use core::panic::PanicInfo;
@@ -18,7 +19,7 @@ use core::panic::PanicInfo;
 use cortex_m_rt::entry;
 use defmt_semihosting as _;
 use model_core::ecu::frame::{encode, Frame, MAX_FRAME_BYTES};
-use model_core::ecu::lockstep::{EcuCore, EcuCoreConfig};
+use model_core::ecu::lockstep::EcuCore;
 
 use board::Link;
 use lockstep::Server;
@@ -65,7 +66,7 @@ fn main() -> ! {
     };
     let board = board::init(core);
     let mode = mode_from_command_line();
-    let ecu = match EcuCore::new(EcuCoreConfig::default()) {
+    let ecu = match EcuCore::new(calibration::load()) {
         Ok(ecu) => ecu,
         Err(what) => halt(what),
     };

@@ -11,6 +11,7 @@
 #![no_main]
 
 mod board;
+mod calibration;
 mod shared;
 mod tasks;
 
@@ -21,7 +22,6 @@ use embassy_executor::{InterruptExecutor, Spawner};
 use embassy_stm32::interrupt;
 use embassy_stm32::interrupt::{InterruptExt, Priority};
 use embassy_stm32::pac;
-use model_core::ecu::lockstep::EcuCoreConfig;
 use model_core::ecu::schedule::{outputs_off, Ecu, EhvvaPart, EvvtPart, SupervisorPart, VacuumPart};
 
 use board::ecu::{EcuAdc, EcuBoard, EcuEhvvaIo, EcuEvvtIo, EcuVacuumIo, EcuWatchdog};
@@ -84,7 +84,7 @@ async fn main(spawner: Spawner) {
         evvt,
         vacuum,
         shared: _,
-    } = Ecu::new(EcuCoreConfig::default()).unwrap_or_else(|what| halt(what));
+    } = Ecu::new(calibration::load()).unwrap_or_else(|what| halt(what));
 
     interrupt::UART5.set_priority(Priority::P6);
     let high = EXECUTOR_HIGH.start(interrupt::UART5);

@@ -1,5 +1,6 @@
 //! Host tools around model-core: measured-data logs, closed-loop runs against simulated plants,
 //! identification and diagnosis.
+pub mod calibrate;
 pub mod diagnose;
 pub mod generate;
 pub mod html;

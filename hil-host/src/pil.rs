@@ -171,6 +171,9 @@ pub struct QemuOptions {
     pub args: Vec<String>,
     /// `-plugin` argument (`path,key=value,...`).
     pub plugin: Option<String>,
+    /// A calibration image QEMU writes into the calibration sector's flash before the
+    /// firmware starts (`-device loader`, at [`crate::calibrate::FLASH_BASE`]).
+    pub calibration: Option<PathBuf>,
     /// Where QEMU's stdout (the defmt stream over semihosting) and stderr go; a temporary
     /// directory's files when `None`.
     pub log_dir: Option<PathBuf>,
@@ -245,6 +248,13 @@ impl QemuBoard {
                 .arg(elf);
             if let Some(p) = &opts.plugin {
                 cmd.args(["-plugin", p]);
+            }
+            if let Some(c) = &opts.calibration {
+                cmd.arg("-device").arg(format!(
+                    "loader,file={},addr=0x{:08X},force-raw=on",
+                    c.display(),
+                    crate::calibrate::FLASH_BASE
+                ));
             }
             let out = File::create(&live[0]).map_err(|e| format!("{}: {e}", live[0].display()))?;
             let err = File::create(&live[1]).map_err(|e| format!("{}: {e}", live[1].display()))?;
@@ -783,6 +793,7 @@ pub fn target_bench(elf: &Path, frames: &[SensorFrame], log_dir: &Path) -> Resul
         args: vec!["bench".into()],
         plugin: Some(spec),
         log_dir: Some(log_dir.to_path_buf()),
+        calibration: None,
     };
     // Counting every instruction slows the emulation: generous answer timeout.
     let mut link = PilLink::start(
@@ -947,13 +958,58 @@ pub fn run_scenario(
     compare_native: bool,
     log_dir: &Path,
 ) -> Result<PilRun, String> {
-    use crate::run::{run_with, NativeLink, RunOptions};
+    let unit = crate::run::Unit::default();
+    run_scenario_calibrated(scenario, elf, faults, until_s, compare_native, log_dir, None, &unit)
+}
+
+/// [`run_scenario`] with a calibration image in the emulated ECU's calibration sector (the
+/// native comparison runs the same image's configuration; an image the host refuses is not
+/// sent) and the plants of `unit`.
+#[allow(clippy::too_many_arguments)]
+pub fn run_scenario_calibrated(
+    scenario: &crate::run::Scenario,
+    elf: &Path,
+    faults: LinkFaults,
+    until_s: Option<f64>,
+    compare_native: bool,
+    log_dir: &Path,
+    calibration: Option<&Path>,
+    unit: &crate::run::Unit,
+) -> Result<PilRun, String> {
+    let native_cfg = match calibration {
+        Some(c) => crate::calibrate::ecu_config_from_image(c)?,
+        None => model_core::ecu::lockstep::EcuCoreConfig::default(),
+    };
+    run_scenario_image(
+        scenario,
+        elf,
+        faults,
+        (until_s, compare_native),
+        log_dir,
+        (calibration, native_cfg),
+        unit,
+    )
+}
+
+/// The PIL run with `image` loaded as it is (even one the host would refuse: the firmware's
+/// own fall-back is then what runs) and `native_cfg` for the native comparison.
+pub fn run_scenario_image(
+    scenario: &crate::run::Scenario,
+    elf: &Path,
+    faults: LinkFaults,
+    (until_s, compare_native): (Option<f64>, bool),
+    log_dir: &Path,
+    (image, native_cfg): (Option<&Path>, model_core::ecu::lockstep::EcuCoreConfig),
+    unit: &crate::run::Unit,
+) -> Result<PilRun, String> {
+    use crate::run::{run_with_unit, NativeLink, RunOptions};
     let opts = RunOptions {
         until_s,
         keep_frames: compare_native,
     };
     let qemu = QemuOptions {
         log_dir: Some(log_dir.to_path_buf()),
+        calibration: image.map(Path::to_path_buf),
         ..QemuOptions::default()
     };
     let mut link = PilLink::start(
@@ -965,13 +1021,13 @@ pub fn run_scenario(
         },
     )?;
     let start = Instant::now();
-    let output = run_with(scenario, &mut link, &opts)?;
+    let output = run_with_unit(scenario, &mut link, &opts, unit)?;
     let wall_s = start.elapsed().as_secs_f64();
     let stats = link.stats();
     drop(link);
     let (mut compared_steps, mut first_difference) = (None, None);
     if compare_native {
-        let native = run_with(scenario, &mut NativeLink::new()?, &opts)?;
+        let native = run_with_unit(scenario, &mut NativeLink::with_config(native_cfg)?, &opts, unit)?;
         compared_steps = Some(native.frames.len().min(output.frames.len()));
         first_difference = native
             .frames

@@ -28,6 +28,7 @@
 use std::path::{Path, PathBuf};
 
 use model_core::ecu::board::SolenoidCmd;
+use model_core::ecu::calibration::CALIBRATION_FAULT_BIT;
 use model_core::ecu::crank_sim::CrankSignal;
 use model_core::ecu::ehvva_task::{TriggerWheel, ValveRequest, CYCLE_DEG};
 use model_core::ecu::evvt_task::EvvtTaskConfig;
@@ -37,7 +38,7 @@ use model_core::ecu::supervisor::{Channel, Fault, FaultSet, SupervisorConfig, N_
 use model_core::ehvva::{EhvvaInputs, EhvvaParams, EhvvaPlant, EhvvaReduced};
 use model_core::evvt::{EvvtParams, EvvtPlant, PlanetaryGear};
 use model_core::peak_hold::{RlCoil, SolenoidParams};
-use model_core::vacuum::VacuumSystem;
+use model_core::vacuum::{VacuumParams, VacuumSystem, VacuumTankParams};
 use serde::Deserialize;
 
 use crate::log::format_log;
@@ -570,6 +571,24 @@ impl EcuLink for NativeLink {
     }
 }
 
+/// The unit the plant side simulates: the paper's plants by default, or a unit `hil-host
+/// generate` described (`--unit truth.json`, [`crate::calibrate::unit_from_truth`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Unit {
+    pub ehvva: EhvvaParams,
+    /// LPT, HPT, HPC.
+    pub vacuum: [VacuumParams; 3],
+}
+
+impl Default for Unit {
+    fn default() -> Self {
+        Self {
+            ehvva: EhvvaParams::paper_default(),
+            vacuum: [VacuumParams::lpt(), VacuumParams::hpt(), VacuumParams::hpc()],
+        }
+    }
+}
+
 /// What [`run_with`] runs and keeps.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct RunOptions {
@@ -648,7 +667,14 @@ pub struct Summary {
     /// For each wastegate set-point step: (time, settling time into ±2 %).
     pub vacuum_settling_s: Vec<(f64, Option<f64>)>,
     pub vacuum_pump_on_fraction: f64,
+    /// RMS position error of each actuator (LPT, HPT, HPC) and of the three together.
+    pub vacuum_rms_error_pct_each: [f64; 3],
+    pub vacuum_position_error_pct_rms: f64,
     pub ehvva_events: usize,
+    /// RMS of every opening and closing timing error, crank degrees.
+    pub ehvva_timing_error_deg_rms: f64,
+    /// An actuator frame carried the calibration fault bit (the ECU refused its image).
+    pub calibration_fault: bool,
     /// (mean, largest magnitude) in crank degrees.
     pub ehvva_open_error_deg: (f64, f64),
     pub ehvva_close_error_deg: (f64, f64),
@@ -720,6 +746,44 @@ impl Summary {
         s
     }
 
+    /// The error figures per actuator (`--json`): `ehvva.timing_error_deg_rms`,
+    /// `evvt.phase_error_deg_rms`, `vacuum.position_error_pct_rms` and their details.
+    pub fn json(&self, name: &str) -> serde_json::Value {
+        let num = |x: f64| {
+            if x.is_finite() {
+                serde_json::json!(x)
+            } else {
+                serde_json::Value::Null
+            }
+        };
+        serde_json::json!({
+            "scenario": name,
+            "simulated_s": self.simulated_s,
+            "ehvva": {
+                "timing_error_deg_rms": num(self.ehvva_timing_error_deg_rms),
+                "events": self.ehvva_events,
+                "open_error_deg_mean": num(self.ehvva_open_error_deg.0),
+                "open_error_deg_max_abs": num(self.ehvva_open_error_deg.1),
+                "close_error_deg_mean": num(self.ehvva_close_error_deg.0),
+                "close_error_deg_max_abs": num(self.ehvva_close_error_deg.1),
+                "seating_velocity_m_s_max": self.ehvva_seating_velocity_m_s.map(num),
+            },
+            "evvt": {
+                "phase_error_deg_rms": num(self.evvt_rms_error_deg),
+                "settling_s": self.evvt_settling_s.iter().map(|(t, s)| serde_json::json!({"step_s": t, "settled_s": s})).collect::<Vec<_>>(),
+            },
+            "vacuum": {
+                "position_error_pct_rms": num(self.vacuum_position_error_pct_rms),
+                "lpt_position_error_pct_rms": num(self.vacuum_rms_error_pct_each[0]),
+                "hpt_position_error_pct_rms": num(self.vacuum_rms_error_pct_each[1]),
+                "hpc_position_error_pct_rms": num(self.vacuum_rms_error_pct_each[2]),
+                "pump_on_fraction": num(self.vacuum_pump_on_fraction),
+            },
+            "calibration_fault": self.calibration_fault,
+            "faults_raised": self.fault_events.iter().filter(|e| e.raised).map(|e| e.fault.name()).collect::<Vec<_>>(),
+        })
+    }
+
     /// The first time `fault` was raised.
     pub fn raised_at(&self, fault: Fault) -> Option<f64> {
         self.fault_events
@@ -764,6 +828,16 @@ const LIFT_FRACTION: f64 = 0.01;
 
 /// Runs `scenario` against `link` and returns the logs and the summary (nothing is written).
 pub fn run_with(scenario: &Scenario, link: &mut dyn EcuLink, opts: &RunOptions) -> Result<RunOutput, String> {
+    run_with_unit(scenario, link, opts, &Unit::default())
+}
+
+/// [`run_with`] against `unit`'s plants instead of the paper's.
+pub fn run_with_unit(
+    scenario: &Scenario,
+    link: &mut dyn EcuLink,
+    opts: &RunOptions,
+    unit: &Unit,
+) -> Result<RunOutput, String> {
     let sc = scenario;
     let started = std::time::Instant::now();
     let err = |what: &str, e: &dyn std::fmt::Debug| format!("{what}: {e:?}");
@@ -775,7 +849,7 @@ pub fn run_with(scenario: &Scenario, link: &mut dyn EcuLink, opts: &RunOptions) 
 
     let board = SupervisorConfig::default();
     let evvt_cfg = EvvtTaskConfig::default();
-    let ehvva_params = EhvvaParams::paper_default();
+    let ehvva_params = unit.ehvva;
     let solenoid = SolenoidParams::pilot_default();
 
     // Plants.
@@ -796,7 +870,9 @@ pub fn run_with(scenario: &Scenario, link: &mut dyn EcuLink, opts: &RunOptions) 
     let (mut pilot_armed, mut pilot_dropped) = (false, false);
     let mut evvt = EvvtPlant::<f32>::new(&EvvtParams::default()).map_err(|e| err("EVVT plant", &e))?;
     evvt.reset(sc.cam_phase_setpoint_deg.at(0.0) as f32);
-    let mut vacuum = VacuumSystem::<f32>::paper(sc.p_tank_initial_kpa).map_err(|e| err("vacuum plant", &e))?;
+    let [lpt, hpt, hpc] = &unit.vacuum;
+    let mut vacuum = VacuumSystem::<f32>::new(lpt, hpt, hpc, &VacuumTankParams::paper(), sc.p_tank_initial_kpa)
+        .map_err(|e| err("vacuum plant", &e))?;
     let mut stuck_x: [Option<f32>; 3] = [None; 3];
     let mut engine = CrankSignal::new(TriggerWheel::sixty_minus_two(), 5.0);
 
@@ -810,7 +886,8 @@ pub fn run_with(scenario: &Scenario, link: &mut dyn EcuLink, opts: &RunOptions) 
     let mut faults_before = FaultSet::default();
     let (mut open_err, mut close_err) = (Vec::new(), Vec::new());
     let (mut opened, mut prev_lift, mut worst_seat) = (false, 0.0f64, None::<f64>);
-    let (mut evvt_se, mut evvt_n, mut wg_se, mut wg_n, mut pump_steps) = (0.0, 0usize, 0.0, 0usize, 0u64);
+    let (mut evvt_se, mut evvt_n, mut wg_n, mut pump_steps) = (0.0, 0usize, 0usize, 0u64);
+    let mut x_se = [0.0f64; 3];
 
     for k in 0..n_steps {
         // Time from whole microseconds: fault and profile breakpoints at round times fall on
@@ -908,6 +985,7 @@ pub fn run_with(scenario: &Scenario, link: &mut dyn EcuLink, opts: &RunOptions) 
             }
         }
         faults_before = faults;
+        out.summary.calibration_fault |= act.faults & CALIBRATION_FAULT_BIT != 0;
         if opts.keep_frames {
             out.frames.push((frame, act));
         }
@@ -957,7 +1035,9 @@ pub fn run_with(scenario: &Scenario, link: &mut dyn EcuLink, opts: &RunOptions) 
                 x_pct,
                 p_act_kpa: [0, 1, 2].map(|i| f64::from(actuator(&vacuum, i).p_act_kpa())),
             });
-            wg_se += (x_set[0] - x_pct[0]).powi(2);
+            for i in 0..3 {
+                x_se[i] += (x_set[i] - x_pct[i]).powi(2);
+            }
             wg_n += 1;
         }
 
@@ -1046,7 +1126,15 @@ pub fn run_with(scenario: &Scenario, link: &mut dyn EcuLink, opts: &RunOptions) 
             .collect::<Vec<_>>(),
         1.0,
     );
-    s.vacuum_rms_error_pct = (wg_se / wg_n.max(1) as f64).sqrt();
+    s.vacuum_rms_error_pct_each = x_se.map(|se| (se / wg_n.max(1) as f64).sqrt());
+    s.vacuum_rms_error_pct = s.vacuum_rms_error_pct_each[0];
+    s.vacuum_position_error_pct_rms = (x_se.iter().sum::<f64>() / (3 * wg_n.max(1)) as f64).sqrt();
+    let all: Vec<f64> = open_err.iter().chain(&close_err).copied().collect();
+    s.ehvva_timing_error_deg_rms = if all.is_empty() {
+        f64::NAN
+    } else {
+        (all.iter().map(|e| e * e).sum::<f64>() / all.len() as f64).sqrt()
+    };
     s.vacuum_settling_s = settling_times(
         &out.vacuum
             .iter()
@@ -1088,8 +1176,13 @@ fn describe_fault(f: &FaultSpec) -> String {
 
 /// Runs the scenario natively ([`NativeLink`]); writes logs and plots into `out` when given.
 pub fn run(sc: &Scenario, out: Option<&Path>) -> Result<Summary, String> {
-    let mut link = NativeLink::new()?;
-    let o = run_with(sc, &mut link, &RunOptions::default())?;
+    run_unit(sc, out, EcuCoreConfig::default(), Unit::default())
+}
+
+/// [`run`] with the ECU's configuration (`--calibration`) and the simulated unit (`--unit`).
+pub fn run_unit(sc: &Scenario, out: Option<&Path>, ecu: EcuCoreConfig, unit: Unit) -> Result<Summary, String> {
+    let mut link = NativeLink::with_config(ecu)?;
+    let o = run_with_unit(sc, &mut link, &RunOptions::default(), &unit)?;
     if let Some(dir) = out {
         write_outputs(sc, &o, dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     }

@@ -12,8 +12,8 @@ use hil_host::run::Scenario;
 
 use super::progress::{self, Counter, Spinner};
 use super::{
-    CheckArgs, Cli, Command, DiagnoseArgs, GenerateArgs, IdentifyArgs, IdentifyCommand, PilArgs, RunArgs,
-    TargetBenchArgs,
+    CalibrateArgs, CalibrationArgs, CheckArgs, Cli, Command, DiagnoseArgs, GenerateArgs, IdentifyArgs, IdentifyCommand,
+    PilArgs, RunArgs, TargetBenchArgs,
 };
 
 /// A failed command (exit status 1); usage errors are clap's (exit status 2).
@@ -51,6 +51,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Identify(IdentifyCommand::Evvt(a)) => identify_evvt(a),
         Command::Identify(IdentifyCommand::Ehvva(a)) => identify_ehvva(a),
         Command::Pil(a) => pil(a),
+        Command::Calibrate(a) => calibrate(a),
         Command::TargetBench(a) => target_bench(a),
         Command::Completions { shell } => {
             use clap::CommandFactory;
@@ -184,13 +185,15 @@ fn load_scenario(file: Option<&Path>) -> Result<Scenario> {
 }
 
 fn run_scenario(a: RunArgs) -> Result<()> {
-    use hil_host::run::{run_with, write_outputs, NativeLink, RunOptions};
+    use hil_host::run::{run_with_unit, write_outputs, NativeLink, RunOptions};
     let scenario = load_scenario(a.scenario.as_deref())?;
+    let (ecu, unit) = calibration_inputs(&a.calibration)?;
     let out = a.out.unwrap_or_else(|| PathBuf::from(format!("out/{}", scenario.name)));
     let mut dir = OutputDir::open(&out, Claim::new("run", format!("scenario {}", scenario.name)), a.force)?;
     let o = {
         let _s = Spinner::start(&format!("running scenario `{}`", scenario.name), true);
-        run_with(&scenario, &mut NativeLink::new().map_err(fail)?, &RunOptions::default()).map_err(fail)?
+        let mut link = NativeLink::with_config(ecu).map_err(fail)?;
+        run_with_unit(&scenario, &mut link, &RunOptions::default(), &unit).map_err(fail)?
     };
     let written = write_outputs(&scenario, &o, &out).map_err(|e| fail(format!("{}: {e}", out.display())))?;
     for w in &written {
@@ -205,7 +208,7 @@ fn run_scenario(a: RunArgs) -> Result<()> {
     }
     print!("{}", o.summary.text(&scenario.name));
     println!("logs (DATA-FORMAT) and plots in {}", out.display());
-    Ok(())
+    summary_json(&a.calibration, &o.summary, &scenario.name)
 }
 
 fn generate(a: GenerateArgs) -> Result<()> {
@@ -357,7 +360,10 @@ fn pil(a: PilArgs) -> Result<()> {
     };
     let r = {
         let _s = Spinner::start(&format!("PIL run of `{}` on QEMU", scenario.name), true);
-        pil::run_scenario(&scenario, &elf, faults, a.until, a.compare_native, &out).map_err(fail)?
+        let (_, unit) = calibration_inputs(&a.calibration)?;
+        let image = a.calibration.calibration.as_deref();
+        pil::run_scenario_calibrated(&scenario, &elf, faults, a.until, a.compare_native, &out, image, &unit)
+            .map_err(fail)?
     };
     print!("{}", r.output.summary.text(&scenario.name));
     print!("{}", r.text());
@@ -376,6 +382,7 @@ fn pil(a: PilArgs) -> Result<()> {
         out.display(),
         written.len()
     );
+    summary_json(&a.calibration, &r.output.summary, &scenario.name)?;
     if r.first_difference.is_some() {
         return Err(fail("the PIL run differs from the native run"));
     }
@@ -424,5 +431,61 @@ fn target_bench(a: TargetBenchArgs) -> Result<()> {
     if b.plant_bits_target[n..] != b.plant_bits_host[n..] || !b.answers_equal_native {
         return Err(fail("the target's results differ from the host's"));
     }
+    Ok(())
+}
+
+/// `--calibration` (the ECU's image, refused whole when bad) and `--unit` (a generated unit's
+/// truth.json) of `run` and `pil`.
+fn calibration_inputs(a: &CalibrationArgs) -> Result<(model_core::ecu::lockstep::EcuCoreConfig, hil_host::run::Unit)> {
+    use hil_host::calibrate::{ecu_config_from_image, unit_from_truth};
+    let ecu = match &a.calibration {
+        Some(p) => ecu_config_from_image(p).map_err(fail)?,
+        None => Default::default(),
+    };
+    let unit = match &a.unit {
+        Some(p) => unit_from_truth(p).map_err(fail)?,
+        None => Default::default(),
+    };
+    Ok((ecu, unit))
+}
+
+/// `--json`: the run's error figures per actuator.
+fn summary_json(a: &CalibrationArgs, s: &hil_host::run::Summary, name: &str) -> Result<()> {
+    if let Some(path) = &a.json {
+        output::check_not_input(path).map_err(|e| fail(format!("{}: {e}", path.display())))?;
+        write_json(path, s.json(name))?;
+        println!("error figures written to {}", path.display());
+    }
+    Ok(())
+}
+
+/// `calibrate`: the unit's logs to calibration.bin, .a2l, .json (hil_host::calibrate).
+fn calibrate(a: CalibrateArgs) -> Result<()> {
+    use hil_host::calibrate::{self as cal, parse_flash_base};
+    let flash_base = parse_flash_base(&a.flash_base).map_err(fail)?;
+    output::protect_inputs(&a.logs);
+    let mut dir = OutputDir::open(
+        &a.out,
+        Claim::new("calibrate", format!("{} logs", a.logs.len())),
+        a.force,
+    )?;
+    let o = {
+        let _s = Spinner::start("calibrating from the logs", true);
+        cal::calibrate(&a.logs, &mut |_| {}).map_err(fail)?
+    };
+    for n in &o.notes {
+        println!("{n}");
+    }
+    for p in cal::write_outputs(&o, &a.out, flash_base).map_err(fail)? {
+        println!("wrote {}", p.display());
+        dir.record(&p);
+    }
+    dir.finish()?;
+    let learned = o.sources.iter().filter(|s| !s.logs.is_empty()).count();
+    println!(
+        "{learned} of {} characteristics learned from the logs, the rest paper defaults; image {} bytes for 0x{flash_base:08X}",
+        model_core::ecu::calibration::CHARACTERISTICS.len(),
+        model_core::ecu::calibration::IMAGE_BYTES
+    );
     Ok(())
 }

@@ -88,6 +88,19 @@ Examples:
     /// Identify actuator models from bench logs
     #[command(subcommand)]
     Identify(IdentifyCommand),
+    /// The ECU's calibration image from a unit's bench logs (any mix of plants):
+    /// calibration.bin, calibration.a2l (ASAM MCD-2 MC) and calibration.json
+    #[command(after_help = "\
+EHVVA matrix logs go to `identify ehvva`, EVVT PRBS logs to `identify evvt`, vacuum logs to
+`diagnose` (with the named extension); the rest keeps the paper defaults (calibration.json
+says which). Flash the image with
+  probe-rs download --binary-format bin --base-address 0x080E0000 --chip STM32F405RGTx calibration.bin
+
+Examples:
+  hil-host calibrate unit/estimation.csv --out cal
+  hil-host calibrate ehvva-matrix.csv prbs/*.csv vacuum-hpt.csv --out cal
+  hil-host run scenarios/calibration-sweep.toml --unit unit/truth.json --calibration cal/calibration.bin")]
+    Calibrate(CalibrateArgs),
     /// Processor in the loop: the closed loop of `run` with the ECU core as firmware on QEMU's
     /// emulated STM32F405, in lockstep over its UART
     #[command(after_help = "\
@@ -197,6 +210,38 @@ pub struct RunArgs {
     /// Write into a directory that holds other files or another run's outputs
     #[arg(long)]
     pub force: bool,
+    #[command(flatten)]
+    pub calibration: CalibrationArgs,
+}
+
+#[derive(Debug, Args)]
+pub struct CalibrateArgs {
+    /// The unit's bench logs
+    #[arg(required = true, value_name = "LOG")]
+    pub logs: Vec<PathBuf>,
+    /// Directory for calibration.bin, calibration.a2l and calibration.json
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// The calibration sector's address in the ECU's flash (hex)
+    #[arg(long, value_name = "ADDR", default_value = "0x080E0000")]
+    pub flash_base: String,
+    /// Write into a directory that holds other files or another run's outputs
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// `--calibration`, `--unit`, `--json` of `run` and `pil`.
+#[derive(Debug, Args)]
+pub struct CalibrationArgs {
+    /// The ECU runs this calibration image (refused whole when any check fails)
+    #[arg(long, value_name = "FILE")]
+    pub calibration: Option<PathBuf>,
+    /// The plants are the unit `generate` described (its truth.json)
+    #[arg(long, value_name = "FILE")]
+    pub unit: Option<PathBuf>,
+    /// Write the error figures per actuator here (ehvva.timing_error_deg_rms, ...)
+    #[arg(long, value_name = "FILE")]
+    pub json: Option<PathBuf>,
 }
 
 #[derive(Debug, Args)]
@@ -273,6 +318,8 @@ pub struct PilArgs {
     /// Write into a directory that holds other files or another run's outputs
     #[arg(long)]
     pub force: bool,
+    #[command(flatten)]
+    pub calibration: CalibrationArgs,
 }
 
 #[derive(Debug, Args)]

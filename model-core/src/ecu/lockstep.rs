@@ -13,13 +13,14 @@
 //! deadlines; 50 µs is 0.45 crank degrees at 1500 rpm).
 
 use super::board::{AnalogIn, Capture, Edge, PwmOut, SolenoidCmd, SolenoidDriver, SwitchOut};
+use super::calibration::CALIBRATION_FAULT_BIT;
 use super::ehvva_task::{EhvvaTaskConfig, EngineSnapshot};
 use super::evvt_task::{EvvtTaskConfig, EvvtTaskOutputs};
 use super::frame::{ActuatorFrame, SensorFrame, MAX_EDGES};
 use super::schedule::{AnalogBank, Boards, Ecu, EhvvaBoard, EvvtBoard, Schedule, Setpoints, VacuumBoard, Watchdog};
 use super::supervisor::{FaultSet, Measurements, SupervisorConfig, N_CHANNELS};
 use super::vacuum_task::{VacuumTaskConfig, VacuumTaskOutputs};
-use crate::ehvva::EhvvaParams;
+use crate::ehvva::{EhvvaParams, ValveMotionData};
 
 pub use super::schedule::{StepPart, EVVT_PERIOD_US, SUPERVISOR_PERIOD_US, VACUUM_PERIOD_US};
 
@@ -35,10 +36,15 @@ pub struct EcuCoreConfig {
     pub ehvva: EhvvaTaskConfig,
     /// The valve model whose delay tables td(Ph, T) advance the pilot command.
     pub ehvva_model: EhvvaParams,
+    /// The valve's own motion after td (added to the pilot edges' advance).
+    pub ehvva_motion: ValveMotionData,
     /// Cam phase controller and phase measurement.
     pub evvt: EvvtTaskConfig,
     /// Vacuum actuator models, position control, pump and diagnosis.
     pub vacuum: VacuumTaskConfig,
+    /// The calibration image was refused and this is the paper defaults' fall-back: every
+    /// actuator frame carries [`CALIBRATION_FAULT_BIT`] (see [`super::calibration`]).
+    pub calibration_fault: bool,
 }
 
 impl Default for EcuCoreConfig {
@@ -47,8 +53,10 @@ impl Default for EcuCoreConfig {
             supervisor: SupervisorConfig::default(),
             ehvva: EhvvaTaskConfig::default(),
             ehvva_model: EhvvaParams::paper_default(),
+            ehvva_motion: ValveMotionData::paper_default(),
             evvt: EvvtTaskConfig::default(),
             vacuum: VacuumTaskConfig::default(),
+            calibration_fault: false,
         }
     }
 }
@@ -288,12 +296,20 @@ pub struct EcuCore {
     started: bool,
     last_evvt: Option<EvvtTaskOutputs>,
     last_vacuum: Option<VacuumTaskOutputs>,
+    /// Fault bits outside the supervisor's ([`CALIBRATION_FAULT_BIT`]).
+    extra_faults: u32,
 }
 
 impl EcuCore {
     /// The composition from `cfg`; an error names the part of the calibration refused.
     pub fn new(cfg: EcuCoreConfig) -> Result<Self, &'static str> {
+        let extra_faults = if cfg.calibration_fault {
+            CALIBRATION_FAULT_BIT
+        } else {
+            0
+        };
         Ok(Self {
+            extra_faults,
             ecu: Ecu::new(cfg)?,
             schedule: Schedule::default(),
             board: FrameBoard::default(),
@@ -340,7 +356,9 @@ impl EcuCore {
         if r.vacuum.is_some() {
             self.last_vacuum = r.vacuum;
         }
-        self.board.outputs(s.seq, s.t_us, self.ecu.shared.faults)
+        let mut out = self.board.outputs(s.seq, s.t_us, self.ecu.shared.faults);
+        out.faults |= self.extra_faults;
+        out
     }
 
     /// The supervisor's converted measurements of its last scan.

@@ -9,6 +9,8 @@
 //! - [`vacuum_task`]: 80 Hz duty from the inverse actuator model with supply-voltage
 //!   compensation, pump on the needed pressure, tank leak residual, stuck actuators.
 //! - [`supervisor`]: ADC range checks, fault debouncing, the safe state of each actuator.
+//! - [`calibration`]: the calibration image (tables and constants learned from a unit's
+//!   bench logs) the ECU reads at boot, with its checks.
 //! - [`crank_sim`]: the crank and cam edges a turning engine produces (for benches).
 //! - [`schedule`]: the one composition of these tasks (what they share, periods, order,
 //!   input assembly from the board, watchdog decision) that the firmware, the QEMU image and
@@ -20,6 +22,7 @@
 //! Everything runs in f32 (the target's FPU type).
 
 pub mod board;
+pub mod calibration;
 pub mod crank_sim;
 pub mod ehvva_task;
 pub mod evvt_task;

@@ -482,7 +482,8 @@ impl Ecu {
     /// Validates the calibration and builds every part (the EHVVA delay and motion tables from
     /// the valve model). An error names what was refused.
     pub fn new(cfg: EcuCoreConfig) -> Result<Self, &'static str> {
-        let tables = EhvvaTables::<f32>::new(&cfg.ehvva_model).map_err(|_| "EHVVA delay tables")?;
+        let tables = EhvvaTables::<f32>::with_valve_motion(&cfg.ehvva_model, &cfg.ehvva_motion)
+            .map_err(|_| "EHVVA delay tables")?;
         Ok(Self {
             supervisor: SupervisorPart {
                 sup: Supervisor::new(cfg.supervisor),

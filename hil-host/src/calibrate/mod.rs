@@ -1,0 +1,484 @@
+//! `hil-host calibrate <log>... --out DIR`: from a unit's bench logs to the ECU's calibration
+//! image (model-core's [`model_core::ecu::calibration`]).
+//!
+//! Each log is read strictly and goes to its plant's tool:
+//! - `ehvva` valve-bench logs: `identify ehvva` (Li 2018 Sec. 5.2, per test condition td VO/VC,
+//!   τp and Cd) gives the td, τp and Cd tables on the ECU's grid; the effect gains are set to 1
+//!   (the tables hold the measured dependence on supply pressure, direction and temperature);
+//!   the valve-motion tables are recomputed from the reduced model with those tables;
+//! - `evvt` closed-loop PRBS logs: `identify evvt` (Yang 2015) per operating point, the 3×3
+//!   α/β tables; the scheduled PI gains they imply are recomputed and stored;
+//! - `vacuum` logs: `diagnose` (baseline and the catalogue's extensions, its last 30 % held
+//!   out) gives the actuator's static valve map, position map, time constants and, where the
+//!   named extension is found, its friction, backlash or direction-dependent time constant;
+//!   the map shapes tell which actuator (LPT, HPT, HPC) the log is of.
+//!
+//! Every value nothing learned keeps the paper default, and `calibration.json` says which is
+//! which. The image is checked whole ([`EcuCalibration::check`]: limits, axes, consistency)
+//! before anything is written: a bad calibration is refused with the name of the value.
+
+pub mod a2l;
+
+use std::path::{Path, PathBuf};
+
+use model_core::ecu::calibration::{
+    CalibrationImage, EcuCalibration, Shape, VacuumActuatorCalibration, CHARACTERISTICS, FORMAT_VERSION, IMAGE_BYTES,
+};
+use model_core::ecu::lockstep::EcuCoreConfig;
+use model_core::ehvva::{EhvvaParams, ValveMotionData, VALVE_MOTION_P_BACK_MPA};
+use model_core::vacuum::VacuumParams;
+use serde_json::{json, Map, Value};
+
+use crate::diagnose::vacuum::VacuumModel;
+use crate::log::{read_log, Log, Plant};
+use crate::run::Unit;
+
+/// The calibration sector's address in the ECU's flash (STM32F405 sector 11; `memory.x`).
+pub const FLASH_BASE: u32 = 0x080E_0000;
+
+/// Where a characteristic's value came from.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Source {
+    /// The logs it was learned from (empty: the paper default).
+    pub logs: Vec<String>,
+    /// How (`identify ehvva`, `diagnose vacuum: coulomb-friction`, ...), or `paper default`.
+    pub method: String,
+}
+
+/// A calibration learned from logs.
+#[derive(Clone, Debug)]
+pub struct Outcome {
+    pub calibration: EcuCalibration,
+    /// Per characteristic (in [`CHARACTERISTICS`] order), where it came from.
+    pub sources: Vec<Source>,
+    /// What the tools reported, one line per step.
+    pub notes: Vec<String>,
+}
+
+impl Outcome {
+    fn set_source(&mut self, prefix: &str, logs: &[String], method: &str) {
+        for (c, s) in CHARACTERISTICS.iter().zip(self.sources.iter_mut()) {
+            if c.name.starts_with(prefix) {
+                *s = Source {
+                    logs: logs.to_vec(),
+                    method: method.to_string(),
+                };
+            }
+        }
+    }
+}
+
+/// Learns the calibration from `paths` (any mix of plants); `progress` is told each step.
+pub fn calibrate(paths: &[PathBuf], progress: &mut dyn FnMut(&str)) -> Result<Outcome, String> {
+    if paths.is_empty() {
+        return Err("calibrate takes one or more bench logs".into());
+    }
+    let mut out = Outcome {
+        calibration: EcuCalibration::paper_defaults(),
+        sources: CHARACTERISTICS
+            .iter()
+            .map(|_| Source {
+                logs: Vec::new(),
+                method: "paper default".into(),
+            })
+            .collect(),
+        notes: Vec::new(),
+    };
+    let mut by_plant: Vec<(Plant, Vec<Log>)> = Vec::new();
+    for p in paths {
+        let log = read_log(p, None).map_err(|e| e.to_string())?;
+        match by_plant.iter_mut().find(|(pl, _)| *pl == log.plant) {
+            Some((_, v)) => v.push(log),
+            None => by_plant.push((log.plant, vec![log])),
+        }
+    }
+    for (plant, logs) in &by_plant {
+        match plant {
+            Plant::Ehvva => ehvva(logs, &mut out, progress)?,
+            Plant::Evvt => evvt(logs, &mut out, progress)?,
+            Plant::Vacuum => vacuum(logs, &mut out, progress)?,
+            Plant::Positioner => out.notes.push(format!(
+                "{}: positioner logs calibrate nothing on this ECU (no positioner task); ignored",
+                names(logs).join(", ")
+            )),
+        }
+    }
+    out.calibration.evvt_kp_rpm_per_deg = out.calibration.implied_kp().map_err(|e| e.to_string())?;
+    out.calibration.check().map_err(|e| format!("refused: {e}"))?;
+    Ok(out)
+}
+
+fn names(logs: &[Log]) -> Vec<String> {
+    logs.iter().map(|l| l.file.clone()).collect()
+}
+
+fn ehvva(logs: &[Log], out: &mut Outcome, progress: &mut dyn FnMut(&str)) -> Result<(), String> {
+    use crate::diagnose::ehvva::Events;
+    use crate::identify::ehvva as id;
+    let files = names(logs);
+    let sets = logs
+        .iter()
+        .map(Events::from_log)
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| format!("EHVVA logs: {e}"))?;
+    progress("identify ehvva");
+    let found = id::identify(&sets, &id::default_options(), &mut |k, n| {
+        progress(&format!("identify ehvva: condition {k}/{n}"))
+    })?;
+    let tables = found.table_data();
+    let cal = &mut out.calibration;
+    cal.ehvva_tables = tables;
+    cal.ehvva_pressure_delay_gain = 1.0;
+    cal.ehvva_direction_delay_gain = 1.0;
+    cal.ehvva_viscosity_gain = 1.0;
+    cal.check()
+        .map_err(|e| format!("refused: {e} (identify ehvva on {})", files.join(", ")))?;
+    progress("EHVVA valve motion from the identified tables");
+    cal.valve_motion = ValveMotionData::from_model(&cal.ehvva_model(), VALVE_MOTION_P_BACK_MPA)
+        .map_err(|e| format!("EHVVA valve motion with the identified tables: {e:?}"))?;
+    out.notes.push(format!(
+        "EHVVA: {} test conditions identified from {} (td VO/VC, tau_p, Cd per condition)",
+        found.conditions.len(),
+        files.join(", ")
+    ));
+    // The diagnosis names the extension the tables carry (e.g. td against supply pressure).
+    progress("diagnose ehvva");
+    let extension = ehvva_extension(logs)?;
+    out.notes
+        .push(format!("EHVVA: diagnose on {}: {extension}", logs[0].file));
+    out.set_source(
+        "ehvva.",
+        &files,
+        &format!(
+            "identify ehvva: per test condition td VO/VC (joint fit), tau_p, Cd; tables on the ECU's grid (diagnose: {extension})"
+        ),
+    );
+    for gain in [
+        "ehvva.pressure_delay_gain",
+        "ehvva.direction_delay_gain",
+        "ehvva.viscosity_gain",
+    ] {
+        set_source_exact(
+            out,
+            gain,
+            &files,
+            "1: the identified td and Cd tables hold the measured dependence as they are",
+        );
+    }
+    set_source_exact(out, "ehvva.delay_nominal_p_supply_mpa", &[], "paper default");
+    for name in CHARACTERISTICS
+        .iter()
+        .map(|c| c.name)
+        .filter(|n| n.starts_with("ehvva.motion"))
+    {
+        set_source_exact(
+            out,
+            name,
+            &files,
+            "derived: the reduced model's valve motion after td with the identified tables",
+        );
+    }
+    Ok(())
+}
+
+/// `diagnose` on the EHVVA logs (the second log as validation data, else the first one's last
+/// 30 %): the named cause and its fitted gain, as a phrase for the sources.
+fn ehvva_extension(logs: &[Log]) -> Result<String, String> {
+    use crate::diagnose::{self, Rules};
+    let family = diagnose::family_for(Plant::Ehvva)?;
+    let (est, val, tail) = match logs {
+        [a, b, ..] => (a.clone(), b.clone(), false),
+        [a] => {
+            let (e, v) = diagnose::split_tail(a, 0.3);
+            (e, v, true)
+        }
+        [] => return Err("no EHVVA log".into()),
+    };
+    let d = diagnose::diagnose(family.as_ref(), &est, &val, tail, &Rules::default(), &mut |_| {})
+        .map_err(|e| format!("diagnose ehvva ({}): {e}", est.file))?;
+    if d.cause == "none" {
+        return Ok("no extension named: the tables as identified".into());
+    }
+    let gains: Vec<String> = d
+        .extended
+        .params
+        .iter()
+        .filter(|(k, _)| k.ends_with("_gain"))
+        .map(|(k, v)| format!("{k} {v:.3}"))
+        .collect();
+    let carried = match d.cause.as_str() {
+        "pressure-delay" => "the td tables' fall with supply pressure, measured per condition",
+        "direction-delay" => "td VO and VC, measured apart",
+        "viscosity" => "Cd against temperature, measured per condition",
+        _ => "no ECU table for it",
+    };
+    Ok(format!("cause `{}` ({}): {carried}", d.cause, gains.join(", ")))
+}
+
+fn set_source_exact(out: &mut Outcome, name: &str, logs: &[String], method: &str) {
+    if let Some(k) = CHARACTERISTICS.iter().position(|c| c.name == name) {
+        out.sources[k] = Source {
+            logs: logs.to_vec(),
+            method: method.into(),
+        };
+    }
+}
+
+fn evvt(logs: &[Log], out: &mut Outcome, progress: &mut dyn FnMut(&str)) -> Result<(), String> {
+    use crate::identify::evvt as id;
+    let opts = id::EvvtIdentifyOptions::default();
+    let mut points = Vec::new();
+    for log in logs {
+        progress(&format!("identify evvt: {}", log.file));
+        points.push(id::identify_log(log, &opts).map_err(|e| format!("{}: {e}", log.file))?);
+    }
+    let table = id::lpv_table(&points).map_err(|e| format!("EVVT logs ({}): {e}", names(logs).join(", ")))?;
+    out.calibration.evvt_lpv = table;
+    let files = names(logs);
+    out.notes.push(format!(
+        "EVVT: alpha/beta at {} operating points from {}",
+        points.len(),
+        files.join(", ")
+    ));
+    for name in [
+        "evvt.engine_speed_rpm",
+        "evvt.battery_voltage_v",
+        "evvt.alpha",
+        "evvt.beta",
+    ] {
+        out.set_source(
+            name,
+            &files,
+            "identify evvt: closed-loop PRBS, q-Markov cover per operating point",
+        );
+    }
+    set_source_exact(
+        out,
+        "evvt.kp_rpm_per_deg",
+        &files,
+        "derived: the scheduled kp the identified alpha/beta imply",
+    );
+    Ok(())
+}
+
+/// Which of the ECU's vacuum actuators a fitted model is, from its map shapes.
+fn vacuum_index(params: &[(String, f64)]) -> usize {
+    let has = |n: &str| params.iter().any(|(k, _)| k == n);
+    if has("k3_kPa_per_pct3") {
+        2
+    } else if has("lin_k_pct_per_kPa") {
+        0
+    } else {
+        1
+    }
+}
+
+const VACUUM_NAMES: [&str; 3] = ["lpt", "hpt", "hpc"];
+
+/// The model-core actuator of a fitted parameter list on the ECU's `index` actuator, with the
+/// named extension `cause` (or none).
+pub fn vacuum_params(index: usize, cause: Option<&str>, params: &[(String, f64)]) -> Result<VacuumParams, String> {
+    let preset = [VacuumParams::lpt(), VacuumParams::hpt(), VacuumParams::hpc()][index.min(2)];
+    let mut m = VacuumModel::from_params(&preset.baseline());
+    if let Some(effect) = cause {
+        m = m.with_effect(effect)?;
+    }
+    for (name, v) in params {
+        m.set(name, *v);
+    }
+    Ok(m.to_params())
+}
+
+fn vacuum(logs: &[Log], out: &mut Outcome, progress: &mut dyn FnMut(&str)) -> Result<(), String> {
+    use crate::diagnose::{self, Rules};
+    let mut best: [Option<(f64, String, VacuumParams)>; 3] = [None, None, None];
+    for log in logs {
+        progress(&format!("diagnose vacuum: {}", log.file));
+        let family = diagnose::family_for(Plant::Vacuum)?;
+        let (est, val) = diagnose::split_tail(log, 0.3);
+        let d = diagnose::diagnose(family.as_ref(), &est, &val, true, &Rules::default(), &mut |_| {})
+            .map_err(|e| format!("{}: {e}", log.file))?;
+        let cause = (d.cause != "none").then(|| d.cause.clone());
+        let k = vacuum_index(&d.extended.params);
+        let p = vacuum_params(k, cause.as_deref(), &d.extended.params)?;
+        out.notes.push(format!(
+            "vacuum {}: {} ({}), fit {:.1} % on the held-out 30 %",
+            VACUUM_NAMES[k].to_uppercase(),
+            log.file,
+            cause.as_deref().unwrap_or("no extension"),
+            d.extended.fit_pct
+        ));
+        let method = format!(
+            "diagnose vacuum: baseline{}",
+            cause.as_deref().map(|c| format!(" + {c}")).unwrap_or_default()
+        );
+        if best[k].as_ref().is_none_or(|(fit, _, _)| d.extended.fit_pct > *fit) {
+            best[k] = Some((d.extended.fit_pct, format!("{}\u{1f}{method}", log.file), p));
+        }
+    }
+    for (k, b) in best.iter().enumerate() {
+        let Some((_, tag, p)) = b else { continue };
+        let (file, method) = tag.split_once('\u{1f}').unwrap_or((tag.as_str(), ""));
+        out.calibration.vacuum[k] = VacuumActuatorCalibration::from_params(p);
+        out.set_source(&format!("vacuum.{}.", VACUUM_NAMES[k]), &[file.to_string()], method);
+        // Not in the log: the bench's U_ref and ambient reference stay the preset's.
+        // The pressure-direction extension not found: one time constant both ways.
+        if !p.effects.pressure_direction {
+            out.calibration.vacuum[k].tau_fall_s = out.calibration.vacuum[k].tau_rise_s;
+        }
+        for kept in ["u_ref_v", "p_amb_ref_kpa"] {
+            set_source_exact(out, &format!("vacuum.{}.{kept}", VACUUM_NAMES[k]), &[], "paper default");
+        }
+    }
+    Ok(())
+}
+
+/// The values of `cal`, per characteristic, as JSON (maps as `[x][y]` nested arrays).
+fn values_json(c: &model_core::ecu::calibration::Characteristic, v: &[f64]) -> Value {
+    let r = |x: f64| f64::from(x as f32);
+    match c.shape {
+        Shape::Value => json!(r(v[0])),
+        Shape::Map { ny, .. } => Value::Array(
+            v.chunks(ny)
+                .map(|row| json!(row.iter().map(|x| r(*x)).collect::<Vec<_>>()))
+                .collect(),
+        ),
+        _ => json!(v.iter().map(|x| r(*x)).collect::<Vec<_>>()),
+    }
+}
+
+/// `calibration.json`: `flash_base`, the image's size and CRC, and every characteristic by its
+/// A2L name with its value(s), unit, address, limits and source.
+pub fn json_report(o: &Outcome, image: &[u8], flash_base: u32) -> Value {
+    let mut chars = Map::new();
+    let mut k = 0;
+    o.calibration.for_each(|c, v| {
+        let s = &o.sources[k];
+        k += 1;
+        let source = if s.logs.is_empty() {
+            json!({"from": "paper default", "method": s.method})
+        } else {
+            json!({"from": "log", "logs": s.logs, "method": s.method})
+        };
+        chars.insert(
+            c.name.to_string(),
+            json!({
+                "value": values_json(c, v),
+                "unit": c.unit,
+                "address": format!("0x{:08X}", flash_base + c.offset() as u32),
+                "limits": [c.min, c.max],
+                "source": source,
+            }),
+        );
+    });
+    let crc = u32::from_le_bytes([
+        image[IMAGE_BYTES - 4],
+        image[IMAGE_BYTES - 3],
+        image[IMAGE_BYTES - 2],
+        image[IMAGE_BYTES - 1],
+    ]);
+    json!({
+        "format_version": FORMAT_VERSION,
+        "flash_base": flash_base,
+        "flash_base_hex": format!("0x{flash_base:08X}"),
+        "image_bytes": IMAGE_BYTES,
+        "crc32": format!("0x{crc:08X}"),
+        "notes": o.notes,
+        "characteristics": chars,
+    })
+}
+
+/// Writes `calibration.bin`, `calibration.json` and `calibration.a2l` into `dir`.
+pub fn write_outputs(o: &Outcome, dir: &Path, flash_base: u32) -> Result<Vec<PathBuf>, String> {
+    let mut image = vec![0u8; IMAGE_BYTES];
+    CalibrationImage::serialize(&o.calibration, &mut image).map_err(|e| e.to_string())?;
+    // What is written is what the ECU will read: parse it back whole.
+    CalibrationImage::parse(&image).map_err(|e| format!("refused: {e}"))?;
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let files = [
+        ("calibration.bin", image.clone()),
+        (
+            "calibration.json",
+            (serde_json::to_string_pretty(&json_report(o, &image, flash_base)).map_err(|e| e.to_string())? + "\n")
+                .into_bytes(),
+        ),
+        ("calibration.a2l", a2l::a2l_text(flash_base).into_bytes()),
+    ];
+    let mut written = Vec::new();
+    for (name, bytes) in files {
+        let p = dir.join(name);
+        crate::output::write_atomic(&p, &bytes).map_err(|e| format!("{}: {e}", p.display()))?;
+        written.push(p);
+    }
+    Ok(written)
+}
+
+/// The ECU configuration of an image file (`--calibration`): refused whole, with the reason
+/// and the file, when any check fails.
+pub fn ecu_config_from_image(path: &Path) -> Result<EcuCoreConfig, String> {
+    let bytes = std::fs::read(path).map_err(|e| format!("calibration {}: {e}", path.display()))?;
+    let cal = CalibrationImage::parse(&bytes).map_err(|e| format!("{}: {e}", path.display()))?;
+    Ok(cal.config())
+}
+
+/// The unit `hil-host generate` described (`--unit truth.json`): the paper's plants with the
+/// truth's plant replaced by the generated one.
+pub fn unit_from_truth(path: &Path) -> Result<Unit, String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("unit {}: {e}", path.display()))?;
+    let v: Value = serde_json::from_str(&text).map_err(|e| format!("unit {}: {e}", path.display()))?;
+    let bad = |what: &str| format!("unit {}: {what}", path.display());
+    let plant = v["plant"].as_str().ok_or_else(|| bad("no `plant`"))?;
+    let effect = v["effect"].as_str().ok_or_else(|| bad("no `effect`"))?;
+    let params: Vec<(String, f64)> = v["params"]
+        .as_object()
+        .ok_or_else(|| bad("no `params` object"))?
+        .iter()
+        .map(|(k, x)| {
+            x.as_f64()
+                .map(|x| (k.clone(), x))
+                .ok_or_else(|| bad(&format!("params.{k} is not a number")))
+        })
+        .collect::<Result<_, _>>()?;
+    let mut unit = Unit::default();
+    match plant {
+        "ehvva" => {
+            use crate::diagnose::ehvva::{effect_knob, BASELINE_KNOBS};
+            let mut p = EhvvaParams::baseline();
+            let mut knobs: Vec<_> = BASELINE_KNOBS.to_vec();
+            if effect != "none" {
+                knobs.push(effect_knob(effect).map_err(|e| bad(&e))?);
+            }
+            for k in knobs {
+                let x = params
+                    .iter()
+                    .find(|(n, _)| n == k.name)
+                    .ok_or_else(|| bad(&format!("params.{} missing", k.name)))?
+                    .1;
+                (k.apply)(&mut p, x);
+            }
+            p.validate().map_err(|e| bad(&format!("{e:?}")))?;
+            unit.ehvva = p;
+        }
+        "vacuum" => {
+            let k = ["preset_LPT", "preset_HPT", "preset_HPC"]
+                .iter()
+                .position(|n| params.iter().any(|(p, _)| p == n))
+                .ok_or_else(|| bad("no preset_LPT/HPT/HPC in params"))?;
+            let cause = (effect != "none").then_some(effect);
+            let fitted: Vec<(String, f64)> = params.into_iter().filter(|(n, _)| !n.starts_with("preset_")).collect();
+            unit.vacuum[k] = vacuum_params(k, cause, &fitted).map_err(|e| bad(&e))?;
+        }
+        other => {
+            return Err(bad(&format!(
+                "plant `{other}`: run simulates generated ehvva and vacuum units"
+            )))
+        }
+    }
+    Ok(unit)
+}
+
+/// A `--flash-base` value: hexadecimal, with or without `0x`.
+pub fn parse_flash_base(v: &str) -> Result<u32, String> {
+    let h = v.strip_prefix("0x").or_else(|| v.strip_prefix("0X")).unwrap_or(v);
+    u32::from_str_radix(h, 16).map_err(|_| format!("--flash-base {v}: not a hexadecimal address"))
+}

@@ -1,0 +1,430 @@
+//! `hil-host calibrate`: from a generated unit's bench logs to the ECU's calibration image, its
+//! A2L and JSON, and the ECU running it.
+//!
+//! The A2L is read back twice: by `a2lfile` (load + its consistency check) and by a small
+//! structural reader in this file (tokens of the `CHARACTERISTIC`/`AXIS_PTS` blocks) that
+//! takes every object's address, element count and limits and checks the image's bytes there.
+use std::path::{Path, PathBuf};
+
+use a2lfile::A2lObjectName;
+use hil_host::calibrate::{self, FLASH_BASE};
+use hil_host::generate::{self, Case};
+use hil_host::log::Plant;
+use hil_host::run::{run_unit, Scenario, Summary};
+use model_core::ecu::calibration::{CalibrationImage, CHARACTERISTICS, IMAGE_BYTES};
+use model_core::ecu::lockstep::EcuCoreConfig;
+
+fn workdir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("hil-calibrate-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// Writes a generated case as `hil-host generate` does: the two logs and truth.json.
+fn write_case(case: &Case, dir: &Path) -> (PathBuf, PathBuf) {
+    std::fs::create_dir_all(dir).unwrap();
+    let est = dir.join("estimation.csv");
+    std::fs::write(&est, &case.estimation_csv).unwrap();
+    std::fs::write(dir.join("validation.csv"), &case.validation_csv).unwrap();
+    let params: serde_json::Map<String, serde_json::Value> = case
+        .truth
+        .iter()
+        .map(|(k, v)| (k.clone(), serde_json::json!(v)))
+        .collect();
+    let truth =
+        serde_json::json!({"plant": case.plant.name(), "effect": case.effect, "seed": case.seed, "params": params});
+    let truth_path = dir.join("truth.json");
+    std::fs::write(&truth_path, serde_json::to_string_pretty(&truth).unwrap()).unwrap();
+    (est, truth_path)
+}
+
+fn sweep() -> Scenario {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/calibration-sweep.toml");
+    Scenario::from_toml(&path, &std::fs::read_to_string(&path).unwrap()).unwrap()
+}
+
+fn f32_at(image: &[u8], addr: u64) -> f32 {
+    let off = (addr - u64::from(FLASH_BASE)) as usize;
+    f32::from_le_bytes(image[off..off + 4].try_into().unwrap())
+}
+
+/// Tokens of an A2L text: quoted strings whole, comments dropped.
+fn tokens(text: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut chars = text.chars().peekable();
+    while let Some(c) = chars.next() {
+        if c.is_whitespace() {
+            continue;
+        }
+        if c == '"' {
+            let mut s = String::new();
+            for d in chars.by_ref() {
+                if d == '"' {
+                    break;
+                }
+                s.push(d);
+            }
+            out.push(format!("\"{s}\""));
+        } else if c == '/' && chars.peek() == Some(&'*') {
+            let mut prev = ' ';
+            for d in chars.by_ref() {
+                if prev == '*' && d == '/' {
+                    break;
+                }
+                prev = d;
+            }
+        } else {
+            let mut s = String::from(c);
+            while let Some(&d) = chars.peek() {
+                if d.is_whitespace() {
+                    break;
+                }
+                s.push(d);
+                chars.next();
+            }
+            out.push(s);
+        }
+    }
+    out
+}
+
+/// One object of the A2L as the structural reader sees it.
+#[derive(Debug)]
+struct Object {
+    kind: String,
+    name: String,
+    address: u64,
+    count: usize,
+    lower: f64,
+    upper: f64,
+}
+
+/// The CHARACTERISTIC and AXIS_PTS blocks: address, element count (VALUE 1, VAL_BLK its
+/// MATRIX_DIM, CURVE/MAP the product of their AXIS_DESCR point counts, AXIS_PTS its maximum
+/// number of points) and limits.
+fn objects(text: &str) -> Vec<Object> {
+    let t = tokens(text);
+    let num = |s: &str| -> f64 { s.parse().unwrap_or_else(|_| panic!("not a number: {s}")) };
+    // Addresses in hex (0x...) or decimal, as A2L allows.
+    let hex = |s: &str| match s.strip_prefix("0x").or_else(|| s.strip_prefix("0X")) {
+        Some(h) => u64::from_str_radix(h, 16).unwrap(),
+        None => s.parse().unwrap(),
+    };
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i + 1 < t.len() {
+        if t[i] == "/begin" && t[i + 1] == "CHARACTERISTIC" {
+            // name "desc" TYPE address deposit max_diff conversion lower upper
+            let kind = t[i + 4].clone();
+            let mut o = Object {
+                kind: kind.clone(),
+                name: t[i + 2].clone(),
+                address: hex(&t[i + 5]),
+                count: 1,
+                lower: num(&t[i + 9]),
+                upper: num(&t[i + 10]),
+            };
+            let end = (i..t.len())
+                .find(|&k| t[k] == "/end" && t[k + 1] == "CHARACTERISTIC")
+                .unwrap();
+            let mut axes = Vec::new();
+            for k in i + 11..end {
+                if t[k] == "/begin" && t[k + 1] == "AXIS_DESCR" {
+                    // attribute input_quantity conversion max_axis_points lower upper
+                    axes.push(t[k + 5].parse::<usize>().unwrap());
+                }
+                if t[k] == "MATRIX_DIM" {
+                    o.count = t[k + 1].parse().unwrap();
+                }
+            }
+            if kind == "CURVE" || kind == "MAP" {
+                o.count = axes.iter().product();
+            }
+            out.push(o);
+            i = end;
+        } else if t[i] == "/begin" && t[i + 1] == "AXIS_PTS" {
+            // name "desc" address input_quantity deposit max_diff conversion max_points lower upper
+            out.push(Object {
+                kind: "AXIS_PTS".into(),
+                name: t[i + 2].clone(),
+                address: hex(&t[i + 4]),
+                count: t[i + 9].parse().unwrap(),
+                lower: num(&t[i + 10]),
+                upper: num(&t[i + 11]),
+            });
+        }
+        i += 1;
+    }
+    out
+}
+
+#[test]
+fn ehvva_unit_gives_an_image_json_and_a2l_that_agree() {
+    let dir = workdir("outputs");
+    let case = generate::generate(Plant::Ehvva, "pressure-delay", 7).unwrap();
+    let (est, _) = write_case(&case, &dir.join("unit"));
+    let outcome = calibrate::calibrate(std::slice::from_ref(&est), &mut |_| {}).unwrap();
+    let written = calibrate::write_outputs(&outcome, &dir.join("cal"), FLASH_BASE).unwrap();
+    assert_eq!(written.len(), 3);
+    let image = std::fs::read(dir.join("cal/calibration.bin")).unwrap();
+    assert_eq!(image.len(), IMAGE_BYTES);
+    let cal = CalibrationImage::parse(&image).unwrap();
+    // The identified td table falls with supply pressure as the unit's does (gain 0.67).
+    let td = cal.ehvva_tables.td_open_ms;
+    for j in 0..5 {
+        assert!(
+            td[0][j] > td[3][j],
+            "td VO at 5 MPa {} not above 8 MPa {}",
+            td[0][j],
+            td[3][j]
+        );
+    }
+
+    // JSON: flash base, every characteristic with its address, value and source.
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("cal/calibration.json")).unwrap()).unwrap();
+    assert_eq!(json["flash_base"], serde_json::json!(FLASH_BASE));
+    let chars = json["characteristics"].as_object().unwrap();
+    assert_eq!(chars.len(), CHARACTERISTICS.len());
+    for c in CHARACTERISTICS.iter() {
+        let e = &chars[c.name];
+        let addr = u64::from(FLASH_BASE) + c.offset() as u64;
+        assert_eq!(e["address"], format!("0x{addr:08X}"), "{}", c.name);
+        let first = match &e["value"] {
+            serde_json::Value::Array(a) => match &a[0] {
+                serde_json::Value::Array(row) => row[0].as_f64().unwrap(),
+                v => v.as_f64().unwrap(),
+            },
+            v => v.as_f64().unwrap(),
+        };
+        assert_eq!(first as f32, f32_at(&image, addr), "{}", c.name);
+    }
+    let from = |n: &str| chars[n]["source"]["from"].as_str().unwrap().to_string();
+    assert_eq!(from("ehvva.td_open_ms"), "log");
+    assert!(chars["ehvva.td_open_ms"]["source"]["logs"][0]
+        .as_str()
+        .unwrap()
+        .ends_with("estimation.csv"));
+    assert_eq!(from("ehvva.motion_open_low_ms"), "log");
+    // The diagnosis named the extension the td tables carry.
+    let method = chars["ehvva.td_open_ms"]["source"]["method"].as_str().unwrap();
+    assert!(method.contains("cause `pressure-delay`"), "{method}");
+    assert_eq!(from("evvt.alpha_deg_per_s2_rpm"), "paper default");
+    assert_eq!(from("vacuum.hpc.fc_kpa"), "paper default");
+
+    // A2L, reader 1: a2lfile loads it strictly and its consistency check finds nothing.
+    let text = std::fs::read_to_string(dir.join("cal/calibration.a2l")).unwrap();
+    let (a2l, log) = a2lfile::load_from_string(&text, None, true).unwrap();
+    assert!(log.is_empty(), "{log:?}");
+    assert!(a2l.check().is_empty(), "{:?}", a2l.check());
+    let m = &a2l.project.module[0];
+    assert_eq!(m.characteristic.len() + m.axis_pts.len(), CHARACTERISTICS.len());
+    for ch in m.characteristic.iter() {
+        let c = CHARACTERISTICS.iter().find(|c| c.name == ch.get_name()).unwrap();
+        assert_eq!(ch.address, FLASH_BASE + c.offset() as u32, "{}", c.name);
+    }
+
+    // A2L, reader 2: every object's values in the image, inside its limits.
+    let objs = objects(&text);
+    assert_eq!(objs.len(), CHARACTERISTICS.len());
+    let mut covered = 0;
+    for o in &objs {
+        let c = CHARACTERISTICS
+            .iter()
+            .find(|c| c.name == o.name)
+            .unwrap_or_else(|| panic!("{o:?}"));
+        assert_eq!(o.count, c.shape.len(), "{}", o.name);
+        let expect_kind = match c.shape {
+            model_core::ecu::calibration::Shape::Value => "VALUE",
+            model_core::ecu::calibration::Shape::Array(_) => "VAL_BLK",
+            model_core::ecu::calibration::Shape::Curve { .. } => "CURVE",
+            model_core::ecu::calibration::Shape::Map { .. } => "MAP",
+            model_core::ecu::calibration::Shape::Axis(_) => "AXIS_PTS",
+        };
+        assert_eq!(o.kind, expect_kind, "{}", o.name);
+        for k in 0..o.count {
+            let v = f64::from(f32_at(&image, o.address + 4 * k as u64));
+            assert!(
+                v >= o.lower && v <= o.upper,
+                "{}[{k}] = {v} outside {}..{}",
+                o.name,
+                o.lower,
+                o.upper
+            );
+        }
+        covered += 4 * o.count;
+    }
+    // The objects cover every value byte between the header and the CRC.
+    assert_eq!(covered, IMAGE_BYTES - 16 - 4);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+fn runs(truth: &Path, image: &Path) -> (Summary, Summary) {
+    let unit = calibrate::unit_from_truth(truth).unwrap();
+    let before = run_unit(&sweep(), None, EcuCoreConfig::default(), unit).unwrap();
+    let cfg = calibrate::ecu_config_from_image(image).unwrap();
+    let after = run_unit(&sweep(), None, cfg, unit).unwrap();
+    assert!(!before.calibration_fault && !after.calibration_fault);
+    (before, after)
+}
+
+#[test]
+fn the_units_own_calibration_beats_the_paper_defaults_on_supply_pressure_dependent_delay() {
+    let dir = workdir("ehvva-gain");
+    for seed in [7, 21] {
+        let case = generate::generate(Plant::Ehvva, "pressure-delay", seed).unwrap();
+        let (est, truth) = write_case(&case, &dir.join(format!("unit{seed}")));
+        let outcome = calibrate::calibrate(&[est], &mut |_| {}).unwrap();
+        let out = dir.join(format!("cal{seed}"));
+        calibrate::write_outputs(&outcome, &out, FLASH_BASE).unwrap();
+        let (before, after) = runs(&truth, &out.join("calibration.bin"));
+        let (b, a) = (before.ehvva_timing_error_deg_rms, after.ehvva_timing_error_deg_rms);
+        eprintln!("seed {seed}: EHVVA timing error RMS {b:.2} -> {a:.2} crank deg");
+        assert!(before.ehvva_events > 30 && after.ehvva_events == before.ehvva_events);
+        assert!(a <= 0.7 * b, "seed {seed}: {a:.2} deg is not 30 % below {b:.2} deg");
+        // The JSON the `run --json` option writes carries the figure by name.
+        let j = after.json("calibration-sweep");
+        assert_eq!(j["ehvva"]["timing_error_deg_rms"].as_f64(), Some(a));
+        assert!(j["evvt"]["phase_error_deg_rms"].as_f64().is_some());
+        assert!(j["vacuum"]["position_error_pct_rms"].as_f64().is_some());
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn vacuum_unit_calibrated_through_diagnose_and_its_named_extension() {
+    let dir = workdir("vacuum");
+    let case = generate::generate(Plant::Vacuum, "coulomb-friction", 11).unwrap();
+    let (est, truth) = write_case(&case, &dir.join("unit"));
+    let outcome = calibrate::calibrate(&[est], &mut |_| {}).unwrap();
+    let out = dir.join("cal");
+    calibrate::write_outputs(&outcome, &out, FLASH_BASE).unwrap();
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("calibration.json")).unwrap()).unwrap();
+    let preset = case
+        .truth
+        .iter()
+        .find(|(k, _)| k.starts_with("preset_"))
+        .unwrap()
+        .0
+        .clone();
+    let name = preset.trim_start_matches("preset_").to_lowercase();
+    let fc = &json["characteristics"][format!("vacuum.{name}.fc_kpa")];
+    assert_eq!(fc["source"]["from"], "log");
+    assert!(fc["source"]["method"].as_str().unwrap().contains("coulomb-friction"));
+    let fc_true = case.truth.iter().find(|(k, _)| k == "fc_kPa").unwrap().1;
+    let fc_got = fc["value"].as_f64().unwrap();
+    assert!(
+        (fc_got / fc_true - 1.0).abs() < 0.2,
+        "fc {fc_got} kPa, truth {fc_true} kPa"
+    );
+    let (before, after) = runs(&truth, &out.join("calibration.bin"));
+    eprintln!(
+        "vacuum {name}: position error RMS {:.2} -> {:.2} % (all three), {:?} -> {:?}",
+        before.vacuum_position_error_pct_rms,
+        after.vacuum_position_error_pct_rms,
+        before.vacuum_rms_error_pct_each,
+        after.vacuum_rms_error_pct_each
+    );
+    assert!(after.vacuum_position_error_pct_rms < before.vacuum_position_error_pct_rms);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn bad_images_logs_and_units_are_refused_by_name() {
+    let dir = workdir("refused");
+    let good = dir.join("good.bin");
+    let mut image = vec![0u8; IMAGE_BYTES];
+    let cal = model_core::ecu::calibration::EcuCalibration::paper_defaults();
+    CalibrationImage::serialize(&cal, &mut image).unwrap();
+    std::fs::write(&good, &image).unwrap();
+    assert!(calibrate::ecu_config_from_image(&good).is_ok());
+    // One flipped bit: the CRC refuses it, and the error says calibration.
+    let mut bad = image.clone();
+    bad[200] ^= 0x04;
+    let p = dir.join("corrupt.bin");
+    std::fs::write(&p, &bad).unwrap();
+    let e = calibrate::ecu_config_from_image(&p).unwrap_err();
+    assert!(
+        e.contains("calibration") && e.contains("corrupted") && e.contains("corrupt.bin"),
+        "{e}"
+    );
+    // Cut short: incomplete.
+    let p = dir.join("short.bin");
+    std::fs::write(&p, &image[..IMAGE_BYTES / 2]).unwrap();
+    let e = calibrate::ecu_config_from_image(&p).unwrap_err();
+    assert!(e.contains("calibration image incomplete"), "{e}");
+    // EVVT logs that are not the 3x3 PRBS grid: refused with the reason, nothing written.
+    let case = generate::generate(Plant::Evvt, "none", 3).unwrap();
+    let (est, truth) = write_case(&case, &dir.join("evvt"));
+    let e = calibrate::calibrate(&[est], &mut |_| {}).unwrap_err();
+    assert!(e.contains("estimation.csv") || e.contains("EVVT"), "{e}");
+    // A unit run does not simulate: named.
+    let e = calibrate::unit_from_truth(&truth).unwrap_err();
+    assert!(e.contains("evvt"), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn the_command_line_calibrates_and_runs_the_unit_with_its_image() {
+    let dir = workdir("cli");
+    let bin = env!("CARGO_BIN_EXE_hil-host");
+    let case = generate::generate(Plant::Ehvva, "pressure-delay", 21).unwrap();
+    let (est, truth) = write_case(&case, &dir.join("unit"));
+    let help = std::process::Command::new(bin)
+        .args(["calibrate", "--help"])
+        .output()
+        .unwrap();
+    let help = String::from_utf8_lossy(&help.stdout).to_string();
+    assert!(
+        help.contains("Usage: hil-host calibrate") && help.contains("Examples:\n  hil-host "),
+        "{help}"
+    );
+    let cal = dir.join("cal");
+    let o = std::process::Command::new(bin)
+        .arg("calibrate")
+        .arg(&est)
+        .arg("--out")
+        .arg(&cal)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for f in ["calibration.bin", "calibration.a2l", "calibration.json"] {
+        assert!(cal.join(f).is_file(), "{f}");
+    }
+    let sweep = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/calibration-sweep.toml");
+    let run = |extra: &[&Path], json: &Path| {
+        let mut c = std::process::Command::new(bin);
+        c.arg("run")
+            .arg(&sweep)
+            .arg("--out")
+            .arg(dir.join("out"))
+            .arg("--force");
+        c.arg("--unit").arg(&truth).arg("--json").arg(json);
+        if let Some(image) = extra.first() {
+            c.arg("--calibration").arg(image);
+        }
+        c.output().unwrap()
+    };
+    let figure = |p: &Path| -> f64 {
+        let j: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap();
+        j["ehvva"]["timing_error_deg_rms"].as_f64().unwrap()
+    };
+    let o = run(&[], &dir.join("before.json"));
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = run(&[&cal.join("calibration.bin")], &dir.join("after.json"));
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (b, a) = (figure(&dir.join("before.json")), figure(&dir.join("after.json")));
+    assert!(a <= 0.7 * b, "{a} deg vs {b} deg");
+    // A corrupted image: refused, exit status 1, the error says calibration.
+    let mut bytes = std::fs::read(cal.join("calibration.bin")).unwrap();
+    bytes[64] ^= 0xFF;
+    let bad = dir.join("bad.bin");
+    std::fs::write(&bad, &bytes).unwrap();
+    let o = run(&[&bad], &dir.join("bad.json"));
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("calibration image corrupted"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
