@@ -284,7 +284,7 @@ pub fn vacuum_params(index: usize, cause: Option<&str>, params: &[(String, f64)]
         m = m.with_effect(effect)?;
     }
     for (name, v) in params {
-        m.set(name, *v);
+        m.set(name, *v)?;
     }
     Ok(m.to_params())
 }
