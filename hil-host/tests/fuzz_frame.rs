@@ -1,7 +1,7 @@
 //! Fuzzing the lockstep frame decoder (`model_core::ecu::frame`) on stable Rust: arbitrary
 //! bytes into `decode` and into the streaming `FrameDecoder`, and structured mutations of
 //! valid frames (every byte corrupted, cut, extended, length byte changed, frames glued
-//! together with junk). It must never panic, answer within [`HANG_LIMIT`], never accept a
+//! together with junk). It must never panic, answer within [`fuzz_common::HANG_LIMIT`], never accept a
 //! frame with a corrupted byte (the CRC-16 catches every error burst within one byte), and
 //! re-encode what it accepts to the bytes it came from.
 //!
@@ -11,58 +11,15 @@
 //!
 //! Long run: `FUZZ_CASES=1000000 cargo test -p hil-host --test fuzz_frame -- --ignored --nocapture`.
 
-use std::cell::Cell;
-use std::time::{Duration, Instant};
+mod fuzz_common;
+
+use fuzz_common::{cases, fuzz};
 
 use model_core::ecu::frame::{
     crc16, decode, encode, FrameDecoder, FrameError, FRAME_VERSION, MAX_FRAME_BYTES, MAX_PAYLOAD_BYTES, SYNC,
 };
 use proptest::prelude::*;
-use proptest::test_runner::{Config, TestCaseError, TestRunner};
-
-const HANG_LIMIT: Duration = Duration::from_secs(2);
-
-fn fuzz<S: Strategy>(name: &str, strategy: S, cases: u32, check: impl Fn(&S::Value) -> Result<bool, TestCaseError>) {
-    let mut runner = TestRunner::new(Config {
-        cases,
-        failure_persistence: None,
-        max_shrink_iters: 2000,
-        ..Config::default()
-    });
-    let (inputs, accepted, slowest) = (Cell::new(0u64), Cell::new(0u64), Cell::new(Duration::ZERO));
-    let started = Instant::now();
-    let result = runner.run(&strategy, |v| {
-        let t0 = Instant::now();
-        let ok = check(&v)?;
-        let took = t0.elapsed();
-        if took > HANG_LIMIT {
-            return Err(TestCaseError::fail(format!("hang: {took:?} on one input")));
-        }
-        inputs.set(inputs.get() + 1);
-        accepted.set(accepted.get() + u64::from(ok));
-        slowest.set(slowest.get().max(took));
-        Ok(())
-    });
-    eprintln!(
-        "fuzz {name}: {} inputs ({} accepted), {} panics, 0 hangs (slowest {:.3} ms, limit {} s), {:.1} s wall",
-        inputs.get(),
-        accepted.get(),
-        u8::from(result.is_err()),
-        slowest.get().as_secs_f64() * 1e3,
-        HANG_LIMIT.as_secs(),
-        started.elapsed().as_secs_f64()
-    );
-    if let Err(e) = result {
-        panic!("fuzz {name}: {e}");
-    }
-}
-
-fn cases(ci: u32) -> u32 {
-    std::env::var("FUZZ_CASES")
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(ci)
-}
+use proptest::test_runner::TestCaseError;
 
 /// A frame on the wire around `payload`.
 fn wire(kind: u8, payload: &[u8]) -> Vec<u8> {

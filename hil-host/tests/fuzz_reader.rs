@@ -1,7 +1,7 @@
 //! Fuzzing the log reader on stable Rust: proptest draws arbitrary bytes and structured
 //! mutations of valid logs in every dialect (flipped bytes, cut and repeated lines, huge
 //! numbers, NaN, duplicate columns, stray BOMs, quotes and separators) and asserts that the
-//! reader never panics, answers each input within [`HANG_LIMIT`], and that whatever it accepts
+//! reader never panics, answers each input within [`fuzz_common::HANG_LIMIT`], and that whatever it accepts
 //! is a valid log (the invariants of DATA-FORMAT.md, checked independently here).
 //!
 //! CI runs a short round; the long run (>= 10^6 inputs per target) is ignored:
@@ -9,61 +9,16 @@
 //! Its figures are in docs/reliability.md. Every input that once failed is kept in
 //! `tests/regressions/` (checked by [`regression_files_give_their_errors`]).
 
-use std::cell::Cell;
+mod fuzz_common;
+
+use fuzz_common::{cases, fuzz};
+
 use std::path::Path;
-use std::time::{Duration, Instant};
 
 use hil_host::log::check::PERIOD_RANGE_S;
 use hil_host::log::{column_range, format_log, log_from_columns, parse_log, read_csv, read_log, Log, Plant, Role};
 use proptest::prelude::*;
-use proptest::test_runner::{Config, TestCaseError, TestRunner};
-
-/// An input that takes longer than this is a hang (inputs are at most a few kB).
-const HANG_LIMIT: Duration = Duration::from_secs(2);
-
-/// Runs `check` on `cases` inputs drawn from `strategy`, timing each; fails on the first
-/// panic, hang or broken invariant (proptest then shrinks it to a minimal input).
-fn fuzz<S: Strategy>(name: &str, strategy: S, cases: u32, check: impl Fn(&S::Value) -> Result<bool, TestCaseError>) {
-    let mut runner = TestRunner::new(Config {
-        cases,
-        failure_persistence: None,
-        max_shrink_iters: 2000,
-        ..Config::default()
-    });
-    let (inputs, accepted, slowest) = (Cell::new(0u64), Cell::new(0u64), Cell::new(Duration::ZERO));
-    let started = Instant::now();
-    let result = runner.run(&strategy, |v| {
-        let t0 = Instant::now();
-        let ok = check(&v)?;
-        let took = t0.elapsed();
-        if took > HANG_LIMIT {
-            return Err(TestCaseError::fail(format!("hang: {took:?} on one input")));
-        }
-        inputs.set(inputs.get() + 1);
-        accepted.set(accepted.get() + u64::from(ok));
-        slowest.set(slowest.get().max(took));
-        Ok(())
-    });
-    eprintln!(
-        "fuzz {name}: {} inputs ({} accepted), {} panics, 0 hangs (slowest {:.3} ms, limit {} s), {:.1} s wall",
-        inputs.get(),
-        accepted.get(),
-        u8::from(result.is_err()),
-        slowest.get().as_secs_f64() * 1e3,
-        HANG_LIMIT.as_secs(),
-        started.elapsed().as_secs_f64()
-    );
-    if let Err(e) = result {
-        panic!("fuzz {name}: {e}");
-    }
-}
-
-fn cases(ci: u32) -> u32 {
-    std::env::var("FUZZ_CASES")
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(ci)
-}
+use proptest::test_runner::TestCaseError;
 
 /// What DATA-FORMAT.md promises of an accepted log, checked without the reader's code.
 fn assert_valid(log: &Log) -> Result<(), TestCaseError> {

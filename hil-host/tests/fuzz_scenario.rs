@@ -1,63 +1,21 @@
 //! Fuzzing the scenario reader (`Scenario::from_toml`) on stable Rust: arbitrary text and
 //! structured mutations of the shipped scenarios (lines dropped or repeated, values replaced
 //! by huge, negative, NaN or mistyped ones, names that are paths, extra `[[fault]]` tables).
-//! It must never panic, answer each input within [`HANG_LIMIT`], name the file in every
+//! It must never panic, answer each input within [`fuzz_common::HANG_LIMIT`], name the file in every
 //! error, and whatever it accepts must be runnable: a name that is no path, a duration and
 //! profiles within their ranges.
 //!
 //! Long run: `FUZZ_CASES=1000000 cargo test -p hil-host --test fuzz_scenario -- --ignored --nocapture`.
 
-use std::cell::Cell;
+mod fuzz_common;
+
+use fuzz_common::{cases, fuzz};
+
 use std::path::Path;
-use std::time::{Duration, Instant};
 
 use hil_host::run::{check_name, Scenario, MAX_DURATION_S, MIN_DURATION_S};
 use proptest::prelude::*;
-use proptest::test_runner::{Config, TestCaseError, TestRunner};
-
-const HANG_LIMIT: Duration = Duration::from_secs(2);
-
-fn fuzz<S: Strategy>(name: &str, strategy: S, cases: u32, check: impl Fn(&S::Value) -> Result<bool, TestCaseError>) {
-    let mut runner = TestRunner::new(Config {
-        cases,
-        failure_persistence: None,
-        max_shrink_iters: 2000,
-        ..Config::default()
-    });
-    let (inputs, accepted, slowest) = (Cell::new(0u64), Cell::new(0u64), Cell::new(Duration::ZERO));
-    let started = Instant::now();
-    let result = runner.run(&strategy, |v| {
-        let t0 = Instant::now();
-        let ok = check(&v)?;
-        let took = t0.elapsed();
-        if took > HANG_LIMIT {
-            return Err(TestCaseError::fail(format!("hang: {took:?} on one input")));
-        }
-        inputs.set(inputs.get() + 1);
-        accepted.set(accepted.get() + u64::from(ok));
-        slowest.set(slowest.get().max(took));
-        Ok(())
-    });
-    eprintln!(
-        "fuzz {name}: {} inputs ({} accepted), {} panics, 0 hangs (slowest {:.3} ms, limit {} s), {:.1} s wall",
-        inputs.get(),
-        accepted.get(),
-        u8::from(result.is_err()),
-        slowest.get().as_secs_f64() * 1e3,
-        HANG_LIMIT.as_secs(),
-        started.elapsed().as_secs_f64()
-    );
-    if let Err(e) = result {
-        panic!("fuzz {name}: {e}");
-    }
-}
-
-fn cases(ci: u32) -> u32 {
-    std::env::var("FUZZ_CASES")
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(ci)
-}
+use proptest::test_runner::TestCaseError;
 
 fn read(text: &str) -> Result<bool, TestCaseError> {
     match Scenario::from_toml(Path::new("fz.toml"), text) {
