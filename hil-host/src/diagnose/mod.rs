@@ -582,6 +582,8 @@ fn diagnose_fits(
         }
         let e_cur = current.residual();
         let mut candidates = Vec::new();
+        // Per candidate: did its new effect end switched off (at its neutral value)?
+        let mut offs: Vec<bool> = Vec::new();
         for effect in &remaining {
             index += 1;
             let mut set = selected.clone();
@@ -604,6 +606,7 @@ fn diagnose_fits(
                         z: 0.0,
                         eligible: false,
                     });
+                    offs.push(false);
                     continue;
                 }
             };
@@ -626,6 +629,36 @@ fn diagnose_fits(
                 z,
                 eligible,
             });
+            offs.push(off);
+        }
+        // A candidate whose new effect ended switched off is the parent model refitted further
+        // (its solver went on from the parent's optimum). What such a refit achieves is no
+        // evidence for any effect, so every other candidate must also beat the best of those
+        // refits by the same rules (gain and significance), not only the parent as it was.
+        let refit = candidates
+            .iter()
+            .zip(&offs)
+            .filter(|(c, off)| **off && c.fit.rmse.is_finite() && c.fit.rmse < current.rmse)
+            .map(|(c, _)| &c.fit)
+            .min_by(|a, b| a.rmse.total_cmp(&b.rmse))
+            .cloned();
+        if let Some(refit) = refit {
+            let e_ref = refit.residual();
+            for (c, off) in candidates.iter_mut().zip(&offs) {
+                if *off || !c.eligible {
+                    continue;
+                }
+                let gain_ref = 100.0 * (refit.rmse - c.fit.rmse) / refit.rmse.max(f64::MIN_POSITIVE);
+                let z_ref = improvement_z(&e_ref, &c.fit.residual());
+                if gain_ref < rules.min_gain_pct || z_ref < rules.min_z {
+                    c.eligible = false;
+                    evidence.push(format!(
+                        "`{}` gains {gain_ref:.1} % (z = {z_ref:.1}) over the same model refitted without it (the switched-off candidates' RMSE {:.4}): not a cause",
+                        c.fit.effects.last().cloned().unwrap_or_default(),
+                        refit.rmse
+                    ));
+                }
+            }
         }
         let mut best: Option<usize> = None;
         for (i, c) in candidates.iter().enumerate() {
