@@ -470,22 +470,7 @@ pub fn unit_from_truth(path: &Path) -> Result<Unit, String> {
             }
             // The rest of the unit, where the generator drew it (issue #12's real units).
             let get = |n: &str| params.iter().find(|(k, _)| k == n).map(|(_, v)| *v);
-            let fields: [(&str, &mut f64); 9] = [
-                ("spring_N_per_mm", &mut p.spring_n_per_mm),
-                ("spring_preload_mm", &mut p.spring_preload_mm),
-                ("friction_N_per_m_s", &mut p.friction_n_per_m_s),
-                ("area_top_mm2", &mut p.area_top_mm2),
-                ("area_bottom_mm2", &mut p.area_bottom_mm2),
-                ("area_main_mm2", &mut p.area_main_mm2),
-                ("area_top_orifice_mm2", &mut p.area_top_orifice_mm2),
-                ("area_top_switch_orifice_mm2", &mut p.area_top_switch_orifice_mm2),
-                ("area_bottom_port_mm2", &mut p.area_bottom_port_mm2),
-            ];
-            for (name, field) in fields {
-                if let Some(v) = get(name) {
-                    *field = v;
-                }
-            }
+            crate::generate::ehvva::apply_unit_geometry(&mut p, get);
             p.validate().map_err(|e| bad(&format!("{e:?}")))?;
             unit.ehvva = p;
         }

@@ -118,6 +118,13 @@ pub fn params_from_truth(truth: &[(String, f64)]) -> EhvvaParams {
             }
         }
     }
+    apply_unit_geometry(&mut p, get);
+    p
+}
+
+/// Sets the unit's spring, friction and areas that a truth.json names (the real-unit draws of
+/// issue #12), leaving the others at their values in `p`.
+pub fn apply_unit_geometry(p: &mut EhvvaParams, get: impl Fn(&str) -> Option<f64>) {
     let fields: [(&str, &mut f64); 9] = [
         ("spring_N_per_mm", &mut p.spring_n_per_mm),
         ("spring_preload_mm", &mut p.spring_preload_mm),
@@ -134,7 +141,6 @@ pub fn params_from_truth(truth: &[(String, f64)]) -> EhvvaParams {
             *field = v;
         }
     }
-    p
 }
 
 /// Least net force that holds the valve on its lift stop, N: with less the valve floats short
