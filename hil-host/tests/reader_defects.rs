@@ -238,3 +238,17 @@ fn in_memory_tables_get_the_same_checks() {
     let e = log_from_columns("a.mf4", conflict, cols(vec![0.0, 0.01, 0.02], vec![0.0; 3]), None).unwrap_err();
     assert!(e.message.contains("contradicts"), "{e}");
 }
+
+/// Was: "the regressors are linearly dependent", naming no file. A fit that cannot be computed
+/// now names the log and the inputs that never moved.
+#[test]
+fn a_fit_that_cannot_be_computed_names_the_file_and_the_still_inputs() {
+    use hil_host::diagnose::{diagnose, family_for, Rules};
+    let rows: String = (0..400).map(|k| format!("{},0,0\n", k as f64 * 0.001)).collect();
+    let log = parse_log("still-bench.csv", &format!("{HEAD}{rows}"), None).unwrap();
+    let (est, val) = log.split_tail(0.3);
+    let family = family_for(Plant::Positioner).unwrap();
+    let e = diagnose(family.as_ref(), &est, &val, true, &Rules::default(), &mut |_| {}).unwrap_err();
+    assert!(e.starts_with("still-bench.csv (first 70 %)"), "{e}");
+    assert!(e.contains("force_N"), "{e}");
+}

@@ -430,19 +430,10 @@ pub fn unexcited_inputs(est: &Log, val: &Log) -> Vec<String> {
         .collect()
 }
 
-/// Splits one log into estimation head and validation tail (`tail` fraction held out).
+/// Splits a borrowed log into estimation head and validation tail (`tail` fraction held out).
+/// It copies the samples; a caller that owns the log uses [`Log::split_tail`], which moves them.
 pub fn split_tail(log: &Log, tail: f64) -> (Log, Log) {
-    let n = log.len();
-    let cut = ((n as f64) * (1.0 - tail)).round() as usize;
-    let part = |r: std::ops::Range<usize>, suffix: &str| {
-        let mut l = log.clone();
-        for v in l.columns.values_mut() {
-            *v = v[r.clone()].to_vec();
-        }
-        l.file = format!("{}{}", log.file, suffix);
-        l
-    };
-    (part(0..cut, " (first 70 %)"), part(cut..n, " (last 30 %, held out)"))
+    log.clone().split_tail(tail)
 }
 
 /// Where a diagnosis stands, for a progress display ([`progress::ProgressLine`]).
@@ -514,8 +505,27 @@ pub fn diagnose(
         };
         let result = diagnose_fits(family, est, val, validation_is_tail, rules, &fit);
         drop(tx);
-        result
+        result.map_err(|e| locate_error(e, est, val))
     })
+}
+
+/// A fit's error as the user must read it: which files, and which inputs never moved (the
+/// usual reason a fit cannot be computed), unless the message already names the file.
+fn locate_error(message: String, est: &Log, val: &Log) -> String {
+    if message.starts_with(&est.file) || message.starts_with(&val.file) {
+        return message;
+    }
+    let files = if est.file == val.file {
+        est.file.clone()
+    } else {
+        format!("{} (validation: {})", est.file, val.file)
+    };
+    let unexcited = unexcited_inputs(est, val);
+    if unexcited.is_empty() {
+        format!("{files}: {message}")
+    } else {
+        format!("{files}: {message}; inputs that never vary: {}", unexcited.join(", "))
+    }
 }
 
 /// Calibrates one model (the baseline plus the effects, extending `parent`) as fit number
