@@ -11,7 +11,7 @@
 use std::time::Duration;
 
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
-use hil_host::diagnose::{diagnose, family_for, split_tail, Rules};
+use hil_host::diagnose::{diagnose, family_for, Rules};
 use hil_host::generate::{self, effects, Case};
 use hil_host::log::{parse_log, Log, Plant};
 
@@ -80,7 +80,7 @@ fn split_log(case: &Case) -> (Log, Log) {
     for column in log.columns.values_mut() {
         column.truncate(SAMPLES);
     }
-    split_tail(&log, 0.3)
+    log.split_tail(0.3)
 }
 
 fn benches(c: &mut Criterion) {

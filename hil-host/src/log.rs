@@ -208,6 +208,22 @@ impl Log {
         (head, back)
     }
 
+    /// The rows in `ranges` (in that order) as a log of their own, named `label`: a part of a
+    /// long record that a fit uses. Metadata, notices and the sample period are kept; the
+    /// time column is cut like the others, so it jumps where the ranges meet.
+    pub fn select_rows(self, ranges: &[std::ops::Range<usize>], label: String) -> Log {
+        let mut part = self.clone_empty();
+        part.file = label;
+        for (name, v) in &self.columns {
+            let mut cut = Vec::with_capacity(ranges.iter().map(|r| r.len()).sum());
+            for r in ranges {
+                cut.extend_from_slice(&v[r.start.min(v.len())..r.end.min(v.len())]);
+            }
+            part.columns.insert(name.clone(), cut);
+        }
+        part
+    }
+
     /// The log without samples (metadata, notices, timing kept).
     fn clone_empty(&self) -> Log {
         Log {
@@ -284,7 +300,8 @@ fn read_csv_log(path: &Path, plant: Option<Plant>) -> Result<Log, LogError> {
         column: None,
         message: format!("cannot read: {e}"),
     })?;
-    read_csv(&file, BufReader::with_capacity(1 << 16, input), plant)
+    let size = input.metadata().ok().filter(|m| m.is_file()).map(|m| m.len());
+    csv::read_csv_sized(&file, BufReader::with_capacity(1 << 16, input), plant, size)
 }
 
 /// Parses log text; `file` names it in errors.

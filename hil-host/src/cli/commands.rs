@@ -111,11 +111,18 @@ fn diagnose(a: DiagnoseArgs) -> Result<()> {
     let plant = a.plant.map(Plant::from);
     let est_full = read(&a.estimation, plant, map.as_ref())?;
     let plant = est_full.plant;
+    let family = diagnose::family_for(plant).map_err(fail)?;
+    // What the fits do not use of a long estimation record is not held through them (nor
+    // while the validation log is read).
     let (est, val, tail) = match &a.validation {
-        Some(v) => (est_full, read(v, Some(plant), map.as_ref())?, false),
+        Some(v) => {
+            let est = family.estimation_part(est_full).map_err(fail)?;
+            (est, read(v, Some(plant), map.as_ref())?, false)
+        }
         None => {
-            let (e, v) = diagnose::split_tail(&est_full, 0.3);
-            (e, v, true)
+            // Moved, not copied: the held-out tail costs no second copy of the log.
+            let (e, v) = est_full.split_tail(0.3);
+            (family.estimation_part(e).map_err(fail)?, v, true)
         }
     };
     for n in est.notices.iter().chain(&val.notices) {
@@ -128,7 +135,6 @@ fn diagnose(a: DiagnoseArgs) -> Result<()> {
         }
         None => None,
     };
-    let family = diagnose::family_for(plant).map_err(fail)?;
     let mut line = diagnose::progress::ProgressLine::for_stderr();
     let mut show = |p: &diagnose::Progress| {
         if let Some(text) = line.render(p) {
@@ -221,7 +227,15 @@ fn generate(a: GenerateArgs) -> Result<()> {
     let out = a
         .out
         .unwrap_or_else(|| PathBuf::from(format!("out/{}-{}-seed{seed}", plant.name(), a.effect)));
-    let claim = Claim::new("generate", format!("{} {} --seed {seed}", plant.name(), a.effect));
+    let repeat = if a.repeat > 1 {
+        format!(" --repeat {}", a.repeat)
+    } else {
+        String::new()
+    };
+    let claim = Claim::new(
+        "generate",
+        format!("{} {} --seed {seed}{repeat}", plant.name(), a.effect),
+    );
     let known = hil_host::generate::effects(plant);
     let prbs_grid = plant == Plant::Evvt && a.effect == "prbs-grid";
     // One catalogue effect, several joined by `+`, or physics outside the catalogue.
@@ -261,7 +275,7 @@ fn generate(a: GenerateArgs) -> Result<()> {
     }
     let case = {
         let _s = Spinner::start(&format!("generating {} {}", plant.name(), a.effect), true);
-        hil_host::generate::generate(plant, &a.effect, seed).map_err(fail)?
+        hil_host::generate::generate_repeated(plant, &a.effect, seed, a.repeat as usize).map_err(fail)?
     };
     let truth: serde_json::Map<String, serde_json::Value> = case
         .truth

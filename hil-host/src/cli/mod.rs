@@ -257,6 +257,10 @@ pub struct GenerateArgs {
     /// Output directory [default: out/<plant>-<effect>-seed<N>]
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
+    /// Run the experiment programme N times (new draws each time): long logs, e.g. an EHVVA
+    /// bench pair of ~400 000 rows with --repeat 18
+    #[arg(long, value_name = "N", default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=1000))]
+    pub repeat: u32,
     /// Write into a directory that holds other files or another run's outputs
     #[arg(long)]
     pub force: bool,

@@ -21,6 +21,7 @@
 //!   `effect_pressure_delay`, `effect_direction_delay`, `effect_snubber`, 0..2), all
 //!   parameters refitted from the baseline's solution.
 
+use std::borrow::Cow;
 use std::collections::hash_map::DefaultHasher;
 use std::hash::{Hash, Hasher};
 use std::sync::Mutex;
@@ -37,6 +38,13 @@ pub const EFFECTS: [&str; 4] = EhvvaEffect::NAMES;
 
 /// Rest kept before each rising command edge (the segment start), ms.
 pub const PRE_MS: f64 = 1.0;
+/// The fits use at most this many estimation events (chosen by [`Events::for_fitting`]); the
+/// validation data are always predicted whole. Ten or so parameters are well determined by a
+/// few dozen events that cover every test condition, while the cost of each fit grows with
+/// the events: a long bench record (hundreds of events of a repeated test matrix) adds time,
+/// not information.
+pub const MAX_FIT_EVENTS: usize = 64;
+
 /// Delay-line length of the simulated model: 1024 samples hold 10 ms even at a 0.01 ms step.
 const DELAY_SAMPLES: usize = 1024;
 
@@ -202,6 +210,61 @@ impl Events {
             samples: at,
             file: self.file.clone(),
         }
+    }
+
+    /// At most `max_events` of the events for a fit, the operating conditions represented.
+    /// Conditions are nested: lift and snubber states, then temperature (to 10 °C), supply
+    /// pressure (to 0.5 MPa) and back pressure (to 0.5 MPa). Each place goes to the event whose
+    /// condition is least represented so far, coarsest level first (so every lift/snubber
+    /// combination, then every temperature within it, is covered before finer differences),
+    /// ties to the event farthest in the record from those already chosen (so a drift over a
+    /// long run is sampled too). All events when there are not more.
+    pub fn for_fitting(&self, max_events: usize) -> Events {
+        if self.events.len() <= max_events {
+            return self.clone();
+        }
+        let keep = self.fitting_choice(max_events);
+        let starts: std::collections::HashSet<usize> = (0..self.events.len())
+            .filter(|&k| keep[k])
+            .map(|k| self.events[k].start)
+            .collect();
+        self.subset(|e| starts.contains(&e.start))
+    }
+
+    /// Which events [`Events::for_fitting`] keeps (a flag per event).
+    fn fitting_choice(&self, max_events: usize) -> Vec<bool> {
+        let levels = |e: &Event| -> [[i64; 5]; 4] {
+            let i = &e.inputs;
+            let full = [
+                i.lift_high as i64,
+                i.snubber_on as i64,
+                (i.temp_c / 10.0).round() as i64,
+                (i.p_supply_mpa / 0.5).round() as i64,
+                (i.p_back_mpa / 0.5).round() as i64,
+            ];
+            // Level l keeps the first 2 + l entries; the rest is masked.
+            core::array::from_fn(|l| core::array::from_fn(|k| if k < 2 + l { full[k] } else { i64::MIN }))
+        };
+        let keys: Vec<[[i64; 5]; 4]> = self.events.iter().map(levels).collect();
+        let mut counts: std::collections::HashMap<[i64; 5], usize> = std::collections::HashMap::new();
+        let mut keep = vec![false; self.events.len()];
+        let mut chosen: Vec<usize> = Vec::with_capacity(max_events);
+        for _ in 0..max_events {
+            let score = |k: usize| {
+                let represented: [usize; 4] = core::array::from_fn(|l| counts.get(&keys[k][l]).copied().unwrap_or(0));
+                let gap = chosen.iter().map(|&c| c.abs_diff(k)).min().unwrap_or(usize::MAX);
+                (represented, std::cmp::Reverse(gap))
+            };
+            let Some(best) = (0..self.events.len()).filter(|&k| !keep[k]).min_by_key(|&k| score(k)) else {
+                break;
+            };
+            keep[best] = true;
+            chosen.push(best);
+            for key in &keys[best] {
+                *counts.entry(*key).or_insert(0) += 1;
+            }
+        }
+        keep
     }
 
     fn key(&self) -> u64 {
@@ -734,8 +797,36 @@ impl Family for EhvvaFamily {
         &EFFECTS
     }
 
+    /// The samples of the events the fits use ([`Events::for_fitting`]), when a long record
+    /// has more than [`MAX_FIT_EVENTS`]: each event's window from its rest before the command
+    /// to the next event's, so the part cuts into the same events again.
+    fn estimation_part(&self, est: Log) -> Result<Log, String> {
+        let all = Events::from_log(&est)?;
+        if all.events.len() <= MAX_FIT_EVENTS {
+            return Ok(est);
+        }
+        let keep = all.fitting_choice(MAX_FIT_EVENTS);
+        let ranges: Vec<std::ops::Range<usize>> = all
+            .events
+            .iter()
+            .zip(&keep)
+            .filter(|(_, k)| **k)
+            .map(|(e, _)| e.start..e.start + e.lift_mm.len())
+            .collect();
+        let label = format!(
+            "{} ({} of its {} valve events: every test condition, spread over the record)",
+            est.file,
+            ranges.len(),
+            all.events.len()
+        );
+        Ok(est.select_rows(&ranges, label))
+    }
+
     fn fit(&self, effects: &[&str], parent: Option<&Fit>, est: &Log, val: &Log) -> Result<Fit, String> {
-        let de = Events::from_log(est)?;
+        let all = Events::from_log(est)?;
+        let de = all.for_fitting(MAX_FIT_EVENTS);
+        let (fitted_on, of) = (de.events.len(), all.events.len());
+        drop(all);
         let dv = Events::from_log(val)?;
         let base = self.fit_baseline(&de)?;
         let (xb, rb) = (base.x.clone(), base.r.clone());
@@ -797,6 +888,11 @@ impl Family for EhvvaFamily {
         // An effect gain at 0 is the effect switched off (its neutral value), not a bound the
         // data pushed against.
         let mut fit = fit.with_solver(&names, &lo, &hi, &r);
+        if fitted_on < of {
+            fit.convergence += &format!(
+                "; fitted on {fitted_on} of the {of} estimation events (every test condition, spread over the record)"
+            );
+        }
         // What the baseline could not identify was fixed at the paper's value: reported.
         if self.unit_baseline {
             fit.not_identifiable.push(
@@ -813,8 +909,8 @@ impl Family for EhvvaFamily {
         Ok(fit)
     }
 
-    fn regressors(&self, val: &Log) -> Vec<(String, Vec<f64>)> {
-        let mut out: Vec<(String, Vec<f64>)> = Vec::new();
+    fn regressors<'a>(&self, val: &'a Log) -> Vec<(String, Cow<'a, [f64]>)> {
+        let mut out: Vec<(String, Cow<'a, [f64]>)> = Vec::new();
         for name in [
             "u_pilot",
             "p_supply_MPa",
@@ -824,7 +920,7 @@ impl Family for EhvvaFamily {
             "snubber_on",
         ] {
             if let Some(c) = val.col(name) {
-                out.push((name.to_string(), c.to_vec()));
+                out.push((name.to_string(), Cow::Borrowed(c)));
             }
         }
         if let Some(y) = val.col("lift_mm") {
@@ -836,18 +932,25 @@ impl Family for EhvvaFamily {
             let thr = 0.02;
             out.push((
                 "valve closing (lift falling)".into(),
-                v.iter().map(|&d| if d < -thr { 1.0 } else { 0.0 }).collect(),
+                v.iter()
+                    .map(|&d| if d < -thr { 1.0 } else { 0.0 })
+                    .collect::<Vec<f64>>()
+                    .into(),
             ));
             out.push((
                 "valve opening (lift rising)".into(),
-                v.iter().map(|&d| if d > thr { 1.0 } else { 0.0 }).collect(),
+                v.iter()
+                    .map(|&d| if d > thr { 1.0 } else { 0.0 })
+                    .collect::<Vec<f64>>()
+                    .into(),
             ));
             out.push((
                 "closing within 1 mm of the seat".into(),
                 v.iter()
                     .zip(y)
                     .map(|(&d, &l)| if d < -thr && l < 1.0 { 1.0 } else { 0.0 })
-                    .collect(),
+                    .collect::<Vec<f64>>()
+                    .into(),
             ));
         }
         out
@@ -959,6 +1062,63 @@ mod tests {
         // The orifices of a real unit vary too and are not all fitted: a little above the
         // sensor noise (σ 2-6 µm).
         assert!(fit.rmse < 0.02, "validation rmse {}", fit.rmse);
+    }
+
+    /// A long record (the matrix run four times) is fitted on a subset that keeps every test
+    /// condition and spreads over the whole record; a short one is fitted whole.
+    #[test]
+    fn long_records_are_fitted_on_every_condition_spread_over_the_record() {
+        for seed in 3..7 {
+            long_record_subset(seed);
+        }
+    }
+
+    fn long_record_subset(seed: u64) {
+        let case = crate::generate::ehvva::generate_repeated(&[], seed, 4).unwrap();
+        let (est, _) = case.logs().unwrap();
+        let all = Events::from_log(&est).unwrap();
+        assert_eq!(all.events.len(), 80);
+        let sub = all.for_fitting(40);
+        assert_eq!(sub.events.len(), 40);
+        assert_eq!(sub.samples, sub.covered());
+        let condition = |e: &Event| {
+            (
+                e.inputs.lift_high,
+                e.inputs.snubber_on,
+                (e.inputs.temp_c / 10.0).round() as i64,
+            )
+        };
+        let wanted: std::collections::BTreeSet<_> = all.events.iter().map(condition).collect();
+        let got: std::collections::BTreeSet<_> = sub.events.iter().map(condition).collect();
+        assert_eq!(
+            got, wanted,
+            "seed {seed}: a condition is missing from the fitted subset"
+        );
+        // Taken from the whole record, not only its beginning: the subset's events are found
+        // in every quarter of the original.
+        let lifts: Vec<&[f64]> = sub.events.iter().map(|e| e.lift_mm.as_slice()).collect();
+        for quarter in 0..4 {
+            let part = &all.events[quarter * 20..(quarter + 1) * 20];
+            assert!(
+                part.iter().any(|e| lifts.contains(&e.lift_mm.as_slice())),
+                "no event of quarter {quarter} is fitted"
+            );
+        }
+        assert_eq!(all.for_fitting(80).events.len(), 80);
+        // The part of the log that `diagnose` keeps cuts into the same events (samples and
+        // set-points) as the fits' choice from the whole record.
+        let family = EhvvaFamily::default();
+        let part = family.estimation_part(est.clone()).unwrap();
+        assert!(part.file.contains("of its 80 valve events"), "{}", part.file);
+        let from_part = Events::from_log(&part).unwrap();
+        let chosen = all.for_fitting(MAX_FIT_EVENTS);
+        assert_eq!(from_part.events.len(), chosen.events.len());
+        for (a, b) in from_part.events.iter().zip(&chosen.events) {
+            assert_eq!((a.start, &a.lift_mm, &a.u_pilot), (b.start, &b.lift_mm, &b.u_pilot));
+            assert_eq!((a.on_index, a.off_index), (b.on_index, b.off_index));
+            assert_eq!(a.inputs.p_supply_mpa, b.inputs.p_supply_mpa);
+            assert_eq!(a.inputs.temp_c, b.inputs.temp_c);
+        }
     }
 
     #[test]

@@ -32,6 +32,7 @@
 //! starts from a coarse (α, β) grid; each extension starts from the baseline's solution with
 //! its effect switched off.
 
+use std::borrow::Cow;
 use std::collections::hash_map::DefaultHasher;
 use std::f64::consts::PI;
 use std::hash::{Hash, Hasher};
@@ -750,53 +751,57 @@ impl Family for EvvtFamily {
         Ok(fit)
     }
 
-    fn regressors(&self, val: &Log) -> Vec<(String, Vec<f64>)> {
-        let Ok(d) = Data::from_log(val, self.open_loop_window_s, self.quantizer_ramp_lsb) else {
-            return Vec::new();
-        };
-        let mut out: Vec<(String, Vec<f64>)> = vec![
-            ("battery voltage u_batt_V".into(), d.volt.clone()),
-            ("engine speed engine_rpm".into(), d.rpm.clone()),
-            ("motor_cmd_rpm".into(), d.cmd.clone()),
-            (
-                "advancing (motor_cmd_rpm > 0)".into(),
-                d.cmd.iter().map(|&u| if u > 0.0 { 1.0 } else { 0.0 }).collect(),
-            ),
-        ];
-        if !d.reference.is_empty() {
-            out.push(("phase_ref_deg".into(), d.reference.clone()));
-        }
-        let (_, ohi) = self.order_range(&d);
-        let sinusoid = |o: f64, f: fn(f64) -> f64| {
-            d.revs
-                .iter()
-                .map(|th| f(2.0 * PI * (o * th).fract()))
-                .collect::<Vec<f64>>()
-        };
-        // The peak of the baseline residual's order spectrum on this record: a disturbance
-        // locked to crank angle shows here whatever the engine speed.
-        let last = self.baseline.lock().ok().and_then(|g| *g);
-        if let Some((_, a, b)) = last {
-            let ctx = Model::lti(a, b);
-            let mut pred = vec![0.0; d.y.len()];
-            if simulate(&ctx, &d, &mut pred).is_ok() {
-                let resid: Vec<f64> = d.y.iter().zip(&pred).map(|(y, p)| y - p).collect();
-                if let Some((o, amp)) = order_peak(&resid, &d.revs, self.min_order, ohi) {
-                    out.push((format!("sin(2π·{o:.3}·crank revolutions) (order-spectrum peak of the baseline residual, {amp:.2} deg)"), sinusoid(o, f64::sin)));
-                    out.push((
-                        format!("cos(2π·{o:.3}·crank revolutions) (order-spectrum peak)"),
-                        sinusoid(o, f64::cos),
-                    ));
+    fn regressors<'a>(&self, val: &'a Log) -> Vec<(String, Cow<'a, [f64]>)> {
+        // Derived series, owned.
+        let owned = (|| -> Vec<(String, Vec<f64>)> {
+            let Ok(d) = Data::from_log(val, self.open_loop_window_s, self.quantizer_ramp_lsb) else {
+                return Vec::new();
+            };
+            let mut out: Vec<(String, Vec<f64>)> = vec![
+                ("battery voltage u_batt_V".into(), d.volt.clone()),
+                ("engine speed engine_rpm".into(), d.rpm.clone()),
+                ("motor_cmd_rpm".into(), d.cmd.clone()),
+                (
+                    "advancing (motor_cmd_rpm > 0)".into(),
+                    d.cmd.iter().map(|&u| if u > 0.0 { 1.0 } else { 0.0 }).collect(),
+                ),
+            ];
+            if !d.reference.is_empty() {
+                out.push(("phase_ref_deg".into(), d.reference.clone()));
+            }
+            let (_, ohi) = self.order_range(&d);
+            let sinusoid = |o: f64, f: fn(f64) -> f64| {
+                d.revs
+                    .iter()
+                    .map(|th| f(2.0 * PI * (o * th).fract()))
+                    .collect::<Vec<f64>>()
+            };
+            // The peak of the baseline residual's order spectrum on this record: a disturbance
+            // locked to crank angle shows here whatever the engine speed.
+            let last = self.baseline.lock().ok().and_then(|g| *g);
+            if let Some((_, a, b)) = last {
+                let ctx = Model::lti(a, b);
+                let mut pred = vec![0.0; d.y.len()];
+                if simulate(&ctx, &d, &mut pred).is_ok() {
+                    let resid: Vec<f64> = d.y.iter().zip(&pred).map(|(y, p)| y - p).collect();
+                    if let Some((o, amp)) = order_peak(&resid, &d.revs, self.min_order, ohi) {
+                        out.push((format!("sin(2π·{o:.3}·crank revolutions) (order-spectrum peak of the baseline residual, {amp:.2} deg)"), sinusoid(o, f64::sin)));
+                        out.push((
+                            format!("cos(2π·{o:.3}·crank revolutions) (order-spectrum peak)"),
+                            sinusoid(o, f64::cos),
+                        ));
+                    }
                 }
             }
-        }
-        for o in [0.5, 1.0, 1.5, 2.0] {
-            if o <= ohi {
-                out.push((format!("sin(2π·{o}·crank revolutions)"), sinusoid(o, f64::sin)));
-                out.push((format!("cos(2π·{o}·crank revolutions)"), sinusoid(o, f64::cos)));
+            for o in [0.5, 1.0, 1.5, 2.0] {
+                if o <= ohi {
+                    out.push((format!("sin(2π·{o}·crank revolutions)"), sinusoid(o, f64::sin)));
+                    out.push((format!("cos(2π·{o}·crank revolutions)"), sinusoid(o, f64::cos)));
+                }
             }
-        }
-        out
+            out
+        })();
+        owned.into_iter().map(|(n, v)| (n, Cow::Owned(v))).collect()
     }
 }
 

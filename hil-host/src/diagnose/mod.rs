@@ -15,6 +15,7 @@ pub mod progress;
 pub mod report;
 pub mod vacuum;
 
+use std::borrow::Cow;
 use std::sync::{mpsc, Arc};
 use std::time::Instant;
 
@@ -32,8 +33,11 @@ pub struct Fit {
     pub params: Vec<(String, f64)>,
     /// 95 % half-widths, same order as `params`.
     pub ci95: Vec<Option<f64>>,
-    /// Measured and predicted output on the validation data (same length).
-    pub measured: Vec<f64>,
+    /// Measured and predicted output on the validation data (same length). Empty in the
+    /// candidates of a [`Diagnosis`] (their figures are kept, not their series); the baseline
+    /// and the extended model keep theirs. Shared: every fit of one diagnosis measures the same
+    /// validation output, so it is held once ([`diagnose`] joins equal copies).
+    pub measured: Arc<[f64]>,
     pub predicted: Vec<f64>,
     pub rmse: f64,
     pub fit_pct: f64,
@@ -79,7 +83,7 @@ impl Fit {
             ci95,
             rmse: rmse(&e),
             fit_pct: fit_pct(&measured, &predicted),
-            measured,
+            measured: measured.into(),
             predicted,
             iterations,
             est_cost: f64::NAN,
@@ -225,6 +229,13 @@ pub trait Family {
     fn nested(&self) -> &'static [(&'static str, &'static str)] {
         &[]
     }
+    /// The estimation log reduced to what this family's fits use; the default keeps all of it.
+    /// A family that fits long records on a part of them (EHVVA: at most
+    /// [`ehvva::MAX_FIT_EVENTS`] events) returns that part, so the rest of a long log is not
+    /// held through the diagnosis; the log's name then says what was kept.
+    fn estimation_part(&self, est: Log) -> Result<Log, String> {
+        Ok(est)
+    }
     /// Calibrates the baseline plus `effects` (empty: the baseline) on `est`, predicts `val`.
     /// `parent` is the calibrated model that this one extends (the baseline plus all but the
     /// last of `effects`): the fit starts from its optimum with the new effect at its neutral
@@ -233,7 +244,7 @@ pub trait Family {
     fn fit(&self, effects: &[&str], parent: Option<&Fit>, est: &Log, val: &Log) -> Result<Fit, String>;
     /// Signals of the validation data to correlate the residual with (inputs and candidate
     /// regressors), aligned with the fit's `measured`.
-    fn regressors(&self, val: &Log) -> Vec<(String, Vec<f64>)>;
+    fn regressors<'a>(&self, val: &'a Log) -> Vec<(String, Cow<'a, [f64]>)>;
     /// What a perfect model would score on the validation data, estimated from `fit`'s
     /// validation residual (the part of the output the model already explains is no noise)
     /// and the quantization of the measured output.
@@ -499,9 +510,17 @@ pub fn diagnose(
                 total,
             });
             let iterations = tx.clone();
-            with_iteration_observer(Arc::new(move |_| drop(iterations.send(Tick::Iteration))), || {
-                family.fit(effects, parent, est, val)
-            })
+            let mut fitted =
+                with_iteration_observer(Arc::new(move |_| drop(iterations.send(Tick::Iteration))), || {
+                    family.fit(effects, parent, est, val)
+                })?;
+            // One copy of the measured validation output for all fits.
+            if let Some(shared) = parent.map(|p| &p.measured) {
+                if shared[..] == fitted.measured[..] {
+                    fitted.measured = shared.clone();
+                }
+            }
+            Ok(fitted)
         };
         let result = diagnose_fits(family, est, val, validation_is_tail, rules, &fit);
         drop(tx);
@@ -526,6 +545,18 @@ fn locate_error(message: String, est: &Log, val: &Log) -> String {
     } else {
         format!("{files}: {message}; inputs that never vary: {}", unexcited.join(", "))
     }
+}
+
+/// A finished round's candidates without their validation series: the report keeps their
+/// figures (RMSE, gain, z, parameters), while the series of every candidate held to the end
+/// would cost a copy of the validation output per fit. The model that is carried on
+/// (`current`) was cloned with its series before.
+fn without_series(mut candidates: Vec<Candidate>) -> Vec<Candidate> {
+    for c in &mut candidates {
+        c.fit.measured = Arc::from([]);
+        c.fit.predicted = Vec::new();
+    }
+    candidates
 }
 
 /// Calibrates one model (the baseline plus the effects, extending `parent`) as fit number
@@ -558,7 +589,6 @@ fn diagnose_fits(
     let mut floor = family.noise_floor(val, &baseline);
     // Seconds per residual sample (an equation-error family may decimate).
     let dt_res = val.dt_s * val.len() as f64 / e0.len().max(1) as f64;
-    let regressors = family.regressors(val);
     let mut evidence = Vec::new();
 
     let mut selected: Vec<&'static str> = Vec::new();
@@ -772,7 +802,7 @@ fn diagnose_fits(
                             }
                             rounds.push(Round {
                                 base: selected[..selected.len() - 2].iter().map(|s| s.to_string()).collect(),
-                                candidates,
+                                candidates: without_series(candidates),
                                 added: Some(format!("{ea}+{eb}")),
                             });
                             continue;
@@ -812,7 +842,7 @@ fn diagnose_fits(
         }
         rounds.push(Round {
             base: round_base(&selected, added.is_some()),
-            candidates,
+            candidates: without_series(candidates),
             added: added.clone(),
         });
         if added.is_none() {
@@ -823,6 +853,9 @@ fn diagnose_fits(
     let candidates = rounds.next().map(|r| r.candidates).unwrap_or_default();
     let rounds: Vec<Round> = rounds.collect();
 
+    // Made after the fits, not held through them (the families' caches they read hold the
+    // baseline from its fit).
+    let regressors = family.regressors(val);
     let tests = ResidualTests::run(&e0, &regressors, lags, floor.rmse);
     tests.describe("baseline residual", &mut evidence);
     let causes: Vec<String> = selected.iter().map(|s| s.to_string()).collect();
@@ -950,7 +983,7 @@ struct ResidualTests {
 }
 
 impl ResidualTests {
-    fn run(e: &[f64], regressors: &[(String, Vec<f64>)], lags: usize, floor: f64) -> Self {
+    fn run(e: &[f64], regressors: &[(String, Cow<[f64]>)], lags: usize, floor: f64) -> Self {
         let rmse_e = rmse(e);
         let excess = (rmse_e * rmse_e - floor * floor).max(0.0).sqrt();
         let mut white = whiteness(e, lags);
@@ -1209,7 +1242,7 @@ mod tests {
                 r.iterations,
             ))
         }
-        fn regressors(&self, _val: &Log) -> Vec<(String, Vec<f64>)> {
+        fn regressors<'a>(&self, _val: &'a Log) -> Vec<(String, Cow<'a, [f64]>)> {
             Vec::new()
         }
     }

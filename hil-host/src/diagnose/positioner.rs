@@ -13,6 +13,8 @@
 //! Baseline: M, Fv, offset. `coulomb-friction`: + Fc. `asymmetric-friction`: viscous and
 //! Coulomb coefficients per direction, M, Fv+, Fv−, Fc+, Fc− (EMPS description eq. (12)).
 
+use std::borrow::Cow;
+
 use super::catalogue::{Effect, PositionerEffect};
 use super::{noise_floor_of, Family, Fit, NoiseFloor};
 use crate::log::{Log, Plant};
@@ -293,33 +295,37 @@ impl Family for PositionerFamily {
         }
     }
 
-    fn regressors(&self, val: &Log) -> Vec<(String, Vec<f64>)> {
-        let Ok(m) = self.motion(val) else { return Vec::new() };
-        let fs = 1.0 / val.dt_s;
-        let still = self.v_still_m_s;
-        let sign: Vec<f64> = m
-            .vel
-            .iter()
-            .map(|&v| {
-                if v > still {
-                    1.0
-                } else if v < -still {
-                    -1.0
-                } else {
-                    0.0
-                }
-            })
-            .collect();
-        let dir_pos: Vec<f64> = m.vel.iter().map(|&v| if v > still { 1.0 } else { 0.0 }).collect();
-        [
-            ("velocity sign", sign),
-            ("direction of motion (positive)", dir_pos),
-            ("velocity", m.vel),
-            ("acceleration", m.acc),
-            ("position", m.pos),
-        ]
-        .into_iter()
-        .filter_map(|(name, x)| self.decimate(&x, fs).ok().map(|d| (name.to_string(), d)))
-        .collect()
+    fn regressors<'a>(&self, val: &'a Log) -> Vec<(String, Cow<'a, [f64]>)> {
+        // Derived series, owned.
+        let owned = (|| -> Vec<(String, Vec<f64>)> {
+            let Ok(m) = self.motion(val) else { return Vec::new() };
+            let fs = 1.0 / val.dt_s;
+            let still = self.v_still_m_s;
+            let sign: Vec<f64> = m
+                .vel
+                .iter()
+                .map(|&v| {
+                    if v > still {
+                        1.0
+                    } else if v < -still {
+                        -1.0
+                    } else {
+                        0.0
+                    }
+                })
+                .collect();
+            let dir_pos: Vec<f64> = m.vel.iter().map(|&v| if v > still { 1.0 } else { 0.0 }).collect();
+            [
+                ("velocity sign", sign),
+                ("direction of motion (positive)", dir_pos),
+                ("velocity", m.vel),
+                ("acceleration", m.acc),
+                ("position", m.pos),
+            ]
+            .into_iter()
+            .filter_map(|(name, x)| self.decimate(&x, fs).ok().map(|d| (name.to_string(), d)))
+            .collect()
+        })();
+        owned.into_iter().map(|(n, v)| (n, Cow::Owned(v))).collect()
     }
 }

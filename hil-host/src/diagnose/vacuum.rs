@@ -55,6 +55,8 @@
 //! Long logs: at most [`VacuumFamily::max_fit_samples`] estimation samples enter the solver, as
 //! four evenly spread windows each started at its settled inputs with the first 2 s not scored.
 
+use std::borrow::Cow;
+
 use std::ops::Range;
 use std::sync::Mutex;
 
@@ -1062,75 +1064,79 @@ impl Family for VacuumFamily {
         Ok(fit)
     }
 
-    fn regressors(&self, val: &Log) -> Vec<(String, Vec<f64>)> {
-        let Ok(io) = Inputs::from_log(val) else {
-            return Vec::new();
-        };
-        let n = io.len();
-        let mut out = vec![
-            ("supply voltage".to_string(), io.u_batt.to_vec()),
-            ("duty".to_string(), io.duty.to_vec()),
-            (
-                "duty x voltage".to_string(),
-                io.duty.iter().zip(io.u_batt).map(|(d, u)| d * u).collect(),
-            ),
-            // The other inputs: the vacuum supply and the ambient pressure (smoothed as simulated).
-            ("tank pressure (vacuum supply)".to_string(), io.p_tank.clone()),
-            ("ambient pressure".to_string(), io.p_amb.clone()),
-        ];
-        // Direction of motion from a smoothed difference (±1, 0 when still).
-        let direction = |y: &[f64], still: f64| -> Vec<f64> {
-            let w = ((0.05 / val.dt_s).round() as usize).max(1);
-            (0..n)
-                .map(|k| {
-                    let d = y[(k + w).min(n - 1)] - y[k.saturating_sub(w)];
-                    if d > still {
-                        1.0
-                    } else if d < -still {
-                        -1.0
-                    } else {
-                        0.0
-                    }
-                })
-                .collect()
-        };
-        if let Some(p) = val.col("p_act_kPa") {
-            let now = direction(p, 1.0);
-            // Hysteresis remembers the last direction: friction and clearance both offset x
-            // by its sign; friction by Fc times the map's slope (wide where the map is steep),
-            // the clearance by a constant half-width. The slope comes from the baseline.
-            let mut held = now.clone();
-            for k in 1..n {
-                if held[k] == 0.0 {
-                    held[k] = held[k - 1];
-                }
-            }
-            let baseline = self
-                .baseline_cache
-                .lock()
-                .ok()
-                .and_then(|g| g.as_ref().and_then(|(_, m)| m.actuator(self.h_max_s).ok()));
-            if let Some(a) = baseline {
-                let slope: Vec<f64> = (0..n)
+    fn regressors<'a>(&self, val: &'a Log) -> Vec<(String, Cow<'a, [f64]>)> {
+        // Derived series, owned.
+        let owned = (|| -> Vec<(String, Vec<f64>)> {
+            let Ok(io) = Inputs::from_log(val) else {
+                return Vec::new();
+            };
+            let n = io.len();
+            let mut out = vec![
+                ("supply voltage".to_string(), io.u_batt.to_vec()),
+                ("duty".to_string(), io.duty.to_vec()),
+                (
+                    "duty x voltage".to_string(),
+                    io.duty.iter().zip(io.u_batt).map(|(d, u)| d * u).collect(),
+                ),
+                // The other inputs: the vacuum supply and the ambient pressure (smoothed as simulated).
+                ("tank pressure (vacuum supply)".to_string(), io.p_tank.clone()),
+                ("ambient pressure".to_string(), io.p_amb.clone()),
+            ];
+            // Direction of motion from a smoothed difference (±1, 0 when still).
+            let direction = |y: &[f64], still: f64| -> Vec<f64> {
+                let w = ((0.05 / val.dt_s).round() as usize).max(1);
+                (0..n)
                     .map(|k| {
-                        (a.static_position_pct(p[k] + 0.5, io.p_amb[k])
-                            - a.static_position_pct(p[k] - 0.5, io.p_amb[k]))
-                        .abs()
+                        let d = y[(k + w).min(n - 1)] - y[k.saturating_sub(w)];
+                        if d > still {
+                            1.0
+                        } else if d < -still {
+                            -1.0
+                        } else {
+                            0.0
+                        }
                     })
-                    .collect();
-                out.push((
-                    "last pressure direction x map slope (friction)".into(),
-                    held.iter().zip(&slope).map(|(d, s)| d * s).collect(),
-                ));
+                    .collect()
+            };
+            if let Some(p) = val.col("p_act_kPa") {
+                let now = direction(p, 1.0);
+                // Hysteresis remembers the last direction: friction and clearance both offset x
+                // by its sign; friction by Fc times the map's slope (wide where the map is steep),
+                // the clearance by a constant half-width. The slope comes from the baseline.
+                let mut held = now.clone();
+                for k in 1..n {
+                    if held[k] == 0.0 {
+                        held[k] = held[k - 1];
+                    }
+                }
+                let baseline = self
+                    .baseline_cache
+                    .lock()
+                    .ok()
+                    .and_then(|g| g.as_ref().and_then(|(_, m)| m.actuator(self.h_max_s).ok()));
+                if let Some(a) = baseline {
+                    let slope: Vec<f64> = (0..n)
+                        .map(|k| {
+                            (a.static_position_pct(p[k] + 0.5, io.p_amb[k])
+                                - a.static_position_pct(p[k] - 0.5, io.p_amb[k]))
+                            .abs()
+                        })
+                        .collect();
+                    out.push((
+                        "last pressure direction x map slope (friction)".into(),
+                        held.iter().zip(&slope).map(|(d, s)| d * s).collect(),
+                    ));
+                }
+                out.push(("last pressure direction (friction, clearance)".into(), held));
+                out.push(("pressure rate sign".into(), now));
+                out.push(("actuator pressure".into(), p.to_vec()));
             }
-            out.push(("last pressure direction (friction, clearance)".into(), held));
-            out.push(("pressure rate sign".into(), now));
-            out.push(("actuator pressure".into(), p.to_vec()));
-        }
-        if let Some(x) = val.col("x_pct") {
-            out.push(("position direction".into(), direction(x, 1.0)));
-        }
-        out
+            if let Some(x) = val.col("x_pct") {
+                out.push(("position direction".into(), direction(x, 1.0)));
+            }
+            out
+        })();
+        owned.into_iter().map(|(n, v)| (n, Cow::Owned(v))).collect()
     }
 }
 

@@ -332,6 +332,14 @@ pub fn generate(effect: &str, seed: u64) -> Result<Case, String> {
 
 /// A case with the given hidden effects (catalogue or outside).
 pub fn generate_effects(parts: &[&str], seed: u64) -> Result<Case, String> {
+    generate_repeated(parts, seed, 1)
+}
+
+/// A case whose estimation matrix (20 events) and validation programme (24 events) are run
+/// `repeats` times, each time with newly drawn set-points: a long bench pair (about 22 000
+/// rows per repeat at 20 kHz) for timing and memory measurements.
+pub fn generate_repeated(parts: &[&str], seed: u64, repeats: usize) -> Result<Case, String> {
+    let repeats = repeats.max(1);
     let effect = if parts.is_empty() {
         "none".to_string()
     } else {
@@ -364,9 +372,12 @@ pub fn generate_effects(parts: &[&str], seed: u64) -> Result<Case, String> {
         }
     };
     let make = |i: &EhvvaInputs<f64>| EhvvaReduced::<f64, 1024>::new(&params, i, DT_MS).map_err(|e| format!("{e:?}"));
-    let est_tests = estimation_tests(&mut rng);
+    let mut est_tests = Vec::new();
+    for _ in 0..repeats {
+        est_tests.extend(estimation_tests(&mut rng));
+    }
     let mut est = run_bench(&est_tests, DT_MS, &sensors, &mut rng, make)?;
-    let val_tests = validation_tests(&mut rng, 24);
+    let val_tests = validation_tests(&mut rng, 24 * repeats);
     let mut val = run_bench(&val_tests, DT_MS, &sensors, &mut rng, make)?;
     grow(&mut est);
     grow(&mut val);

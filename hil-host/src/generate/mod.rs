@@ -155,6 +155,30 @@ pub fn generate(plant: Plant, effect: &str, seed: u64) -> Result<Case, String> {
     }
 }
 
+/// A case whose experiments are `repeat` times the default length (each plant's programme run
+/// again with new draws, or its durations multiplied): long logs for timing and memory
+/// measurements. `repeat` 1 is [`generate`].
+pub fn generate_repeated(plant: Plant, effect: &str, seed: u64, repeat: usize) -> Result<Case, String> {
+    if repeat <= 1 {
+        return generate(plant, effect, seed);
+    }
+    let r = repeat as f64;
+    match plant {
+        Plant::Positioner => positioner::generate_sized(effect, seed, 25.0 * r, 15.0 * r),
+        Plant::Evvt => {
+            let d = evvt::Sizes::default();
+            let sizes = evvt::Sizes {
+                estimation_points: d.estimation_points * repeat,
+                validation_points: d.validation_points * repeat,
+                ..d
+            };
+            evvt::generate_sized(effect, seed, &sizes)
+        }
+        Plant::Vacuum => vacuum::generate_sized(effect, seed, repeat, 60.0 * r),
+        Plant::Ehvva => ehvva::generate_repeated(&parse_effects(plant, effect)?, seed, repeat),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

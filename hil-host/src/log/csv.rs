@@ -267,6 +267,21 @@ fn bare_unit(cell: &str) -> &str {
 /// Reads a CSV log from `input`, checking it whole; `source` names it in errors.
 /// `plant_override` (from `--plant`) wins over `# plant:`.
 pub fn read_csv(source: &str, input: impl BufRead, plant_override: Option<Plant>) -> Result<Log, LogError> {
+    read_csv_sized(source, input, plant_override, None)
+}
+
+/// Data rows read before the columns are sized from the file's length.
+const SIZING_ROWS: usize = 512;
+
+/// As [`read_csv`]; with the input's length in bytes (`size_hint`), the columns are sized
+/// once from the length of the first rows instead of growing by doubling, which may hold up
+/// to twice the log while it is read.
+pub fn read_csv_sized(
+    source: &str,
+    input: impl BufRead,
+    plant_override: Option<Plant>,
+    size_hint: Option<u64>,
+) -> Result<Log, LogError> {
     let mut lines = Lines {
         input,
         buf: Vec::new(),
@@ -360,12 +375,30 @@ pub fn read_csv(source: &str, input: impl BufRead, plant_override: Option<Plant>
     let mut units_line = None;
     let mut comma_decimals = false;
     let mut first_data = true;
+    let mut sizing_bytes = 0usize;
     while let Some((n, l)) = lines.next_line()? {
         if l.trim().is_empty() {
             continue;
         }
         if l.starts_with('#') {
             return Err(err(n, None, "metadata line after the header".into()));
+        }
+        if let Some(total) = size_hint {
+            if n_rows < SIZING_ROWS {
+                sizing_bytes += l.len() + 1;
+            } else if n_rows == SIZING_ROWS {
+                // Later rows are rarely shorter (the time stamps grow): a small margin.
+                let rows = (total as f64 / (sizing_bytes as f64 / SIZING_ROWS as f64) * 1.02) as usize;
+                for c in columns.iter_mut() {
+                    c.reserve_exact(rows.saturating_sub(c.len()));
+                }
+            }
+            // Past the estimate: grow by a tenth, not by doubling.
+            if n_rows > SIZING_ROWS {
+                for c in columns.iter_mut().filter(|c| c.len() == c.capacity()) {
+                    c.reserve_exact(c.len() / 10 + 1);
+                }
+            }
         }
         split(l, dialect.sep, &mut cells).map_err(|(at, what)| err(n, None, format!("{what} (byte {at})")))?;
         if cells.len() != width {
@@ -473,7 +506,17 @@ pub fn read_csv(source: &str, input: impl BufRead, plant_override: Option<Plant>
     all_notices.extend(meta_notices);
     all_notices.extend(notices);
     all_notices.extend(sel.notices);
-    let columns: Vec<(String, Vec<f64>)> = sel.order.into_iter().zip(columns).collect();
+    // The columns grew by doubling: give back the unused capacity (up to half of each) before
+    // the log is used, since it is held for the whole of a diagnosis.
+    let columns: Vec<(String, Vec<f64>)> = sel
+        .order
+        .into_iter()
+        .zip(columns)
+        .map(|(name, mut c)| {
+            c.shrink_to_fit();
+            (name, c)
+        })
+        .collect();
     finish(source, plant, meta, columns, &rows, all_notices)
 }
 
