@@ -827,7 +827,6 @@ impl Family for EhvvaFamily {
         let de = all.for_fitting(MAX_FIT_EVENTS);
         let (fitted_on, of) = (de.events.len(), all.events.len());
         drop(all);
-        let dv = Events::from_log(val)?;
         let base = self.fit_baseline(&de)?;
         let (xb, rb) = (base.x.clone(), base.r.clone());
         let mut knobs: Vec<Knob> = base.knobs.clone();
@@ -862,6 +861,8 @@ impl Family for EhvvaFamily {
             }
         };
         let p = apply_knobs(&EhvvaParams::baseline(), &knobs, &r.x);
+        // Cut after the fit, not held through it with the solver's arrays.
+        let dv = Events::from_log(val)?;
         let mut predicted = vec![0.0; dv.samples];
         simulate_all_on(&p, &dv, &mut predicted, self.lsq.threads)?;
         // Samples before the validation log's first event are not predicted (the valve's state
