@@ -927,7 +927,9 @@ mod tests {
         // The family scores the skipped samples as measured, for every candidate alike.
         let fit = EhvvaFamily::default().fit(&["snubber"], None, &est, &tail).unwrap();
         assert_eq!(&fit.measured[..seated], &tail.col("lift_mm").unwrap()[..seated]);
-        assert!(fit.rmse < 0.008, "validation rmse {} mm", fit.rmse);
+        // 8.8 µm since the top snubber acts only inside its zone (issue #14): the valve enters
+        // the zone faster and seats more abruptly, which the fit reproduces less finely.
+        assert!(fit.rmse < 0.010, "validation rmse {} mm", fit.rmse);
     }
 
     /// The baseline and an extension recover the generator's parameters from the estimation
