@@ -801,10 +801,12 @@ impl Family for EhvvaFamily {
             } else {
                 r
             };
-            // The parent's unit geometry absorbed what it lacked of the effect (without the
-            // snubber the baseline stiffens the spring to slow the closing tail, issue #14):
-            // also start with the unit knobs at the paper's values and keep the better.
-            if knobs.iter().any(|k| UNIT_KNOBS.iter().any(|u| u.name == k.name)) {
+            // The baseline's unit geometry absorbed what it lacked of the effect (without the
+            // snubber it stiffens the spring to slow the closing tail, issue #14): a one-effect
+            // extension also starts with the unit knobs at the paper's values and keeps the
+            // better. Not a later one: its parent already has the effect it lacked, and a start
+            // its parent never had would credit the gain of that start to the new effect.
+            if effects.len() == 1 && knobs.iter().any(|k| UNIT_KNOBS.iter().any(|u| u.name == k.name)) {
                 let x0: Vec<f64> = knobs
                     .iter()
                     .zip(start(1.0))
