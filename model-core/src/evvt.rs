@@ -45,7 +45,7 @@
 //! [`PlanetaryGear`] gives the ideal kinematics for the feed-through.
 
 use crate::lut::{Lut2, LutError};
-use crate::real::Real;
+use crate::real::{horner, Real};
 
 /// Engine speed breakpoints of the identification grid (Section IV-B), rpm.
 pub const ENGINE_SPEED_BREAKPOINTS_RPM: [f64; 3] = [800.0, 1100.0, 1400.0];
@@ -292,7 +292,7 @@ pub struct Zoh<R: Real> {
 }
 
 /// Computes [`Zoh`] for `alpha` (crank-deg/(s²·rpm)), `beta` (1/s) and `t_s` (s). For
-/// βT < 2 φ1, φ2 come from their power series (nested form, 25 terms, truncation < 1e-16):
+/// βT < 2 φ1, φ2 come from their power series (Horner form, 25 terms, truncation < 1e-16):
 /// no division by β, so β → 0 gives the double integrator (φ1 = 1, φ2 = 1/2) smoothly, and no
 /// cancellation in `x − 1 + e^{-x}` (which in f32 would lose most digits at βT = 0.07).
 /// Negative β or T are treated as 0 (the plant is never unstable).
@@ -302,14 +302,16 @@ pub fn zoh<R: Real>(alpha: R, beta: R, t_s: R) -> Zoh<R> {
     // Above βT = 2 the closed form is accurate even with f32's approximate exp (e^{-x} < 0.14
     // enters φ2 only through 1 − φ1 > 0.57).
     let (phi1, phi2, e) = if x < R::from_f64(2.0) {
-        // g = 1 − x/3 (1 − x/4 (1 − … x/26)); φ2 = g/2, φ1 = 1 − (x/2) g.
-        let mut g = R::ONE;
-        let mut n = 26;
-        while n >= 3 {
-            g = R::ONE - x * g / R::from_f64(n as f64);
-            n -= 1;
-        }
-        let phi2 = g / R::from_f64(2.0);
+        // g = 2 Σ (−x)^k/(k+2)! = 1 − x/3 (1 − x/4 (1 − … x/26)), coefficients as literals
+        // (converted at compile time). Below βT = 1/4 (the usual step) 13 terms already leave
+        // a truncation < 1e-20.
+        let nx = -x;
+        let g = if x < R::from_f64(0.25) {
+            horner!(R, nx; 1.0, 0.3333333333333333, 0.08333333333333333, 0.016666666666666666, 0.002777777777777778, 0.0003968253968253968, 4.96031746031746e-05, 5.5114638447971785e-06, 5.511463844797178e-07, 5.010421677088344e-08, 4.17535139757362e-09, 3.2118087673643227e-10, 2.294149119545945e-11)
+        } else {
+            horner!(R, nx; 1.0, 0.3333333333333333, 0.08333333333333333, 0.016666666666666666, 0.002777777777777778, 0.0003968253968253968, 4.96031746031746e-05, 5.5114638447971785e-06, 5.511463844797178e-07, 5.010421677088344e-08, 4.17535139757362e-09, 3.2118087673643227e-10, 2.294149119545945e-11, 1.5294327463639633e-12, 9.55895466477477e-14, 5.622914508691041e-15, 3.123841393717245e-16, 1.644127049324866e-17, 8.22063524662433e-19, 3.9145882126782525e-20, 1.779358278490115e-21, 7.736340341261367e-23, 3.2234751421922368e-24, 1.2893900568768947e-25, 4.9591925264495945e-27)
+        };
+        let phi2 = g * R::from_f64(0.5);
         let phi1 = R::ONE - x * phi2;
         // e^{-x} = 1 − x φ1, consistent with φ1 to the last bit.
         (phi1, phi2, R::ONE - x * phi1)

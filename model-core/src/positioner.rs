@@ -17,7 +17,7 @@
 //!
 //! Units: m, m/s, N, kg, s.
 
-use crate::real::Real;
+use crate::real::{horner, Real};
 
 /// Why a parameter set was rejected; the name is the offending field.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -273,25 +273,19 @@ impl<R: Real> Positioner<R> {
 /// step; Taylor series below x = 0.5 (where the closed forms cancel), closed forms above.
 fn relaxation_weights<R: Real>(x: R) -> (R, R) {
     if x < R::from_f64(0.5) {
-        // φ = Σ (−x)^k/(k+1)!, ψ = Σ (−x)^k/(k+2)!, k = 0..9 (error < 3e-9).
-        let mut phi = R::ZERO;
-        let mut psi = R::ZERO;
-        let mut k = 9;
-        while k >= 0 {
-            phi = R::ONE / R::from_f64(fact(k + 1)) - x * phi;
-            psi = R::ONE / R::from_f64(fact(k + 2)) - x * psi;
-            k -= 1;
-        }
+        // φ = Σ (−x)^k/(k+1)!, ψ = Σ (−x)^k/(k+2)!, k = 0..9 (error < 3e-9), coefficients as
+        // literals (converted at compile time).
+        let nx = -x;
+        let phi = horner!(R, nx; 1.0, 1.0 / 2.0, 1.0 / 6.0, 1.0 / 24.0, 1.0 / 120.0, 1.0 / 720.0, 1.0 / 5040.0,
+            1.0 / 40320.0, 1.0 / 362880.0, 1.0 / 3628800.0);
+        let psi = horner!(R, nx; 1.0 / 2.0, 1.0 / 6.0, 1.0 / 24.0, 1.0 / 120.0, 1.0 / 720.0, 1.0 / 5040.0,
+            1.0 / 40320.0, 1.0 / 362880.0, 1.0 / 3628800.0, 1.0 / 39916800.0);
         (phi, psi)
     } else {
         let e = (-x).exp();
         let phi = (R::ONE - e) / x;
         (phi, (R::ONE - phi) / x)
     }
-}
-
-fn fact(n: i32) -> f64 {
-    (1..=n).fold(1.0, |acc, k| acc * k as f64)
 }
 
 /// The EMPS position controller's settings (description eqs. (6), (7); log metadata `gtau`,

@@ -17,6 +17,20 @@ use core::ops::{Add, AddAssign, Div, Mul, MulAssign, Neg, Sub, SubAssign};
 
 use fixed::types::I32F32;
 
+/// Horner's scheme `c0 + x·(c1 + x·(c2 + …))` in the number type `$R` with literal f64
+/// coefficients, unrolled by the macro so that every coefficient converts at compile time: in
+/// a loop, `R::from_f64` runs at run time, which on the target is soft-float double arithmetic
+/// (hundreds of instructions per coefficient).
+macro_rules! horner {
+    ($R:ty, $x:expr; $c0:expr) => {
+        <$R as $crate::real::Real>::from_f64($c0)
+    };
+    ($R:ty, $x:expr; $c0:expr, $($c:expr),+) => {
+        <$R as $crate::real::Real>::from_f64($c0) + $x * horner!($R, $x; $($c),+)
+    };
+}
+pub(crate) use horner;
+
 /// A real number as the models need it: field operations plus the few functions the physics
 /// uses. All functions are total: `sqrt` of a negative number is 0, division by zero saturates.
 pub trait Real:
