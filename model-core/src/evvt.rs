@@ -483,7 +483,8 @@ impl<R: Real> EvvtPlant<R> {
     }
 
     fn advance_belt(&mut self, engine_rpm: R, dt: R) {
-        self.belt_cycle += self.belt_order * engine_rpm / R::from_f64(60.0) * dt;
+        // rpm/60 = revolutions per second (a multiplication: no division in the step).
+        self.belt_cycle += self.belt_order * engine_rpm * R::from_f64(1.0 / 60.0) * dt;
         // Wrap to [0, 1): keeps the sine argument small (Q32 range, f32 precision). One step
         // advances at most order·N·dt/60 cycles (< 1 for any realistic dt); the bound keeps the
         // loop finite whatever the input, and an absurd step restarts the cycle.
