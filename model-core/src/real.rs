@@ -380,8 +380,17 @@ impl Mul for Q16 {
     type Output = Q16;
     #[inline(always)]
     fn mul(self, rhs: Q16) -> Q16 {
-        let p = i64::from(self.0) * i64::from(rhs.0);
-        Q16::saturate((p + (1 << 15)) >> 16)
+        let p = i64::from(self.0) * i64::from(rhs.0) + (1 << 15);
+        // Bits 16..47 of the product; it fits when bits 47..63 all equal the sign (checked on
+        // the high word alone: a few instructions, where a 64-bit clamp takes a dozen).
+        let hi = (p >> 32) as i32;
+        let r = (p >> 16) as i32;
+        if (hi >> 15) != (r >> 31) {
+            // MAX for a positive product, MIN for a negative one.
+            Q16((hi >> 31) ^ i32::MAX)
+        } else {
+            Q16(r)
+        }
     }
 }
 impl Div for Q16 {
