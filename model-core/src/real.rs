@@ -61,6 +61,16 @@ pub trait Real:
     fn to_f32(self) -> f32 {
         self.to_f64() as f32
     }
+    /// The largest integer not above `self`, saturating at the i32 range (NaN gives 0). The
+    /// types override it with their own instructions (through f64 it is soft-float on the
+    /// target).
+    fn floor_i32(self) -> i32 {
+        libm::floor(self.to_f64()) as i32
+    }
+    /// An integer as `Self` (exact where the type holds it; saturating).
+    fn from_i32(n: i32) -> Self {
+        Self::from_f64(f64::from(n))
+    }
 
     /// Square root; 0 for negative arguments (never NaN).
     fn sqrt(self) -> Self;
@@ -119,6 +129,19 @@ impl Real for f32 {
     }
     fn to_f64(self) -> f64 {
         self as f64
+    }
+    fn floor_i32(self) -> i32 {
+        // `as` truncates towards zero (one vcvt) and saturates; step down for negative
+        // non-integers.
+        let t = self as i32;
+        if (t as f32) > self {
+            t - 1
+        } else {
+            t
+        }
+    }
+    fn from_i32(n: i32) -> Self {
+        n as f32
     }
     fn sqrt(self) -> Self {
         // libm's sqrtf is correctly rounded; micromath's is off by up to 6 % relative
@@ -298,6 +321,12 @@ impl Real for Q32 {
     fn to_f64(self) -> f64 {
         self.0.to_num::<f64>()
     }
+    fn floor_i32(self) -> i32 {
+        (self.0.to_bits() >> 32) as i32
+    }
+    fn from_i32(n: i32) -> Self {
+        Q32::from_bits(i64::from(n) << 32)
+    }
     fn sqrt(self) -> Self {
         if self.0 > I32F32::ZERO {
             Q32(self.0.sqrt())
@@ -451,6 +480,12 @@ impl Real for Q16 {
     }
     fn to_f64(self) -> f64 {
         f64::from(self.0) / 65536.0
+    }
+    fn floor_i32(self) -> i32 {
+        self.0 >> 16
+    }
+    fn from_i32(n: i32) -> Self {
+        Q16::saturate(i64::from(n) << 16)
     }
     fn sqrt(self) -> Self {
         Q16(q16_sqrt(self.0))
@@ -903,6 +938,20 @@ mod tests {
         fn q16_ops_never_panic(a in any::<i32>(), b in any::<i32>()) {
             let (a, b) = (Q16::from_bits(a), Q16::from_bits(b));
             let _ = (a + b, a - b, a * b, a / b, -a, a.sqrt(), a.exp(), a.atan(), a.sin(), a.ln());
+        }
+
+        #[test]
+        fn floor_and_from_i32_agree_with_f64(x in -30_000.0f64..30_000.0, n in -30_000i32..30_000) {
+            let want = libm::floor(x) as i32;
+            prop_assert_eq!((x as f32).floor_i32(), libm::floor(f64::from(x as f32)) as i32);
+            prop_assert_eq!(x.floor_i32(), want);
+            let q = Q16::from_f64(x);
+            prop_assert_eq!(q.floor_i32(), libm::floor(q.to_f64()) as i32);
+            let q = Q32::from_f64(x);
+            prop_assert_eq!(q.floor_i32(), libm::floor(q.to_f64()) as i32);
+            prop_assert_eq!(f32::from_i32(n) as f64, f64::from(n));
+            prop_assert_eq!(Q16::from_i32(n).to_f64(), f64::from(n));
+            prop_assert_eq!(Q32::from_i32(n).to_f64(), f64::from(n));
         }
 
         #[test]
