@@ -7,8 +7,10 @@
 //! marker bodies differ (each stores its own number), so the linker cannot merge them, and
 //! interrupts are masked while an interval is open, so no handler is counted.
 //!
-//! 1. Plants: [`PlantBench`] in f32 and in Q32, `COUNTED_STEPS` counted steps of each model,
-//!    then the final states as raw bits in a [`PLANT_REPORT_MAGIC`] record on the link.
+//! 1. Plants: [`PlantBench`] in f32 and in Q16.16 (the fixed-point type for FPU-less ECUs),
+//!    `COUNTED_STEPS` counted steps of each model, then the final states as raw bits in a
+//!    [`PLANT_REPORT_MAGIC`] record on the link. (Q32.32 is left out: its bench is 22 KB and
+//!    the copies its construction makes overflow the stack into the statics.)
 //! 2. Tasks: the lockstep link is served as usual, with every task of every step counted
 //!    (`supervisor`, `ehvva`, `evvt`, `vacuum`) and the whole `EcuCore::step` (`core_step`,
 //!    which includes the inner markers' call instructions).
@@ -17,7 +19,7 @@ use core::sync::atomic::{compiler_fence, AtomicU32, Ordering};
 use model_core::ecu::frame::{crc16, ActuatorFrame, SensorFrame};
 use model_core::ecu::lockstep::{EcuCore, StepPart};
 use model_core::plant_bench::{PlantBench, COUNTED_STEPS, N_STATE};
-use model_core::{Real, Q32};
+use model_core::{Real, Q16};
 
 use crate::board::Link;
 
@@ -48,11 +50,15 @@ markers! {
     pil_begin_evvt = 5,
     pil_begin_vacuum = 6,
     pil_begin_ehvva_plant_f32 = 7,
-    pil_begin_ehvva_plant_q32 = 8,
     pil_begin_evvt_plant_f32 = 9,
-    pil_begin_evvt_plant_q32 = 10,
     pil_begin_vacuum_plant_f32 = 11,
-    pil_begin_vacuum_plant_q32 = 12,
+    pil_begin_ehvva_lpv_plant_f32 = 13,
+    pil_begin_positioner_plant_f32 = 15,
+    pil_begin_ehvva_plant_fixed = 17,
+    pil_begin_ehvva_lpv_plant_fixed = 18,
+    pil_begin_evvt_plant_fixed = 19,
+    pil_begin_vacuum_plant_fixed = 20,
+    pil_begin_positioner_plant_fixed = 21,
     pil_end = 0xE0D,
 }
 
@@ -69,44 +75,59 @@ fn counted<T>(begin: extern "C" fn(), work: impl FnOnce() -> T) -> T {
     })
 }
 
-/// The plant steps of one number type, counted; their final states.
-fn plants<R: Real>(
+/// The begin markers of one number type's plant steps.
+struct PlantMarkers {
     ehvva: extern "C" fn(),
+    ehvva_lpv: extern "C" fn(),
     evvt: extern "C" fn(),
     vacuum: extern "C" fn(),
-) -> Result<[R; N_STATE], &'static str> {
+    positioner: extern "C" fn(),
+}
+
+/// The plant steps of one number type, counted; their final states. Not inlined: the two
+/// benches (11 KB each, plus the copies `new` makes) then use the stack one after the other.
+#[inline(never)]
+fn plants<R: Real>(m: PlantMarkers) -> Result<[R; N_STATE], &'static str> {
     let mut b = PlantBench::<R>::new()?;
-    // The order the host repeats natively (hil-host pil.rs, `plant_bench_native`).
+    // The order the host repeats natively (hil-host pil.rs, `plant_bench_native`); the next
+    // engine speed is converted outside the counted EVVT step.
     for _ in 0..COUNTED_STEPS {
         let b = core::hint::black_box(&mut b);
-        counted(ehvva, || b.step_ehvva());
+        counted(m.ehvva, || b.step_ehvva());
+        counted(m.ehvva_lpv, || b.step_ehvva_lpv());
         let rpm = b.next_engine_rpm();
-        counted(evvt, || b.step_evvt(rpm));
-        counted(vacuum, || b.step_vacuum());
+        counted(m.evvt, || b.step_evvt(rpm));
+        counted(m.vacuum, || b.step_vacuum());
+        counted(m.positioner, || b.step_positioner());
     }
     Ok(b.state())
 }
 
-/// Runs the plant bench and sends its record; an empty interval first (the host subtracts
-/// its count, the call instruction of `pil_end`, from every interval).
+/// Runs the plant bench and sends its record (f32, then Q16.16 states); an empty interval
+/// first (the host subtracts its count, the call instruction of `pil_end`, from every
+/// interval).
 pub fn run_plants(link: &mut Link) -> Result<(), &'static str> {
     for _ in 0..4 {
         counted(pil_begin_empty, || ());
     }
-    let f = plants::<f32>(
-        pil_begin_ehvva_plant_f32,
-        pil_begin_evvt_plant_f32,
-        pil_begin_vacuum_plant_f32,
-    )?;
-    let q = plants::<Q32>(
-        pil_begin_ehvva_plant_q32,
-        pil_begin_evvt_plant_q32,
-        pil_begin_vacuum_plant_q32,
-    )?;
+    let f = plants::<f32>(PlantMarkers {
+        ehvva: pil_begin_ehvva_plant_f32,
+        ehvva_lpv: pil_begin_ehvva_lpv_plant_f32,
+        evvt: pil_begin_evvt_plant_f32,
+        vacuum: pil_begin_vacuum_plant_f32,
+        positioner: pil_begin_positioner_plant_f32,
+    })?;
+    let x = plants::<Q16>(PlantMarkers {
+        ehvva: pil_begin_ehvva_plant_fixed,
+        ehvva_lpv: pil_begin_ehvva_lpv_plant_fixed,
+        evvt: pil_begin_evvt_plant_fixed,
+        vacuum: pil_begin_vacuum_plant_fixed,
+        positioner: pil_begin_positioner_plant_fixed,
+    })?;
     let mut words = [0u64; 2 * N_STATE];
     for k in 0..N_STATE {
         words[k] = u64::from(f[k].to_bits());
-        words[N_STATE + k] = q[k].to_bits() as u64;
+        words[N_STATE + k] = x[k].to_bits() as u64;
     }
     let mut record = [0u8; 3 + 8 * 2 * N_STATE + 2];
     record[..2].copy_from_slice(&PLANT_REPORT_MAGIC);

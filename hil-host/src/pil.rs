@@ -726,7 +726,8 @@ pub struct TargetBench {
     pub counts: Vec<CountStats>,
     /// Instructions of an empty interval (the call of the end marker).
     pub empty_overhead: u64,
-    /// Final plant states, raw bits: f32 first, then Q32, in `PlantBench::state` order.
+    /// Final plant states, raw bits: f32, then Q16.16, each in `PlantBench::state` order
+    /// ([`PLANT_NUMBERS`]).
     pub plant_bits_target: Vec<u64>,
     pub plant_bits_host: Vec<u64>,
     /// The lockstep part (the frames sent to count the tasks).
@@ -734,7 +735,11 @@ pub struct TargetBench {
     pub answers_equal_native: bool,
 }
 
-/// The plant bench's final states computed natively, as raw bits (f32 then Q32).
+/// The number types of the plant bench, in the order of its state record: the name in
+/// reports (`target-bench --json`: "f32", "fixed" = Q16.16) and the marker-label suffix.
+pub const PLANT_NUMBERS: [(&str, &str); 2] = [("f32", "f32"), ("fixed", "fixed")];
+
+/// The plant bench's final states computed natively, as raw bits (f32, Q16.16).
 pub fn plant_bench_native() -> Result<Vec<u64>, String> {
     use model_core::plant_bench::{PlantBench, COUNTED_STEPS};
     use model_core::Real;
@@ -743,17 +748,19 @@ pub fn plant_bench_native() -> Result<Vec<u64>, String> {
         // The firmware's order (firmware-qemu/src/bench.rs, `plants`).
         for _ in 0..COUNTED_STEPS {
             b.step_ehvva();
+            b.step_ehvva_lpv();
             let rpm = b.next_engine_rpm();
             b.step_evvt(rpm);
             b.step_vacuum();
+            b.step_positioner();
         }
         Ok(b.state())
     }
     let f = run::<f32>()?;
-    let q = run::<model_core::Q32>()?;
+    let x = run::<model_core::Q16>()?;
     Ok(f.iter()
-        .map(|x| u64::from(x.to_bits()))
-        .chain(q.iter().map(|x| x.to_bits() as u64))
+        .map(|v| u64::from(v.to_bits()))
+        .chain(x.iter().map(|v| v.to_bits() as u64))
         .collect())
 }
 
@@ -862,7 +869,7 @@ pub fn target_bench(elf: &Path, frames: &[SensorFrame], log_dir: &Path) -> Resul
 /// count, the words (u64 LE), CRC-16/CCITT-FALSE over count and words.
 fn read_plant_record(link: &mut PilLink) -> Result<Vec<u64>, String> {
     const MAGIC: [u8; 2] = [0x50, 0xB7];
-    let words = 2 * model_core::plant_bench::N_STATE;
+    let words = PLANT_NUMBERS.len() * model_core::plant_bench::N_STATE;
     let total = 3 + 8 * words + 2;
     let mut buf: Vec<u8> = Vec::new();
     let stream = link.board().stream();
@@ -1054,6 +1061,81 @@ pub fn run_scenario_image(
 }
 
 impl TargetBench {
+    /// Whether the target's final plant states of number type `k` ([`PLANT_NUMBERS`]) equal
+    /// the host's bit for bit.
+    pub fn plant_states_equal(&self, k: usize) -> bool {
+        let n = model_core::plant_bench::N_STATE;
+        let r = k * n..(k + 1) * n;
+        self.plant_bits_target.get(r.clone()).is_some() && self.plant_bits_target[r.clone()] == self.plant_bits_host[r]
+    }
+
+    /// The mean instructions of one step of each plant in each number type of
+    /// [`PLANT_NUMBERS`]: (plant id, number name, mean), in bench order.
+    pub fn plant_steps(&self) -> Vec<(&'static str, &'static str, f64)> {
+        let mut out = Vec::new();
+        for plant in model_core::plant_bench::BenchPlant::ALL {
+            for (name, suffix) in PLANT_NUMBERS {
+                let label = format!("{}_plant_{suffix}", plant.label());
+                if let Some(c) = self.counts.iter().find(|c| c.label == label) {
+                    out.push((plant.id(), name, c.mean));
+                }
+            }
+        }
+        out
+    }
+
+    /// `{"plant_steps": [{"plant", "number", "instructions_mean", "min", "max"}, ...],
+    /// "tasks": [{"task", "steps", "instructions_mean", "min", "max"}, ...]}`.
+    pub fn to_json(&self) -> serde_json::Value {
+        let stats = |label: &str| self.counts.iter().find(|c| c.label == label);
+        let plant_steps: Vec<serde_json::Value> = self
+            .plant_steps()
+            .into_iter()
+            .map(|(plant, number, mean)| {
+                let suffix = PLANT_NUMBERS.iter().find(|(n, _)| *n == number).map_or(number, |p| p.1);
+                let label = model_core::plant_bench::BenchPlant::ALL
+                    .iter()
+                    .find(|p| p.id() == plant)
+                    .map(|p| format!("{}_plant_{suffix}", p.label()))
+                    .unwrap_or_default();
+                let c = stats(&label);
+                serde_json::json!({
+                    "plant": plant,
+                    "number": number,
+                    "instructions_mean": mean,
+                    "instructions_min": c.map(|c| c.min),
+                    "instructions_max": c.map(|c| c.max),
+                    "steps": c.map(|c| c.n),
+                })
+            })
+            .collect();
+        let tasks: Vec<serde_json::Value> = self
+            .counts
+            .iter()
+            .filter(|c| !c.label.contains("_plant_"))
+            .map(|c| {
+                serde_json::json!({
+                    "task": c.label,
+                    "steps": c.n,
+                    "instructions_mean": c.mean,
+                    "instructions_min": c.min,
+                    "instructions_max": c.max,
+                })
+            })
+            .collect();
+        let equal: Vec<serde_json::Value> = PLANT_NUMBERS
+            .iter()
+            .enumerate()
+            .map(|(k, (name, _))| serde_json::json!({"number": name, "target_equals_host": self.plant_states_equal(k)}))
+            .collect();
+        serde_json::json!({
+            "plant_steps": plant_steps,
+            "tasks": tasks,
+            "plant_states": equal,
+            "lockstep_answers_equal_native": self.answers_equal_native,
+        })
+    }
+
     /// The instruction-count table.
     pub fn text(&self) -> String {
         let mut t = String::from(
@@ -1069,14 +1151,15 @@ impl TargetBench {
                 c.label, c.n, c.mean, c.min, c.max
             ));
         }
-        let n = model_core::plant_bench::N_STATE;
-        let f32_exact = self.plant_bits_target[..n] == self.plant_bits_host[..n];
-        let q32_exact = self.plant_bits_target[n..] == self.plant_bits_host[n..];
-        t.push_str(&format!(
-            "plant states after the counted steps, target vs host: f32 {}, Q32 {}\n",
-            if f32_exact { "bit-identical" } else { "DIFFERENT" },
-            if q32_exact { "bit-identical" } else { "DIFFERENT" }
-        ));
+        t.push_str("plant states after the counted steps, target vs host:");
+        for (k, (name, _)) in PLANT_NUMBERS.iter().enumerate() {
+            let exact = self.plant_states_equal(k);
+            t.push_str(&format!(
+                " {name} {}",
+                if exact { "bit-identical" } else { "DIFFERENT" }
+            ));
+        }
+        t.push('\n');
         t.push_str(&format!(
             "lockstep part: {} steps, actuator frames {} the native core's\n",
             self.lockstep.answers.len(),

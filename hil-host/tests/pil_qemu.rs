@@ -145,17 +145,9 @@ fn target_bench_counts_every_task_and_plant_and_matches_the_host() {
     let dir = std::env::temp_dir().join(format!("pil-bench-{}", std::process::id()));
     let b = pil::target_bench(&elf, &frames, &dir).unwrap();
     eprint!("{}", b.text());
-    let n = model_core::plant_bench::N_STATE;
-    assert_eq!(
-        b.plant_bits_target[n..],
-        b.plant_bits_host[n..],
-        "Q32 plant states differ"
-    );
-    assert_eq!(
-        b.plant_bits_target[..n],
-        b.plant_bits_host[..n],
-        "f32 plant states differ"
-    );
+    for (k, (name, _)) in pil::PLANT_NUMBERS.iter().enumerate() {
+        assert!(b.plant_states_equal(k), "{name} plant states differ");
+    }
     assert!(b.answers_equal_native);
     let count = |label: &str| {
         b.counts
@@ -177,13 +169,21 @@ fn target_bench_counts_every_task_and_plant_and_matches_the_host() {
     }
     // The whole step holds its tasks.
     assert!(count("core_step").max >= count("vacuum").max + count("ehvva").min);
-    for plant in ["ehvva_plant", "evvt_plant", "vacuum_plant"] {
-        let (f, q) = (count(&format!("{plant}_f32")), count(&format!("{plant}_q32")));
-        assert_eq!((f.n, q.n), (8, 8));
-        // The FPU does f32 in single instructions; Q32.32 needs 64-bit multiplies and
-        // divisions in software.
-        assert!(q.mean > 5.0 * f.mean, "{plant}: f32 {f:?} vs Q32 {q:?}");
+    for plant in model_core::plant_bench::BenchPlant::ALL {
+        let label = plant.label();
+        let (f, x) = (
+            count(&format!("{label}_plant_f32")),
+            count(&format!("{label}_plant_fixed")),
+        );
+        assert_eq!((f.n, x.n), (8, 8));
+        assert!(f.min > 20 && x.min > 20, "{label}: f32 {f:?}, Q16 {x:?}");
     }
+    let json = b.to_json();
+    let rows = json["plant_steps"].as_array().unwrap();
+    assert_eq!(rows.len(), 10, "{json}");
+    assert!(rows
+        .iter()
+        .any(|r| r["plant"] == "ehvva-reduced" && r["number"] == "fixed"));
 }
 
 #[test]

@@ -25,4 +25,4 @@ pub mod pwm_comp;
 pub mod real;
 pub mod vacuum;
 
-pub use real::{Real, Q32};
+pub use real::{Real, Q16, Q32};

@@ -17,6 +17,20 @@ use core::ops::{Add, AddAssign, Div, Mul, MulAssign, Neg, Sub, SubAssign};
 
 use fixed::types::I32F32;
 
+/// Horner's scheme `c0 + x·(c1 + x·(c2 + …))` in the number type `$R` with literal f64
+/// coefficients, unrolled by the macro so that every coefficient converts at compile time: in
+/// a loop, `R::from_f64` runs at run time, which on the target is soft-float double arithmetic
+/// (hundreds of instructions per coefficient).
+macro_rules! horner {
+    ($R:ty, $x:expr; $c0:expr) => {
+        <$R as $crate::real::Real>::from_f64($c0)
+    };
+    ($R:ty, $x:expr; $c0:expr, $($c:expr),+) => {
+        <$R as $crate::real::Real>::from_f64($c0) + $x * horner!($R, $x; $($c),+)
+    };
+}
+pub(crate) use horner;
+
 /// A real number as the models need it: field operations plus the few functions the physics
 /// uses. All functions are total: `sqrt` of a negative number is 0, division by zero saturates.
 pub trait Real:
@@ -46,6 +60,16 @@ pub trait Real:
     }
     fn to_f32(self) -> f32 {
         self.to_f64() as f32
+    }
+    /// The largest integer not above `self`, saturating at the i32 range (NaN gives 0). The
+    /// types override it with their own instructions (through f64 it is soft-float on the
+    /// target).
+    fn floor_i32(self) -> i32 {
+        libm::floor(self.to_f64()) as i32
+    }
+    /// An integer as `Self` (exact where the type holds it; saturating).
+    fn from_i32(n: i32) -> Self {
+        Self::from_f64(f64::from(n))
     }
 
     /// Square root; 0 for negative arguments (never NaN).
@@ -105,6 +129,19 @@ impl Real for f32 {
     }
     fn to_f64(self) -> f64 {
         self as f64
+    }
+    fn floor_i32(self) -> i32 {
+        // `as` truncates towards zero (one vcvt) and saturates; step down for negative
+        // non-integers.
+        let t = self as i32;
+        if (t as f32) > self {
+            t - 1
+        } else {
+            t
+        }
+    }
+    fn from_i32(n: i32) -> Self {
+        n as f32
     }
     fn sqrt(self) -> Self {
         // libm's sqrtf is correctly rounded; micromath's is off by up to 6 % relative
@@ -284,6 +321,12 @@ impl Real for Q32 {
     fn to_f64(self) -> f64 {
         self.0.to_num::<f64>()
     }
+    fn floor_i32(self) -> i32 {
+        (self.0.to_bits() >> 32) as i32
+    }
+    fn from_i32(n: i32) -> Self {
+        Q32::from_bits(i64::from(n) << 32)
+    }
     fn sqrt(self) -> Self {
         if self.0 > I32F32::ZERO {
             Q32(self.0.sqrt())
@@ -302,6 +345,371 @@ impl Real for Q32 {
     }
     fn ln(self) -> Self {
         q32_ln(self)
+    }
+}
+
+/// Signed Q16.16 fixed point in an `i32`: range ±32768, resolution 1.5e-5, saturating like
+/// [`Q32`]. Made for the FPU-less Cortex-M0+/M3 ECUs: a product is one 32×32→64 multiply
+/// (`smull`, a single instruction on the M3/M4) and a shift, so a model step costs a small
+/// multiple of its f32 step, where Q32.32 needs 128-bit intermediates (about 30×).
+///
+/// Models that run in it keep their signals within the range and well above the resolution;
+/// each plant's tests measure its error against f64 over its operating envelope.
+/// Products round to nearest (an integrator fed truncated products would drift by half an
+/// LSB per step); the functions work in Q2.30 internally, errors in the tests below.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct Q16(i32);
+
+impl Q16 {
+    /// The largest value, 32767.99998.
+    pub const MAX: Q16 = Q16(i32::MAX);
+    /// The most negative value, -32768.
+    pub const MIN: Q16 = Q16(i32::MIN);
+    /// Resolution: one least significant bit, 2^-16.
+    pub const LSB: Q16 = Q16(1);
+    /// Fractional bits.
+    pub const FRAC_BITS: u32 = 16;
+
+    /// The raw integer (value · 2^16).
+    pub const fn to_bits(self) -> i32 {
+        self.0
+    }
+    /// From the raw integer (value · 2^16).
+    pub const fn from_bits(bits: i32) -> Self {
+        Q16(bits)
+    }
+
+    #[inline(always)]
+    fn saturate(x: i64) -> Q16 {
+        if x > i64::from(i32::MAX) {
+            Q16::MAX
+        } else if x < i64::from(i32::MIN) {
+            Q16::MIN
+        } else {
+            Q16(x as i32)
+        }
+    }
+}
+
+impl Add for Q16 {
+    type Output = Q16;
+    #[inline(always)]
+    fn add(self, rhs: Q16) -> Q16 {
+        Q16(self.0.saturating_add(rhs.0))
+    }
+}
+impl Sub for Q16 {
+    type Output = Q16;
+    #[inline(always)]
+    fn sub(self, rhs: Q16) -> Q16 {
+        Q16(self.0.saturating_sub(rhs.0))
+    }
+}
+impl Mul for Q16 {
+    type Output = Q16;
+    #[inline(always)]
+    fn mul(self, rhs: Q16) -> Q16 {
+        let p = i64::from(self.0) * i64::from(rhs.0) + (1 << 15);
+        // Bits 16..47 of the product; it fits when bits 47..63 all equal the sign (checked on
+        // the high word alone: a few instructions, where a 64-bit clamp takes a dozen).
+        let hi = (p >> 32) as i32;
+        let r = (p >> 16) as i32;
+        if (hi >> 15) != (r >> 31) {
+            // MAX for a positive product, MIN for a negative one.
+            Q16((hi >> 31) ^ i32::MAX)
+        } else {
+            Q16(r)
+        }
+    }
+}
+impl Div for Q16 {
+    type Output = Q16;
+    fn div(self, rhs: Q16) -> Q16 {
+        let (a, b) = (self.0, rhs.0);
+        if b == 0 {
+            return match a.cmp(&0) {
+                core::cmp::Ordering::Less => Q16::MIN,
+                core::cmp::Ordering::Greater => Q16::MAX,
+                core::cmp::Ordering::Equal => Q16(0),
+            };
+        }
+        // |a| < 0.5: the shifted dividend fits 32 bits, one hardware division (truncating,
+        // like the 64-bit path below).
+        if a > -(1 << 15) && a < (1 << 15) {
+            return Q16((a << 16) / b);
+        }
+        Q16::saturate((i64::from(a) << 16) / i64::from(b))
+    }
+}
+impl Neg for Q16 {
+    type Output = Q16;
+    #[inline(always)]
+    fn neg(self) -> Q16 {
+        Q16(self.0.saturating_neg())
+    }
+}
+impl AddAssign for Q16 {
+    #[inline(always)]
+    fn add_assign(&mut self, rhs: Q16) {
+        *self = *self + rhs;
+    }
+}
+impl SubAssign for Q16 {
+    #[inline(always)]
+    fn sub_assign(&mut self, rhs: Q16) {
+        *self = *self - rhs;
+    }
+}
+impl MulAssign for Q16 {
+    #[inline(always)]
+    fn mul_assign(&mut self, rhs: Q16) {
+        *self = *self * rhs;
+    }
+}
+
+impl Real for Q16 {
+    const ZERO: Self = Q16(0);
+    const ONE: Self = Q16(1 << 16);
+    const NAME: &'static str = "Q16.16";
+    #[inline(always)]
+    fn from_f64(x: f64) -> Self {
+        // Constants fold at compile time; a run-time conversion is soft-float on the M0+/M3.
+        // `as` saturates and maps NaN to 0.
+        let s = x * 65536.0;
+        Q16::saturate((if s >= 0.0 { s + 0.5 } else { s - 0.5 }) as i64)
+    }
+    fn to_f64(self) -> f64 {
+        f64::from(self.0) / 65536.0
+    }
+    fn floor_i32(self) -> i32 {
+        self.0 >> 16
+    }
+    fn from_i32(n: i32) -> Self {
+        Q16::saturate(i64::from(n) << 16)
+    }
+    fn sqrt(self) -> Self {
+        Q16(q16_sqrt(self.0))
+    }
+    fn exp(self) -> Self {
+        Q16(q16_exp(self.0))
+    }
+    fn atan(self) -> Self {
+        Q16(q16_atan(self.0))
+    }
+    fn sin(self) -> Self {
+        Q16(q16_sin(self.0))
+    }
+    fn ln(self) -> Self {
+        Q16(q16_ln(self.0))
+    }
+}
+
+/// `a·b` of two Q2.30 numbers, rounded.
+#[inline(always)]
+fn mul30(a: i32, b: i32) -> i32 {
+    ((i64::from(a) * i64::from(b) + (1 << 29)) >> 30) as i32
+}
+
+/// `round(y · 2^shift)` of a non-negative `y`, saturating (shift may be negative).
+#[inline(always)]
+fn shift_round(y: i64, shift: i32) -> i32 {
+    let v = if shift >= 0 {
+        if shift > 31 {
+            return i32::MAX;
+        }
+        y << shift
+    } else if shift < -62 {
+        0
+    } else {
+        (y + (1 << (-shift - 1))) >> -shift
+    };
+    v.min(i64::from(i32::MAX)) as i32
+}
+
+/// sqrt of a raw Q16.16: normalised to a 32-bit radicand with an even shift, then the
+/// bit-by-bit integer square root (16 result bits, relative error < 2^-15).
+fn q16_sqrt(x: i32) -> i32 {
+    if x <= 0 {
+        return 0;
+    }
+    // sqrt(x·2^-16)·2^16 = sqrt(x·2^16) = sqrt(x·2^s)·2^((16-s)/2), s even, x·2^s in [2^30, 2^32).
+    let lz = x.leading_zeros() as i32; // >= 1
+    let s = lz & !1;
+    let n = (x as u32) << s;
+    let mut rem = n;
+    let mut root: u32 = 0;
+    let mut bit: u32 = 1 << 30;
+    while bit != 0 {
+        if rem >= root + bit {
+            rem -= root + bit;
+            root = (root >> 1) + bit;
+        } else {
+            root >>= 1;
+        }
+        bit >>= 2;
+    }
+    // Round: the next bit of the root is 1 when rem > root.
+    if rem > root {
+        root += 1;
+    }
+    shift_round(i64::from(root), (16 - s) / 2)
+}
+
+/// exp of a raw Q16.16: `2^k · e^r`, `|r| <= ln2/2` in Q2.30, Taylor polynomial to r^7
+/// (truncation < 3e-9 relative).
+fn q16_exp(x: i32) -> i32 {
+    // e^10.3972 = 32768: above saturates; below -11.8 the result rounds to 0.
+    if x > 681_391 {
+        return i32::MAX;
+    }
+    if x < -773_325 {
+        return 0;
+    }
+    // k = round(x / ln2): 1/ln2 in Q0.16 · x, rounded at bit 32.
+    let k = ((i64::from(x) * 94_548 + (1 << 31)) >> 32) as i32;
+    const LN2_Q30: i64 = 744_261_118;
+    let r = ((i64::from(x) << 14) - i64::from(k) * LN2_Q30) as i32;
+    // 1/n! in Q2.30, n = 7..0.
+    const C: [i32; 8] = [
+        213_044,
+        1_491_308,
+        8_947_849,
+        44_739_243,
+        178_956_971,
+        536_870_912,
+        1_073_741_824,
+        1_073_741_824,
+    ];
+    let mut y = C[0];
+    for &c in &C[1..] {
+        y = c + mul30(r, y);
+    }
+    // y in Q2.30 → Q16.16 · 2^k
+    shift_round(i64::from(y), k - 14)
+}
+
+/// ln of a raw Q16.16: `x = 2^e · m`, `m = (1 + i/16)(1 + t)` with the table below and
+/// `|t| < 1/16`, `ln(1+t)` by its series to t^6 (error < 3e-9).
+fn q16_ln(x: i32) -> i32 {
+    if x <= 0 {
+        return i32::MIN;
+    }
+    // m in [1, 2) as Q2.30.
+    let top = 31 - x.leading_zeros() as i32; // bit index of the leading one, 0..=30
+    let m = ((x as u32) << (30 - top)) as i32;
+    let i = ((m >> 26) & 15) as usize; // m ≈ 1 + i/16
+                                       // t = m / (1 + i/16) − 1 = (m − c)·(1/c), in Q2.30.
+    let c = (1 << 30) + ((i as i32) << 26);
+    let t = mul30(m - c, INV_1_PLUS_I16_Q30[i]);
+    // ln(1+t) = t − t²/2 + t³/3 − … (Horner from t^6).
+    const C: [i32; 6] = [
+        -178_956_971,
+        214_748_365,
+        -268_435_456,
+        357_913_941,
+        -536_870_912,
+        1_073_741_824,
+    ];
+    let mut s = C[0];
+    for &ck in &C[1..] {
+        s = ck + mul30(t, s);
+    }
+    let ln_m = i64::from(mul30(t, s)) + i64::from(LN_1_PLUS_I16_Q30[i]);
+    // ln x = ln m + (top − 16)·ln2, back to Q16.16 (rounded).
+    const LN2_Q30: i64 = 744_261_118;
+    let v = ln_m + i64::from(top - 16) * LN2_Q30;
+    ((v + (1 << 13)) >> 14) as i32
+}
+
+/// `1/(1 + i/16)` in Q2.30, i = 0..15.
+const INV_1_PLUS_I16_Q30: [i32; 16] = {
+    let mut t = [0i32; 16];
+    let mut i = 0;
+    while i < 16 {
+        // 2^30·16/(16+i), rounded.
+        let num: i64 = (1i64 << 34) + (16 + i as i64) / 2;
+        t[i] = (num / (16 + i as i64)) as i32;
+        i += 1;
+    }
+    t
+};
+
+/// `ln(1 + i/16)` in Q2.30, i = 0..15 (values of libm::log, rounded).
+const LN_1_PLUS_I16_Q30: [i32; 16] = [
+    0,
+    65_095_192,
+    126_468_572,
+    184_522_808,
+    239_598_564,
+    291_986_604,
+    341_937_090,
+    389_666_807,
+    435_364_845,
+    479_197_128,
+    521_310_048,
+    561_833_416,
+    600_882_877,
+    638_561_895,
+    674_963_409,
+    710_171_213,
+];
+
+/// sin of a raw Q16.16: the angle as a fraction of a turn (exact wrap-around in a u32), folded
+/// to [-π/2, π/2], Taylor polynomial to r^11 in Q4.28 (truncation < 2.4e-7).
+fn q16_sin(x: i32) -> i32 {
+    // turns · 2^32 = x · 2^16 / (2π): the constant 2^32/(2π) in Q16 (rounded).
+    const TURN_Q16: i64 = 683_565_276;
+    let phase = ((i64::from(x) * TURN_Q16 + (1 << 15)) >> 16) as u32;
+    // Fold: sin(π − a) = sin a; work on a signed quarter-turn in [-1/4, 1/4] of a turn.
+    let mut p = phase as i32; // [-1/2, 1/2) turn
+    if p > (1 << 30) {
+        p = (1i32 << 31).wrapping_sub(p); // π − a
+    } else if p < -(1 << 30) {
+        p = (-(1i64 << 31) - i64::from(p)) as i32; // −π − a
+    }
+    // r in rad, Q4.28: p · 2π / 2^32 · 2^28 = p · 2π / 16.
+    const TWO_PI_Q28: i64 = 1_686_629_713;
+    let r = ((i64::from(p) * TWO_PI_Q28 + (1 << 31)) >> 32) as i32;
+    let mul28 = |a: i32, b: i32| ((i64::from(a) * i64::from(b) + (1 << 27)) >> 28) as i32;
+    let r2 = mul28(r, r);
+    // sin r = r(1 − r²/6 + r⁴/120 − …), coefficients (−1)^n/(2n+1)! in Q4.28, n = 5..0.
+    const C: [i32; 6] = [-7, 740, -53_261, 2_236_962, -44_739_243, 268_435_456];
+    let mut s = C[0];
+    for &c in &C[1..] {
+        s = c + mul28(r2, s);
+    }
+    let y = i64::from(mul28(r, s));
+    ((y + (1 << 11)) >> 12) as i32
+}
+
+/// atan of a raw Q16.16: |x| > 1 through π/2 − atan(1/x), then the polynomial of Abramowitz
+/// and Stegun 4.4.49 on [0, 1] (error < 1e-5 rad), in Q2.30.
+fn q16_atan(x: i32) -> i32 {
+    let neg = x < 0;
+    let a = i64::from(x).abs();
+    let inverted = a > (1 << 16);
+    // a in Q2.30, in [0, 1].
+    let a30 = if inverted {
+        ((1i64 << 46) / a) as i32
+    } else {
+        (a << 14) as i32
+    };
+    const C: [i32; 5] = [22_371_518, -91_410_863, 193_424_926, -354_656_388, 1_073_597_943];
+    let a2 = mul30(a30, a30);
+    let mut s = C[0];
+    for &c in &C[1..] {
+        s = c + mul30(a2, s);
+    }
+    let mut y = mul30(a30, s);
+    if inverted {
+        const HALF_PI_Q30: i32 = 1_686_629_713;
+        y = HALF_PI_Q30 - y;
+    }
+    let y16 = (y + (1 << 13)) >> 14;
+    if neg {
+        -y16
+    } else {
+        y16
     }
 }
 
@@ -484,6 +892,66 @@ mod tests {
             let y = Real::sqrt(x) as f64;
             let r = libm::sqrt(x as f64);
             prop_assert!((y - r).abs() <= 1e-6 * r, "sqrt({x}) = {y}, libm {r}");
+        }
+
+        #[test]
+        fn q16_functions_match_libm(x in -30_000.0f64..30_000.0) {
+            let q = Q16::from_f64(x);
+            let xq = q.to_f64();
+            let lsb = 1.0 / 65536.0;
+            if xq > 0.0 {
+                let r = libm::sqrt(xq);
+                prop_assert!((q.sqrt().to_f64() - r).abs() <= 4e-5 * r + lsb, "sqrt({xq})");
+                let r = libm::log(xq);
+                prop_assert!((q.ln().to_f64() - r).abs() <= 1.5 * lsb, "ln({xq}) = {}", q.ln().to_f64());
+            }
+            let r = libm::atan(xq);
+            prop_assert!((q.atan().to_f64() - r).abs() <= 1.2e-5, "atan({xq}) = {}", q.atan().to_f64());
+            let r = libm::sin(xq);
+            // The angle's own quantisation is 2^-16 rad; the turn constant adds |x|·2.4e-11.
+            prop_assert!((q.sin().to_f64() - r).abs() <= 1.5 * lsb + xq.abs() * 1e-10, "sin({xq}) = {}", q.sin().to_f64());
+        }
+
+        #[test]
+        fn q16_exp_matches_libm(x in -12.0f64..10.39) {
+            let q = Q16::from_f64(x);
+            let r = libm::exp(q.to_f64());
+            prop_assert!((q.exp().to_f64() - r).abs() <= 2e-7 * r + 1.0 / 65536.0, "exp({x}) = {}", q.exp().to_f64());
+        }
+
+        #[test]
+        fn q16_mul_div_round_and_saturate(a in -40_000.0f64..40_000.0, b in -40_000.0f64..40_000.0) {
+            let (qa, qb) = (Q16::from_f64(a), Q16::from_f64(b));
+            let (x, y) = (qa.to_f64(), qb.to_f64());
+            let lsb = 1.0 / 65536.0;
+            let p = (x * y).clamp(-32768.0, 32768.0 - lsb);
+            prop_assert!(((qa * qb).to_f64() - p).abs() <= 0.5 * lsb, "{x} * {y}");
+            if y != 0.0 {
+                let d = (x / y).clamp(-32768.0, 32768.0 - lsb);
+                prop_assert!(((qa / qb).to_f64() - d).abs() < lsb, "{x} / {y}");
+            }
+            let s = (x + y).clamp(-32768.0, 32768.0 - lsb);
+            prop_assert_eq!((qa + qb).to_f64(), s);
+        }
+
+        #[test]
+        fn q16_ops_never_panic(a in any::<i32>(), b in any::<i32>()) {
+            let (a, b) = (Q16::from_bits(a), Q16::from_bits(b));
+            let _ = (a + b, a - b, a * b, a / b, -a, a.sqrt(), a.exp(), a.atan(), a.sin(), a.ln());
+        }
+
+        #[test]
+        fn floor_and_from_i32_agree_with_f64(x in -30_000.0f64..30_000.0, n in -30_000i32..30_000) {
+            let want = libm::floor(x) as i32;
+            prop_assert_eq!((x as f32).floor_i32(), libm::floor(f64::from(x as f32)) as i32);
+            prop_assert_eq!(x.floor_i32(), want);
+            let q = Q16::from_f64(x);
+            prop_assert_eq!(q.floor_i32(), libm::floor(q.to_f64()) as i32);
+            let q = Q32::from_f64(x);
+            prop_assert_eq!(q.floor_i32(), libm::floor(q.to_f64()) as i32);
+            prop_assert_eq!(f32::from_i32(n) as f64, f64::from(n));
+            prop_assert_eq!(Q16::from_i32(n).to_f64(), f64::from(n));
+            prop_assert_eq!(Q32::from_i32(n).to_f64(), f64::from(n));
         }
 
         #[test]

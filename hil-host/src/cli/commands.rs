@@ -414,6 +414,9 @@ fn target_bench(a: TargetBenchArgs) -> Result<()> {
     let scenario = load_scenario(a.scenario.as_deref())?;
     let elf = pil::find_firmware(a.elf.as_deref()).map_err(fail)?;
     output::protect_inputs(&[&elf]);
+    if let Some(json) = &a.json {
+        output::check_not_input(json)?;
+    }
     let mut dir = OutputDir::open(
         &a.out,
         Claim::new("target-bench", format!("scenario {}", scenario.name)),
@@ -445,8 +448,11 @@ fn target_bench(a: TargetBenchArgs) -> Result<()> {
     dir.finish()?;
     print!("{}", b.text());
     println!("raw counts in {}", a.out.join("insn-counts.txt").display());
-    let n = model_core::plant_bench::N_STATE;
-    if b.plant_bits_target[n..] != b.plant_bits_host[n..] || !b.answers_equal_native {
+    if let Some(json) = &a.json {
+        write_json(json, b.to_json())?;
+    }
+    // The fixed-point states must match bit for bit (integer arithmetic on both sides).
+    if !(1..pil::PLANT_NUMBERS.len()).all(|k| b.plant_states_equal(k)) || !b.answers_equal_native {
         return Err(fail("the target's results differ from the host's"));
     }
     Ok(())

@@ -118,7 +118,8 @@ Examples:
     #[command(after_help = "\
 Examples:
   hil-host target-bench
-  hil-host target-bench --steps 20000 --out out/bench")]
+  hil-host target-bench --steps 20000 --out out/bench
+  hil-host target-bench --json out/target-bench.json")]
     TargetBench(TargetBenchArgs),
     /// Each model against its paper: one row per published value (paper, model, relative
     /// error, tolerance, pass); exit status 1 when a row fails
@@ -347,6 +348,11 @@ pub struct TargetBenchArgs {
     /// Lockstep steps of the scenario to count
     #[arg(long, value_name = "N", default_value_t = 2000)]
     pub steps: u32,
+    /// Also write the counts as JSON: `{"plant_steps": [{"plant", "number", "instructions_mean",
+    /// ...}], "tasks": [...]}` (plants ehvva-reduced, ehvva-lpv, evvt, vacuum, positioner;
+    /// numbers f32 and fixed = Q16.16)
+    #[arg(long, value_name = "FILE")]
+    pub json: Option<PathBuf>,
     /// Write into a directory that holds other files or another run's outputs
     #[arg(long)]
     pub force: bool,
