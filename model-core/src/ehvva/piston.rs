@@ -41,8 +41,6 @@ pub(crate) struct Piston<R: Real> {
     inv_cap_low: R,
     pump: R,
     relief_high: R,
-    /// Pump flow / relief gain, MPa: how far below the set-point the relief cracks.
-    pump_over_relief_high: R,
     relief_low: R,
 }
 
@@ -76,7 +74,6 @@ impl<R: Real> Piston<R> {
             inv_cap_low: r(1.0 / p.cap_low_mm3_per_mpa),
             pump: r(p.pump_flow_mm3_per_ms),
             relief_high: r(p.relief_high_mm3_per_ms_mpa),
-            pump_over_relief_high: r(p.pump_flow_mm3_per_ms / p.relief_high_mm3_per_ms_mpa),
             relief_low: r(p.relief_low_mm3_per_ms_mpa),
         })
     }
@@ -149,15 +146,6 @@ impl<R: Real> Piston<R> {
         self.quadratic_gain_with(cd, self.inv_a2_top(lift, closing, switch_on), lift, stroke)
     }
 
-    /// [`Self::quadratic_gain`] with 1/Cd² given: Cd is constant over a step, so a model that
-    /// sub-steps divides once per step instead of once per sub-step.
-    pub(crate) fn quadratic_gain_inv_cd2(&self, inv_cd2: R, lift: R, vel: R, stroke: R, switch_on: bool) -> R {
-        let closing = vel < R::ZERO;
-        let top = self.half_rho_at3 * self.inv_a2_top(lift, closing, switch_on);
-        let bottom = self.half_rho_ab3 * self.inv_a2_bottom(lift, stroke);
-        (top + bottom) * inv_cd2
-    }
-
     /// As [`Self::quadratic_gain`] with the top orifice's 1/Aorit² given (the ninth-order model
     /// meters the main valve by its spool position).
     pub fn quadratic_gain_with(&self, cd: R, inv_a2_top: R, lift: R, stroke: R) -> R {
@@ -208,7 +196,7 @@ impl<R: Real> Piston<R> {
     /// delivers a constant flow; the relief valve returns the excess above the crack pressure,
     /// set so the steady state with the valve at rest is exactly the set-point.
     pub fn p_high_rate(&self, p_high: R, p_set: R, vel: R) -> R {
-        let crack = p_set - self.pump_over_relief_high;
+        let crack = p_set - self.pump / self.relief_high;
         let relief = self.relief_high * (p_high - crack).max(R::ZERO);
         (self.pump - relief - self.area_top * vel.max(R::ZERO)) * self.inv_cap_high
     }
