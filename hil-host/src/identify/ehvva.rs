@@ -491,10 +491,41 @@ fn interpolate(points: &[(f64, f64, f64)], p: f64, t: f64) -> f64 {
     num / den
 }
 
+/// Whether a condition's fit can enter the tables: its pass 1 (the paper's method) must not
+/// end with Cd on its lower bound or τp on its upper bound, where the reduced model could not
+/// follow the measured lift at all (e.g. a unit far from the paper's valve at low supply
+/// pressure) and the td beside them is no calibration. τp on its lower bound is common (a
+/// fast pressure rise the lift does not resolve) and stays.
+pub fn enters_tables(c: &ConditionFit) -> bool {
+    let (tau, cd) = (&CONDITION_KNOBS[0], &CONDITION_KNOBS[1]);
+    c.cd_onset > cd.lo + 1e-3 * (cd.hi - cd.lo) && c.tau_p_onset_ms < tau.hi - 1e-3 * (tau.hi - tau.lo)
+}
+
 impl Identified {
-    fn points(&self, f: impl Fn(&ConditionFit) -> f64) -> Vec<(f64, f64, f64)> {
+    /// The conditions whose values make the tables ([`enters_tables`]; all of them if none
+    /// would).
+    fn tabled(&self) -> Vec<&ConditionFit> {
+        let good: Vec<&ConditionFit> = self.conditions.iter().filter(|c| enters_tables(c)).collect();
+        if good.is_empty() {
+            self.conditions.iter().collect()
+        } else {
+            good
+        }
+    }
+
+    /// The conditions left out of the tables, as "Ph MPa / T °C".
+    pub fn left_out(&self) -> Vec<String> {
+        let tabled = self.tabled();
         self.conditions
             .iter()
+            .filter(|c| !tabled.iter().any(|t| std::ptr::eq(*t, *c)))
+            .map(|c| format!("{:.2} MPa / {:.1} °C", c.p_supply_mpa, c.temp_c))
+            .collect()
+    }
+
+    fn points(&self, f: impl Fn(&ConditionFit) -> f64) -> Vec<(f64, f64, f64)> {
+        self.tabled()
+            .into_iter()
             .map(|c| (c.p_supply_mpa, c.temp_c, f(c)))
             .collect()
     }
@@ -503,7 +534,7 @@ impl Identified {
     /// (clamped outside the tested range).
     pub fn cd_at(&self, t: f64) -> f64 {
         let mut by_t: Vec<(f64, f64, usize)> = Vec::new();
-        for c in &self.conditions {
+        for c in self.tabled() {
             match by_t.iter_mut().find(|(tt, _, _)| (tt - c.temp_c).abs() <= SAME_T_C) {
                 Some(e) => {
                     e.1 += c.cd;
@@ -616,6 +647,13 @@ impl Identified {
             g
         };
         let o = self.table_data_onset_td();
+        let left = self.left_out();
+        if !left.is_empty() {
+            s.push_str(&format!(
+                "\nleft out of the tables (pass 1 ended with Cd or tau_p on a bound: the reduced model could not follow the lift there, no calibration): {}; the tables interpolate the other conditions there\n",
+                left.join(", ")
+            ));
+        }
         s.push_str("\ntd has two readings: onset (pass 1) = command edge to the lift onset (1 % / 99 % of the stroke) less the reduced model's own response time at pass 1's tau_p and Cd (Li 2018's td); joint (pass 2) = td fitted with tau_p and Cd, the set that best reproduces the whole lift in the reduced model (td and tau_p trade off along a ridge, r above). On reduced-model logs they agree; on another plant (ninth-order model) the onset td is its td, the joint set one consistent reduced-model calibration. The tau_p and Cd tables below are the joint fit's.\n");
         s.push_str(&grid(
             "td VO (ms) from the lift onset, on model-core's breakpoints",
@@ -662,6 +700,7 @@ impl Identified {
         let o = self.table_data_onset_td();
         json!({
             "td_definitions": "pass 1 (the paper's method), td_*_onset_ms and td_onset_tables: command edge to the lift onset (1 % rising, 99 % falling of the stroke) less the reduced model's own response time at pass 1's tau_p_onset_ms and cd_onset, which are fitted under that td; pass 2, td_*_ms and ehvva_table_data: td fitted jointly with tau_p and Cd from pass 1 (one consistent reduced-model calibration; td and tau_p correlate, corr_*). On reduced-model logs they agree; on another plant the onset td is its td",
+            "left_out_of_tables": self.left_out(),
             "td_onset_tables": {
                 "td_p_supply_mpa": o.td_p_supply_mpa,
                 "td_temp_c": o.td_temp_c,
