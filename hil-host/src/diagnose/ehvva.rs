@@ -527,21 +527,6 @@ pub const UNIT_KNOBS: [Knob; 8] = [
     },
 ];
 
-/// The unit knobs of the top snubber's orifices: they restrict the flow only inside the
-/// snubbing zone (Sec. 2, issue #14), so a model without the `snubber` effect (the baseline,
-/// zone length 0) does not depend on them at all. They are fitted with that effect, not with
-/// the baseline, where their zero sensitivities would leave the unit fit singular.
-const SNUBBER_UNIT_KNOBS: [&str; 2] = ["area_top_orifice_mm2", "area_top_switch_orifice_mm2"];
-
-/// The unit knobs the baseline fits (all but the snubber's).
-fn baseline_unit_knobs() -> Vec<Knob> {
-    UNIT_KNOBS
-        .iter()
-        .filter(|k| !SNUBBER_UNIT_KNOBS.contains(&k.name))
-        .copied()
-        .collect()
-}
-
 /// The paper's value of a unit knob.
 fn unit_nominal(k: &Knob) -> f64 {
     let p = EhvvaParams::baseline();
@@ -752,10 +737,9 @@ impl EhvvaFamily {
         let four = b.clone();
         if self.unit_baseline {
             let mut knobs = BASELINE_KNOBS.to_vec();
-            let unit = baseline_unit_knobs();
-            knobs.extend(unit.iter().copied());
+            knobs.extend(UNIT_KNOBS);
             let mut x0 = b.x.clone();
-            x0.extend(unit.iter().map(unit_nominal));
+            x0.extend(UNIT_KNOBS.iter().map(unit_nominal));
             let r = calibrate(&EhvvaParams::baseline(), &knobs, &x0, set, &self.lsq)?;
             let lo: Vec<f64> = knobs.iter().map(|k| k.lo).collect();
             let hi: Vec<f64> = knobs.iter().map(|k| k.hi).collect();
@@ -848,10 +832,6 @@ impl Family for EhvvaFamily {
         let mut knobs: Vec<Knob> = base.knobs.clone();
         for e in effects {
             knobs.push(effect_knob(e)?);
-            if *e == "snubber" && base.knobs.len() > BASELINE_KNOBS.len() {
-                // The snubber brings its orifices, the unit's like the rest of its geometry.
-                knobs.extend(UNIT_KNOBS.iter().filter(|k| SNUBBER_UNIT_KNOBS.contains(&k.name)));
-            }
         }
         let r = if effects.is_empty() {
             rb
@@ -865,23 +845,11 @@ impl Family for EhvvaFamily {
                     .and_then(|f| f.internal.iter().find(|(n, _)| n == name).map(|(_, v)| *v))
                     .or_else(|| base.knobs.iter().position(|k| k.name == name).map(|i| xb[i]))
             };
-            // A new unit knob (the snubber's orifices) starts at the paper's value, a new
-            // effect gain at `new_gain`.
-            let start = |new_gain: f64| -> Vec<f64> {
-                knobs
-                    .iter()
-                    .map(|k| {
-                        from_parent(k.name).unwrap_or(if SNUBBER_UNIT_KNOBS.contains(&k.name) {
-                            unit_nominal(k)
-                        } else {
-                            new_gain
-                        })
-                    })
-                    .collect()
-            };
+            let start =
+                |new_gain: f64| -> Vec<f64> { knobs.iter().map(|k| from_parent(k.name).unwrap_or(new_gain)).collect() };
             let parent_cost = parent.map_or(rb.cost, |f| f.est_cost);
             let r = calibrate(&EhvvaParams::baseline(), &knobs, &start(1.0), &de, &self.lsq)?;
-            let mut r = if r.cost > parent_cost {
+            if r.cost > parent_cost {
                 let r0 = calibrate(&EhvvaParams::baseline(), &knobs, &start(0.0), &de, &self.lsq)?;
                 if r0.cost < r.cost {
                     r0
@@ -890,30 +858,7 @@ impl Family for EhvvaFamily {
                 }
             } else {
                 r
-            };
-            // The baseline's unit geometry absorbed what it lacked of the effect (without the
-            // snubber it stiffens the spring to slow the closing tail, issue #14): a one-effect
-            // extension also starts with the unit knobs at the paper's values and keeps the
-            // better. Not a later one: its parent already has the effect it lacked, and a start
-            // its parent never had would credit the gain of that start to the new effect.
-            if effects.len() == 1 && knobs.iter().any(|k| UNIT_KNOBS.iter().any(|u| u.name == k.name)) {
-                let x0: Vec<f64> = knobs
-                    .iter()
-                    .zip(start(1.0))
-                    .map(|(k, v)| {
-                        if UNIT_KNOBS.iter().any(|u| u.name == k.name) {
-                            unit_nominal(k)
-                        } else {
-                            v
-                        }
-                    })
-                    .collect();
-                let rn = calibrate(&EhvvaParams::baseline(), &knobs, &x0, &de, &self.lsq)?;
-                if rn.cost < r.cost {
-                    r = rn;
-                }
             }
-            r
         };
         let p = apply_knobs(&EhvvaParams::baseline(), &knobs, &r.x);
         // Cut after the fit, not held through it with the solver's arrays.
