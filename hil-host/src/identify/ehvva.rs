@@ -837,7 +837,7 @@ mod tests {
         assert!((t.td_open_ms[0][0] - 4.0).abs() < 1e-9, "{:?}", t.td_open_ms);
         for row in t.td_open_ms.iter().chain(t.td_close_ms.iter()) {
             for &v in row {
-                assert!((2.0..=4.0).contains(&(v as f64)), "{:?}", t.td_open_ms);
+                assert!((2.0..=4.0).contains(&v), "{:?}", t.td_open_ms);
             }
         }
         assert!(id.text().contains("left out of the tables"));
