@@ -71,6 +71,13 @@ pub trait Real:
     fn from_i32(n: i32) -> Self {
         Self::from_f64(f64::from(n))
     }
+    /// `self · k · x` for a small step `self` times a small gain `k` (a time step times a
+    /// reciprocal mass). Floats multiply left to right; a narrow fixed-point type overrides it
+    /// to form `k · x` first, because `self · k` alone can be a few LSB (10 µs over 0.18 kg is
+    /// 1.8 LSB of Q16.16, rounded to 2: an 11 % faster piston).
+    fn step_times(self, k: Self, x: Self) -> Self {
+        self * k * x
+    }
 
     /// Square root; 0 for negative arguments (never NaN).
     fn sqrt(self) -> Self;
@@ -486,6 +493,11 @@ impl Real for Q16 {
     }
     fn from_i32(n: i32) -> Self {
         Q16::saturate(i64::from(n) << 16)
+    }
+    fn step_times(self, k: Self, x: Self) -> Self {
+        // |k| < 1 where this is used (a reciprocal mass in m/s per ms per N), so k·x cannot
+        // overflow where x does not.
+        self * (k * x)
     }
     fn sqrt(self) -> Self {
         Q16(q16_sqrt(self.0))

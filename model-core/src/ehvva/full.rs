@@ -74,7 +74,7 @@ impl<R: Real> Spool<R> {
     fn step(&self, x: R, v: R, force: R, quad_gain: R, h: R) -> (R, R) {
         let f = force - self.spring * (x + self.preload);
         let damping = self.friction + quad_gain * v.abs();
-        let v = (v + h * self.accel_per_newton * f) / (R::ONE + h * self.accel_per_newton * damping);
+        let v = (v + h.step_times(self.accel_per_newton, f)) / (R::ONE + h.step_times(self.accel_per_newton, damping));
         let (x, v, _) = stops(x + h * v, v, self.stroke);
         (x, v)
     }

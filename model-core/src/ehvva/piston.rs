@@ -40,6 +40,10 @@ pub(crate) struct Piston<R: Real> {
     inv_cap_low: R,
     pump: R,
     relief_high: R,
+    /// Pump flow / relief gain, MPa: how far below the set-point the relief cracks. Divided
+    /// once in f64 (a Q16.16 division of two small numbers loses most of the quotient's bits;
+    /// in f64 it is the same number as dividing per step).
+    pump_over_relief_high: R,
     relief_low: R,
 }
 
@@ -72,6 +76,7 @@ impl<R: Real> Piston<R> {
             inv_cap_low: r(1.0 / p.cap_low_mm3_per_mpa),
             pump: r(p.pump_flow_mm3_per_ms),
             relief_high: r(p.relief_high_mm3_per_ms_mpa),
+            pump_over_relief_high: r(p.pump_flow_mm3_per_ms / p.relief_high_mm3_per_ms_mpa),
             relief_low: r(p.relief_low_mm3_per_ms_mpa),
         })
     }
@@ -153,7 +158,7 @@ impl<R: Real> Piston<R> {
     /// damping cannot make the step unstable whatever the orifice area.
     pub fn velocity_step(&self, vel: R, force: R, quad_gain: R, h: R) -> R {
         let damping = self.friction + quad_gain * vel.abs();
-        (vel + h * self.accel_per_newton * force) / (R::ONE + h * self.accel_per_newton * damping)
+        (vel + h.step_times(self.accel_per_newton, force)) / (R::ONE + h.step_times(self.accel_per_newton, damping))
     }
 
     /// End stops of eq. (1): the seat at 0 and the lift sleeve at S stop the piston at once.
@@ -184,7 +189,7 @@ impl<R: Real> Piston<R> {
     /// delivers a constant flow; the relief valve returns the excess above the crack pressure,
     /// set so the steady state with the valve at rest is exactly the set-point.
     pub fn p_high_rate(&self, p_high: R, p_set: R, vel: R) -> R {
-        let crack = p_set - self.pump / self.relief_high;
+        let crack = p_set - self.pump_over_relief_high;
         let relief = self.relief_high * (p_high - crack).max(R::ZERO);
         (self.pump - relief - self.area_top * vel.max(R::ZERO)) * self.inv_cap_high
     }

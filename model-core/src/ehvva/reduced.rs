@@ -290,6 +290,46 @@ mod tests {
         }
     }
 
+    #[test]
+    fn runs_in_q16_close_to_f64_over_whole_events() {
+        // The target's 10 µs step, a whole high-lift event with the snubber: in Q16.16 a step
+        // times the reciprocal mass is 1.8 LSB, so `Real::step_times` forms the gain times the
+        // force first (left to right the piston ran 11 % fast).
+        use crate::real::Q16;
+        let p = EhvvaParams::paper_default();
+        // Tolerance in % of the stroke: 0.1 (issue #14's goal) at 6.5 and 8 MPa; 1 at 5 MPa, where
+        // the pressure force on the top area (60.8 mm² x 5 MPa = 304 N) barely exceeds the
+        // spring's preload (252 N), so a rounding of the pressure force is six times larger in
+        // the net force that moves the piston (measured: 0.43 % there, 0.03-0.05 % above).
+        for (p_supply, tol_pct) in [(8.0, 0.1), (6.5, 0.1), (5.0, 1.0)] {
+            let fi = EhvvaInputs {
+                snubber_on: true,
+                ..inputs(p_supply, true)
+            };
+            let qi = EhvvaInputs::<Q16> {
+                p_supply_mpa: Q16::from_f64(p_supply),
+                p_back_mpa: Q16::ONE,
+                temp_c: Q16::from_f64(22.0),
+                lift_high: true,
+                snubber_on: true,
+            };
+            let mut mf = EhvvaReduced::<f64>::new(&p, &fi, 0.01).unwrap();
+            let mut mq = EhvvaReduced::<Q16>::new(&p, &qi, 0.01).unwrap();
+            let mut max_lift: f64 = 0.0;
+            for k in 0..3000 {
+                let u = (100..1100).contains(&k);
+                let yf = mf.step(u, &fi);
+                let yq = mq.step(u, &qi).to_f64();
+                max_lift = max_lift.max(yf);
+                assert!(
+                    (yf - yq).abs() <= tol_pct / 100.0 * p.lift_high_mm,
+                    "{p_supply} MPa, step {k}: {yf} vs {yq}"
+                );
+            }
+            assert!(max_lift > 6.0, "the event must open: {max_lift}");
+        }
+    }
+
     proptest::proptest! {
         #![proptest_config(proptest::prelude::ProptestConfig::with_cases(24))]
         /// Whatever the operating point and command pattern: the lift stays within the stops,
