@@ -45,8 +45,9 @@ echo "== firmware for QEMU's netduinoplus2 (thumbv7em-none-eabihf, profile firmw
 cargo build --profile firmware --locked -p firmware-qemu --target thumbv7em-none-eabihf
 
 echo "== host tests (model-core, paper tests, hil-host) [${SECONDS} s]"
-# The PIL tests fail rather than skip when QEMU is missing.
-HIL_REQUIRE_QEMU=1 cargo test --workspace --locked
+# The PIL tests fail rather than skip when QEMU is missing. --no-fail-fast: a failing test
+# binary does not hide the failures of the binaries after it (the run still fails).
+HIL_REQUIRE_QEMU=1 cargo test --workspace --locked --no-fail-fast
 
 echo "== firmware for the STM32F405 (thumbv7em-none-eabihf, profile firmware) [${SECONDS} s]"
 cargo build --profile firmware --locked -p firmware --target thumbv7em-none-eabihf
