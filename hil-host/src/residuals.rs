@@ -213,9 +213,18 @@ const MIN_GROUP_SHARE: f64 = 0.02;
 pub fn group_check(name: &str, e: &[f64], condition: &[f64]) -> GroupCheck {
     let n = e.len().min(condition.len());
     let (e, c) = (&e[..n], &condition[..n]);
-    let mut values: Vec<f64> = c.iter().copied().filter(|v| v.is_finite()).collect();
+    // Up to four distinct values are enough to tell a flag from a quantity (no sorted copy of
+    // the whole condition for that: it was a validation-length copy held through the check).
+    let mut values: Vec<f64> = Vec::new();
+    for &v in c.iter().filter(|v| v.is_finite()) {
+        if !values.contains(&v) {
+            values.push(v);
+            if values.len() > 3 {
+                break;
+            }
+        }
+    }
     values.sort_by(f64::total_cmp);
-    values.dedup();
     type GroupOf = Box<dyn Fn(f64) -> Option<usize>>;
     let (labels, group_of): (Vec<String>, GroupOf) = if values.len() <= 3 {
         let vals = values.clone();

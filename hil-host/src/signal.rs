@@ -58,6 +58,12 @@ impl Butterworth {
     /// Causal filtering, the state starting at the first sample's steady state.
     pub fn filter(&self, x: &[f64]) -> Vec<f64> {
         let mut y = x.to_vec();
+        self.filter_in_place(&mut y);
+        y
+    }
+
+    /// [`Butterworth::filter`] over `y` itself (no copy of a long record).
+    pub fn filter_in_place(&self, y: &mut [f64]) {
         for s in &self.sections {
             let x0 = y.first().copied().unwrap_or(0.0);
             // Steady state for a constant input x0 (unity DC gain): z1, z2 such that y = x0.
@@ -71,7 +77,6 @@ impl Butterworth {
                 *v = out;
             }
         }
-        y
     }
 
     /// Zero-phase filtering: forward, then backward (the magnitude response squared, no lag).
@@ -87,11 +92,14 @@ impl Butterworth {
         ext.extend((1..=pad).rev().map(|k| 2.0 * x[0] - x[k]));
         ext.extend_from_slice(x);
         ext.extend((1..=pad).map(|k| 2.0 * x[n - 1] - x[n - 1 - k]));
-        let mut y = self.filter(&ext);
-        y.reverse();
-        let mut z = self.filter(&y);
-        z.reverse();
-        z[pad..pad + n].to_vec()
+        // In place: one buffer of the record's length (four copies were held before).
+        self.filter_in_place(&mut ext);
+        ext.reverse();
+        self.filter_in_place(&mut ext);
+        ext.reverse();
+        ext.truncate(pad + n);
+        ext.drain(..pad);
+        ext
     }
 }
 

@@ -38,6 +38,8 @@ use std::f64::consts::PI;
 use std::hash::{Hash, Hasher};
 use std::sync::Mutex;
 
+use rustfft::num_complex::Complex64;
+
 use model_core::evvt::{quantize_phase_deg, zoh};
 
 use super::catalogue::{Effect, EvvtEffect};
@@ -95,15 +97,17 @@ enum Drive {
     OpenLoop { window: usize },
 }
 
-/// One log, ready to simulate.
+/// One log, ready to simulate. The columns are the log's own (borrowed: on a 425 000-row pair
+/// five copies of them were 40 B a row of the diagnosis's peak).
 #[derive(Clone, Debug)]
-struct Data {
+struct Data<'a> {
     dt: f64,
-    y: Vec<f64>,
-    cmd: Vec<f64>,
-    rpm: Vec<f64>,
-    volt: Vec<f64>,
-    reference: Vec<f64>,
+    y: &'a [f64],
+    cmd: &'a [f64],
+    rpm: &'a [f64],
+    volt: &'a [f64],
+    /// Empty when the loop is not used (open-loop windows).
+    reference: &'a [f64],
     /// Crank revolutions from the start of the log to each sample.
     revs: Vec<f64>,
     drive: Drive,
@@ -134,13 +138,9 @@ fn detect_resolution(y: &[f64]) -> f64 {
     }
 }
 
-impl Data {
-    fn from_log(log: &Log, window_s: f64, ramp_lsb: f64) -> Result<Self, String> {
-        let col = |name: &str| {
-            log.col(name)
-                .map(<[f64]>::to_vec)
-                .ok_or_else(|| format!("{}: no `{name}` column", log.file))
-        };
+impl<'a> Data<'a> {
+    fn from_log(log: &'a Log, window_s: f64, ramp_lsb: f64) -> Result<Self, String> {
+        let col = |name: &str| log.col(name).ok_or_else(|| format!("{}: no `{name}` column", log.file));
         let y = col("phase_deg")?;
         let cmd = col("motor_cmd_rpm")?;
         let rpm = col("engine_rpm")?;
@@ -150,10 +150,10 @@ impl Data {
         }
         let dt = log.dt_s;
         let meta = |k: &str| log.meta_f64(k).map_err(|e| e.to_string());
-        let lsb = detect_resolution(&y);
+        let lsb = detect_resolution(y);
         let mut revs = Vec::with_capacity(y.len());
         let mut theta = 0.0;
-        for &n in &rpm {
+        for &n in rpm {
             revs.push(theta);
             theta += n.max(0.0) / 60.0 * dt;
         }
@@ -163,7 +163,7 @@ impl Data {
         let mut drive = Drive::OpenLoop {
             window: ((window_s / dt).round() as usize).max(1),
         };
-        let mut reference = Vec::new();
+        let mut reference: &'a [f64] = &[];
         if let (Some(r), Some(kp)) = (log.col("phase_ref_deg"), meta("kp")?) {
             let cmd_max = meta("motor_cmd_max_rpm")?.filter(|m| *m > 0.0).unwrap_or(f64::INFINITY);
             let hold = ((meta("control_period_s")?.unwrap_or(dt) / dt).round() as usize).max(1);
@@ -180,7 +180,7 @@ impl Data {
             }
             if kp > 0.0 && obeyed as f64 >= 0.99 * checked as f64 {
                 drive = Drive::ClosedLoop { kp, cmd_max, hold };
-                reference = r.to_vec();
+                reference = r;
             }
         }
         Ok(Data {
@@ -203,7 +203,7 @@ impl Data {
         let mut h = DefaultHasher::new();
         self.y.len().hash(&mut h);
         self.dt.to_bits().hash(&mut h);
-        for v in self.y.iter().chain(&self.cmd).chain(&self.rpm).chain(&self.volt) {
+        for v in self.y.iter().chain(self.cmd).chain(self.rpm).chain(self.volt) {
             v.to_bits().hash(&mut h);
         }
         h.finish()
@@ -340,33 +340,24 @@ fn quantizer(x: f64, lsb: f64, ramp: f64) -> f64 {
 
 fn sim_error(m: &Model, d: &Data, out: &mut [f64]) -> Result<(), String> {
     simulate(m, d, out)?;
-    for (o, y) in out.iter_mut().zip(&d.y) {
+    for (o, y) in out.iter_mut().zip(d.y) {
         *o -= y;
     }
     Ok(())
 }
 
 /// In-place forward FFT (`rustfft`, any length), X_m = Σ x_k e^{−2πi mk/n}.
-fn fft(re: &mut [f64], im: &mut [f64]) {
-    let n = re.len();
-    if n < 2 || im.len() != n {
-        return;
-    }
-    let mut x: Vec<rustfft::num_complex::Complex64> = re
-        .iter()
-        .zip(im.iter())
-        .map(|(&r, &i)| rustfft::num_complex::Complex64::new(r, i))
-        .collect();
-    rustfft::FftPlanner::new().plan_fft_forward(n).process(&mut x);
-    for ((r, i), c) in re.iter_mut().zip(im.iter_mut()).zip(&x) {
-        (*r, *i) = (c.re, c.im);
+fn fft(x: &mut [Complex64]) {
+    if x.len() >= 2 {
+        rustfft::FftPlanner::new().plan_fft_forward(x.len()).process(x);
     }
 }
 
-/// Σ r_k e^{−2πi o θ_k} by direct summation.
-fn order_dft(r: &[f64], revs: &[f64], order: f64) -> (f64, f64) {
+/// Σ (r_k − mean) e^{−2πi o θ_k} by direct summation (the centred series is not copied).
+fn order_dft(r: &[f64], mean: f64, revs: &[f64], order: f64) -> (f64, f64) {
     let (mut c, mut s) = (0.0, 0.0);
-    for (v, th) in r.iter().zip(revs) {
+    for (x, th) in r.iter().zip(revs) {
+        let v = x - mean;
         let (sn, cs) = (2.0 * PI * (order * th).fract()).sin_cos();
         c += v * cs;
         s += v * sn;
@@ -399,13 +390,6 @@ fn order_peak_in_segments(r: &[f64], revs: &[f64], lo: f64, hi: f64, segment_bin
     let mean = r.iter().sum::<f64>() / r.len() as f64;
     let per_rev = (8.0 * hi).ceil();
     let bins = (total * per_rev).ceil() as usize + 2;
-    let mut grid = vec![0.0; bins];
-    for (v, th) in r.iter().zip(revs) {
-        let i = (th * per_rev).round() as usize;
-        if let Some(slot) = grid.get_mut(i) {
-            *slot += v - mean;
-        }
-    }
     // One transform of the whole record (2× zero-padded) when it fits a segment, else the
     // averaged power of segments.
     let whole = (2 * bins).next_power_of_two() <= 2 * segment_bins;
@@ -423,21 +407,27 @@ fn order_peak_in_segments(r: &[f64], revs: &[f64], lo: f64, hi: f64, segment_bin
         return None;
     }
     let mut power_sum = vec![0.0; m_hi - m_lo + 1];
-    let (mut re, mut im) = (vec![0.0; nfft], vec![0.0; nfft]);
-    for chunk in grid.chunks(seg) {
-        re.fill(0.0);
-        im.fill(0.0);
-        re[..chunk.len()].copy_from_slice(chunk);
-        fft(&mut re, &mut im);
+    // Each segment's bins are gridded straight into the transform's buffer (a pass over the
+    // samples per segment; no grid of the whole record is held).
+    let mut x = vec![Complex64::new(0.0, 0.0); nfft];
+    for first in (0..bins).step_by(seg) {
+        let end = (first + seg).min(bins);
+        x.fill(Complex64::new(0.0, 0.0));
+        for (v, th) in r.iter().zip(revs) {
+            let i = (th * per_rev).round() as usize;
+            if (first..end).contains(&i) {
+                x[i - first].re += v - mean;
+            }
+        }
+        fft(&mut x);
         for (m, p) in (m_lo..=m_hi).zip(power_sum.iter_mut()) {
-            *p += re[m] * re[m] + im[m] * im[m];
+            *p += x[m].re * x[m].re + x[m].im * x[m].im;
         }
     }
-    drop((re, im, grid));
+    drop(x);
     let best = m_lo + (0..power_sum.len()).max_by(|&a, &b| power_sum[a].total_cmp(&power_sum[b]))?;
-    let centred: Vec<f64> = r.iter().map(|v| v - mean).collect();
     let power = |o: f64| {
-        let (c, s) = order_dft(&centred, revs, o);
+        let (c, s) = order_dft(r, mean, revs, o);
         c * c + s * s
     };
     let (mut a, mut b) = ((best as f64 - 1.0) * bin_order, (best as f64 + 1.0) * bin_order);
@@ -604,10 +594,12 @@ impl EvvtFamily {
             EvvtEffect::EngineSpeed => (vec![0.0, 0.0], vec![-3.0, -3.0], vec![3.0, 3.0]),
             EvvtEffect::Direction => (vec![1.0], vec![0.1], vec![4.0]),
             EvvtEffect::BeltVibration => {
-                let mut out = vec![0.0; d.y.len()];
-                sim_error(parent, d, &mut out)?;
+                let mut resid = vec![0.0; d.y.len()];
+                sim_error(parent, d, &mut resid)?;
                 // The residual is model − measured; the disturbance is in the measurement.
-                let resid: Vec<f64> = out.iter().map(|e| -e).collect();
+                for e in resid.iter_mut() {
+                    *e = -*e;
+                }
                 let (olo, ohi) = self.order_range(d);
                 let (order, _) = order_peak(&resid, &d.revs, olo, ohi).ok_or(
                     "no order spectrum: the log is too short or its sample rate too low for orders above the minimum",
@@ -780,43 +772,43 @@ impl Family for EvvtFamily {
             ci95[at + 2] = ci_p;
         }
         let labels: Vec<&str> = effects.iter().map(|e| e.name()).collect();
-        let mut fit = Fit::new(
-            &Fit::label(&labels),
-            params,
-            ci95,
-            dv.y.clone(),
-            predicted,
-            r.iterations,
-        )
-        .with_solver(&internal_names, &lo, &hi, &r);
+        // Every fit measures the same validation output: the parent's copy is shared.
+        let measured: std::sync::Arc<[f64]> = match parent {
+            Some(f) if f.measured[..] == dv.y[..] => f.measured.clone(),
+            _ => dv.y.into(),
+        };
+        let mut fit = Fit::with_shared(&Fit::label(&labels), params, ci95, measured, predicted, r.iterations)
+            .with_solver(&internal_names, &lo, &hi, &r);
         fit.internal = internal_names.into_iter().zip(x).collect();
         Ok(fit)
     }
 
     fn regressors<'a>(&self, val: &'a Log) -> Vec<(String, Cow<'a, [f64]>)> {
-        // Derived series, owned.
-        let owned = (|| -> Vec<(String, Vec<f64>)> {
+        // The log's columns borrowed, derived series owned.
+        (|| -> Vec<(String, Cow<'a, [f64]>)> {
             let Ok(d) = Data::from_log(val, self.open_loop_window_s, self.quantizer_ramp_lsb) else {
                 return Vec::new();
             };
-            let mut out: Vec<(String, Vec<f64>)> = vec![
-                ("battery voltage u_batt_V".into(), d.volt.clone()),
-                ("engine speed engine_rpm".into(), d.rpm.clone()),
-                ("motor_cmd_rpm".into(), d.cmd.clone()),
+            let mut out: Vec<(String, Cow<'a, [f64]>)> = vec![
+                ("battery voltage u_batt_V".into(), Cow::Borrowed(d.volt)),
+                ("engine speed engine_rpm".into(), Cow::Borrowed(d.rpm)),
+                ("motor_cmd_rpm".into(), Cow::Borrowed(d.cmd)),
                 (
                     "advancing (motor_cmd_rpm > 0)".into(),
-                    d.cmd.iter().map(|&u| if u > 0.0 { 1.0 } else { 0.0 }).collect(),
+                    Cow::Owned(d.cmd.iter().map(|&u| if u > 0.0 { 1.0 } else { 0.0 }).collect()),
                 ),
             ];
             if !d.reference.is_empty() {
-                out.push(("phase_ref_deg".into(), d.reference.clone()));
+                out.push(("phase_ref_deg".into(), Cow::Borrowed(d.reference)));
             }
             let (_, ohi) = self.order_range(&d);
             let sinusoid = |o: f64, f: fn(f64) -> f64| {
-                d.revs
-                    .iter()
-                    .map(|th| f(2.0 * PI * (o * th).fract()))
-                    .collect::<Vec<f64>>()
+                Cow::Owned(
+                    d.revs
+                        .iter()
+                        .map(|th| f(2.0 * PI * (o * th).fract()))
+                        .collect::<Vec<f64>>(),
+                )
             };
             // The peak of the baseline residual's order spectrum on this record: a disturbance
             // locked to crank angle shows here whatever the engine speed.
@@ -842,8 +834,7 @@ impl Family for EvvtFamily {
                 }
             }
             out
-        })();
-        owned.into_iter().map(|(n, v)| (n, Cow::Owned(v))).collect()
+        })()
     }
 }
 
@@ -866,8 +857,9 @@ mod tests {
     fn fft_matches_the_direct_transform() {
         let mut rng = Rng::new(4);
         let x: Vec<f64> = (0..64).map(|_| rng.normal()).collect();
-        let (mut re, mut im) = (x.clone(), vec![0.0; 64]);
-        fft(&mut re, &mut im);
+        let mut xf: Vec<Complex64> = x.iter().map(|&v| Complex64::new(v, 0.0)).collect();
+        fft(&mut xf);
+        let (re, im): (Vec<f64>, Vec<f64>) = xf.iter().map(|c| (c.re, c.im)).unzip();
         for m in [0, 1, 7, 31, 32, 50] {
             let (mut c, mut s) = (0.0, 0.0);
             for (k, v) in x.iter().enumerate() {
@@ -906,7 +898,7 @@ mod tests {
             simulate(&m, &d, &mut out).unwrap();
             let same = out
                 .iter()
-                .zip(&d.y)
+                .zip(d.y)
                 .filter(|(p, y)| quantize_phase_deg(**p, 1.0) == **y)
                 .count();
             assert_eq!(same, d.y.len(), "{effect}: quantized simulation differs from the log");
@@ -918,7 +910,7 @@ mod tests {
             simulate(&wrong, &d, &mut out).unwrap();
             let same = out
                 .iter()
-                .zip(&d.y)
+                .zip(d.y)
                 .filter(|(p, y)| quantize_phase_deg(**p, 1.0) == **y)
                 .count();
             assert!(same < d.y.len() * 99 / 100);

@@ -48,16 +48,16 @@ impl Default for PositionerFamily {
     }
 }
 
-/// Filtered motion and force, decimated.
-struct Motion {
+/// Filtered motion, and the log's force.
+struct Motion<'a> {
     acc: Vec<f64>,
     vel: Vec<f64>,
-    force: Vec<f64>,
+    force: &'a [f64],
     pos: Vec<f64>,
 }
 
 impl PositionerFamily {
-    fn motion(&self, log: &Log) -> Result<Motion, String> {
+    fn motion<'a>(&self, log: &'a Log) -> Result<Motion<'a>, String> {
         let q = log.col("pos_m").ok_or("no pos_m column")?;
         let f = log.col("force_N").ok_or("no force_N column")?;
         let fs = 1.0 / log.dt_s;
@@ -68,7 +68,7 @@ impl PositionerFamily {
         Ok(Motion {
             acc,
             vel,
-            force: f.to_vec(),
+            force: f,
             pos: qf,
         })
     }
@@ -94,39 +94,44 @@ impl PositionerFamily {
         })
     }
 
-    /// The regressor columns of a model, already decimated, and their parameter names.
+    /// The regressor columns of a model, already decimated, and their parameter names. Each
+    /// column is made at full rate and decimated before the next is made (on a long record the
+    /// full-rate columns held together were the family's peak).
     fn columns(&self, m: &Motion, effect: Option<&str>, fs: f64) -> Result<Regression, String> {
         let still = self.v_still_m_s;
         let pos = |v: f64| if v > still { 1.0 } else { 0.0 };
         let neg = |v: f64| if v < -still { 1.0 } else { 0.0 };
-        let mut cols: Vec<(String, Vec<f64>)> = vec![("M_kg".into(), m.acc.clone())];
+        let mut names: Vec<String> = Vec::new();
+        let mut data: Vec<Vec<f64>> = Vec::new();
+        let mut add = |name: &str, column: &[f64]| -> Result<(), String> {
+            data.push(self.decimate(column, fs)?);
+            names.push(name.into());
+            Ok(())
+        };
+        let derived = |f: &dyn Fn(f64) -> f64| m.vel.iter().map(|&v| f(v)).collect::<Vec<f64>>();
+        add("M_kg", &m.acc)?;
         match effect {
-            None | Some("coulomb-friction") => cols.push(("Fv_Ns_per_m".into(), m.vel.clone())),
+            None | Some("coulomb-friction") => add("Fv_Ns_per_m", &m.vel)?,
             Some("asymmetric-friction") => {
-                cols.push(("Fv_pos_Ns_per_m".into(), m.vel.iter().map(|&v| v * pos(v)).collect()));
-                cols.push(("Fv_neg_Ns_per_m".into(), m.vel.iter().map(|&v| v * neg(v)).collect()));
+                add("Fv_pos_Ns_per_m", &derived(&|v| v * pos(v)))?;
+                add("Fv_neg_Ns_per_m", &derived(&|v| v * neg(v)))?;
             }
             Some(other) => return Err(format!("unknown positioner effect `{other}`")),
         }
         match effect {
-            None => cols.push(("offset_N".into(), vec![1.0; m.acc.len()])),
+            None => add("offset_N", &vec![1.0; m.acc.len()])?,
             Some("coulomb-friction") => {
-                cols.push(("Fc_N".into(), m.vel.iter().map(|&v| pos(v) - neg(v)).collect()));
-                cols.push(("offset_N".into(), vec![1.0; m.acc.len()]));
+                add("Fc_N", &derived(&|v| pos(v) - neg(v)))?;
+                add("offset_N", &vec![1.0; m.acc.len()])?;
             }
             // Eq. (12): Fc+ sign(0+(q̇)) + Fc− sign(0−(q̇)); the two Coulomb levels absorb the
             // offset (a separate offset would be collinear with them while the load moves).
             Some(_) => {
-                cols.push(("Fc_pos_N".into(), m.vel.iter().map(|&v| pos(v)).collect()));
-                cols.push(("Fc_neg_N".into(), m.vel.iter().map(|&v| -neg(v)).collect()));
+                add("Fc_pos_N", &derived(&|v| pos(v)))?;
+                add("Fc_neg_N", &derived(&|v| -neg(v)))?;
             }
         }
-        let names = cols.iter().map(|(n, _)| n.clone()).collect();
-        let data = cols
-            .iter()
-            .map(|(_, c)| self.decimate(c, fs))
-            .collect::<Result<_, _>>()?;
-        Ok((data, names, self.decimate(&m.force, fs)?))
+        Ok((data, names, self.decimate(m.force, fs)?))
     }
 }
 

@@ -1040,9 +1040,13 @@ impl Family for VacuumFamily {
         let (x, _) = self.predict(&model, val)?;
         let measured = val
             .col("x_pct")
-            .ok_or_else(|| format!("{}: no `x_pct` column", val.file))?
-            .to_vec();
-        let mut fit = Fit::new(&Fit::label(effects), model.named(&names), ci95, measured, x, iterations);
+            .ok_or_else(|| format!("{}: no `x_pct` column", val.file))?;
+        // Every fit measures the same validation output: the parent's copy is shared.
+        let measured: std::sync::Arc<[f64]> = match parent {
+            Some(f) if f.measured[..] == measured[..] => f.measured.clone(),
+            _ => measured.into(),
+        };
+        let mut fit = Fit::with_shared(&Fit::label(effects), model.named(&names), ci95, measured, x, iterations);
         fit.est_cost = last.cost;
         fit.convergence = format!(
             "position stage {} ({} iterations over all stages and starts)",
@@ -1065,22 +1069,19 @@ impl Family for VacuumFamily {
     }
 
     fn regressors<'a>(&self, val: &'a Log) -> Vec<(String, Cow<'a, [f64]>)> {
-        // Derived series, owned.
-        let owned = (|| -> Vec<(String, Vec<f64>)> {
+        // The log's columns borrowed, derived series owned (moved in, not cloned).
+        (|| -> Vec<(String, Cow<'a, [f64]>)> {
             let Ok(io) = Inputs::from_log(val) else {
                 return Vec::new();
             };
             let n = io.len();
-            let mut out = vec![
-                ("supply voltage".to_string(), io.u_batt.to_vec()),
-                ("duty".to_string(), io.duty.to_vec()),
+            let mut out: Vec<(String, Cow<'a, [f64]>)> = vec![
+                ("supply voltage".to_string(), Cow::Borrowed(io.u_batt)),
+                ("duty".to_string(), Cow::Borrowed(io.duty)),
                 (
                     "duty x voltage".to_string(),
-                    io.duty.iter().zip(io.u_batt).map(|(d, u)| d * u).collect(),
+                    Cow::Owned(io.duty.iter().zip(io.u_batt).map(|(d, u)| d * u).collect()),
                 ),
-                // The other inputs: the vacuum supply and the ambient pressure (smoothed as simulated).
-                ("tank pressure (vacuum supply)".to_string(), io.p_tank.clone()),
-                ("ambient pressure".to_string(), io.p_amb.clone()),
             ];
             // Direction of motion from a smoothed difference (±1, 0 when still).
             let direction = |y: &[f64], still: f64| -> Vec<f64> {
@@ -1124,19 +1125,22 @@ impl Family for VacuumFamily {
                         .collect();
                     out.push((
                         "last pressure direction x map slope (friction)".into(),
-                        held.iter().zip(&slope).map(|(d, s)| d * s).collect(),
+                        Cow::Owned(held.iter().zip(&slope).map(|(d, s)| d * s).collect()),
                     ));
                 }
-                out.push(("last pressure direction (friction, clearance)".into(), held));
-                out.push(("pressure rate sign".into(), now));
-                out.push(("actuator pressure".into(), p.to_vec()));
+                out.push(("last pressure direction (friction, clearance)".into(), Cow::Owned(held)));
+                out.push(("pressure rate sign".into(), Cow::Owned(now)));
+                out.push(("actuator pressure".into(), Cow::Borrowed(p)));
             }
             if let Some(x) = val.col("x_pct") {
-                out.push(("position direction".into(), direction(x, 1.0)));
+                out.push(("position direction".into(), Cow::Owned(direction(x, 1.0))));
             }
+            // The other inputs: the vacuum supply and the ambient pressure (smoothed as
+            // simulated), in their place after the duty (moved in once the slope has used them).
+            out.insert(3, ("tank pressure (vacuum supply)".to_string(), Cow::Owned(io.p_tank)));
+            out.insert(4, ("ambient pressure".to_string(), Cow::Owned(io.p_amb)));
             out
-        })();
-        owned.into_iter().map(|(n, v)| (n, Cow::Owned(v))).collect()
+        })()
     }
 }
 
