@@ -689,8 +689,8 @@ impl Family for EvvtFamily {
         let de = Data::from_log(est, self.open_loop_window_s, self.quantizer_ramp_lsb)?;
         let dv = Data::from_log(val, self.open_loop_window_s, self.quantizer_ramp_lsb)?;
         let ctx = Ctx {
-            v_ref: Data::mean(&de.volt),
-            n_ref_krpm: Data::mean(&de.rpm) / 1000.0,
+            v_ref: Data::mean(de.volt),
+            n_ref_krpm: Data::mean(de.rpm) / 1000.0,
         };
         let (alpha, beta, base_res) = match self.cached_baseline(&de).filter(|_| !effects.is_empty()) {
             Some((a, b)) => (a, b, None),
