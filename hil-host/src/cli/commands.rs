@@ -113,21 +113,27 @@ fn diagnose(a: DiagnoseArgs) -> Result<()> {
     let plant = est_full.plant;
     let family = diagnose::family_for(plant).map_err(fail)?;
     // What the fits do not use of a long estimation record is not held through them (nor
-    // while the validation log is read).
+    // while the validation log is read), its time stamps included (the fits use the period).
     let (est, val, tail) = match &a.validation {
         Some(v) => {
-            let est = family.estimation_part(est_full).map_err(fail)?;
+            let est = family.estimation_part(est_full).map_err(fail)?.without_time_stamps();
             (est, read(v, Some(plant), map.as_ref())?, false)
         }
         None => {
             // Moved, not copied: the held-out tail costs no second copy of the log.
             let (e, v) = est_full.split_tail(0.3);
-            (family.estimation_part(e).map_err(fail)?, v, true)
+            (family.estimation_part(e).map_err(fail)?.without_time_stamps(), v, true)
         }
     };
     for n in est.notices.iter().chain(&val.notices) {
         eprintln!("notice: {n}");
     }
+    // The validation log's time stamps serve only the plots' time axis.
+    let val = if a.plots.is_none() && a.report.is_none() {
+        val.without_time_stamps()
+    } else {
+        val
+    };
     let plots = match &a.plots {
         Some(dir) => {
             let identity = format!("plots of {}", canonical(&a.estimation));
@@ -141,7 +147,8 @@ fn diagnose(a: DiagnoseArgs) -> Result<()> {
             eprint!("{text}");
         }
     };
-    let d = diagnose::diagnose(family.as_ref(), &est, &val, tail, &Rules::default(), &mut show);
+    // The estimation log is given away: it is freed once the fits are done.
+    let d = diagnose::diagnose_owned(family.as_ref(), est, &val, tail, &Rules::default(), &mut show);
     if let Some(text) = line.finish() {
         eprint!("{text}");
     }

@@ -97,6 +97,9 @@ enum Drive {
     OpenLoop { window: usize },
 }
 
+/// Residuals a fit scores at most (see `EvvtFamily::solve_model`).
+const MAX_FIT_RESIDUALS: usize = 65_536;
+
 /// One log, ready to simulate. The columns are the log's own (borrowed: on a 425 000-row pair
 /// five copies of them were 40 B a row of the diagnosis's peak).
 #[derive(Clone, Debug)]
@@ -535,9 +538,29 @@ impl EvvtFamily {
         self.lsq.clone()
     }
 
+    /// The solver on the simulation error of the whole record; a record longer than
+    /// [`MAX_FIT_RESIDUALS`] samples is simulated whole but scored at every `stride`-th sample
+    /// (the solver's Jacobian of a 292 500-sample record with five parameters was 11.7 MB, the
+    /// largest thing a long diagnosis held). The stride depends on the record's length only, so
+    /// a model and the one it extends are scored on the same samples.
     fn solve_model(&self, effects: &[EvvtEffect], d: &Data, ctx: &Ctx, spec: &Spec) -> Result<LsqResult, String> {
-        let r = |x: &[f64], out: &mut [f64]| sim_error(&model_from(effects, x, ctx), d, out);
-        solve(r, &spec.x0, &spec.lo, &spec.hi, d.y.len(), &self.opts()).map_err(|e| e.to_string())
+        let n = d.y.len();
+        let stride = n.div_ceil(MAX_FIT_RESIDUALS).max(1);
+        let solved = if stride == 1 {
+            let r = |x: &[f64], out: &mut [f64]| sim_error(&model_from(effects, x, ctx), d, out);
+            solve(r, &spec.x0, &spec.lo, &spec.hi, n, &self.opts())
+        } else {
+            let r = |x: &[f64], out: &mut [f64]| {
+                let mut whole = vec![0.0; n];
+                sim_error(&model_from(effects, x, ctx), d, &mut whole)?;
+                for (o, e) in out.iter_mut().zip(whole.iter().step_by(stride)) {
+                    *o = *e;
+                }
+                Ok(())
+            };
+            solve(r, &spec.x0, &spec.lo, &spec.hi, n.div_ceil(stride), &self.opts())
+        };
+        solved.map_err(|e| e.to_string())
     }
 
     /// The baseline (α, β) on the estimation data: the best point of a coarse grid, refined by

@@ -16,6 +16,7 @@ pub mod report;
 pub mod vacuum;
 
 use std::borrow::Cow;
+use std::cell::RefCell;
 use std::sync::{mpsc, Arc};
 use std::time::Instant;
 
@@ -532,6 +533,34 @@ pub fn diagnose(
     rules: &Rules,
     progress: &mut (dyn FnMut(&Progress) + Send),
 ) -> Result<Diagnosis, String> {
+    diagnose_in(family, Cow::Borrowed(est), val, validation_is_tail, rules, progress)
+}
+
+/// [`diagnose`] given the estimation log to keep: it is freed as soon as the last fit is done,
+/// before the residual tests of the validation data (on a long record the estimation log is
+/// the largest thing held then; the command line diagnoses this way).
+pub fn diagnose_owned(
+    family: &dyn Family,
+    est: Log,
+    val: &Log,
+    validation_is_tail: bool,
+    rules: &Rules,
+    progress: &mut (dyn FnMut(&Progress) + Send),
+) -> Result<Diagnosis, String> {
+    diagnose_in(family, Cow::Owned(est), val, validation_is_tail, rules, progress)
+}
+
+fn diagnose_in(
+    family: &dyn Family,
+    est: Cow<Log>,
+    val: &Log,
+    validation_is_tail: bool,
+    rules: &Rules,
+    progress: &mut (dyn FnMut(&Progress) + Send),
+) -> Result<Diagnosis, String> {
+    let est_id = (est.file.clone(), est.len());
+    let unexcited = unexcited_inputs(&est, val);
+    let est = RefCell::new(Some(est));
     let start = Instant::now();
     let (tx, rx) = mpsc::channel::<Tick>();
     std::thread::scope(|s| {
@@ -563,6 +592,8 @@ pub fn diagnose(
                 total,
             });
             let iterations = tx.clone();
+            let held = est.borrow();
+            let est = held.as_deref().ok_or("the estimation log was freed before a fit")?;
             let mut fitted =
                 with_iteration_observer(Arc::new(move |_| drop(iterations.send(Tick::Iteration))), || {
                     family.fit(effects, parent, est, val)
@@ -575,24 +606,34 @@ pub fn diagnose(
             }
             Ok(fitted)
         };
-        let result = diagnose_fits(family, est, val, validation_is_tail, rules, &fit);
+        let release = || drop(est.borrow_mut().take());
+        let result = diagnose_fits(
+            family,
+            (&est_id, unexcited),
+            val,
+            validation_is_tail,
+            rules,
+            &fit,
+            &release,
+        );
         drop(tx);
-        result.map_err(|e| locate_error(e, est, val))
+        result.map_err(|e| locate_error(e, &est_id.0, est.borrow().as_deref(), val))
     })
 }
 
 /// A fit's error as the user must read it: which files, and which inputs never moved (the
-/// usual reason a fit cannot be computed), unless the message already names the file.
-fn locate_error(message: String, est: &Log, val: &Log) -> String {
-    if message.starts_with(&est.file) || message.starts_with(&val.file) {
+/// usual reason a fit cannot be computed), unless the message already names the file. `est`
+/// is `None` once the estimation log was freed (its inputs are then not checked).
+fn locate_error(message: String, est_file: &str, est: Option<&Log>, val: &Log) -> String {
+    if message.starts_with(est_file) || message.starts_with(&val.file) {
         return message;
     }
-    let files = if est.file == val.file {
-        est.file.clone()
+    let files = if est_file == val.file {
+        est_file.to_string()
     } else {
-        format!("{} (validation: {})", est.file, val.file)
+        format!("{est_file} (validation: {})", val.file)
     };
-    let unexcited = unexcited_inputs(est, val);
+    let unexcited = est.map(|est| unexcited_inputs(est, val)).unwrap_or_default();
     if unexcited.is_empty() {
         format!("{files}: {message}")
     } else {
@@ -616,7 +657,9 @@ fn without_series(mut candidates: Vec<Candidate>) -> Vec<Candidate> {
 /// `index` of (so far) `total`, and reports it.
 type FitOne<'a> = dyn Fn(&[&str], Option<&Fit>, usize, usize) -> Result<Fit, String> + 'a;
 
-/// The diagnosis proper; `fit` calibrates one model (and reports it).
+/// The diagnosis proper; `fit` calibrates one model (and reports it). The estimation log is
+/// reached only through `fit` (here its name, length and unexcited inputs), and
+/// `release_estimation` frees it once the last fit is done.
 ///
 /// 1. The baseline, its residual tests and the noise floor.
 /// 2. Forward selection: each remaining catalogue effect is fitted on top of the model so far
@@ -628,11 +671,12 @@ type FitOne<'a> = dyn Fn(&[&str], Option<&Fit>, usize, usize) -> Result<Fit, Str
 ///    carries no material structure; else `unexplained`, with where the remainder lives.
 fn diagnose_fits(
     family: &dyn Family,
-    est: &Log,
+    (est_id, unexcited): (&(String, usize), Vec<String>),
     val: &Log,
     validation_is_tail: bool,
     rules: &Rules,
     fit: &FitOne,
+    release_estimation: &dyn Fn(),
 ) -> Result<Diagnosis, String> {
     let mut total = 1 + family.effects().len();
     let mut index = 1;
@@ -906,6 +950,8 @@ fn diagnose_fits(
     let candidates = rounds.next().map(|r| r.candidates).unwrap_or_default();
     let rounds: Vec<Round> = rounds.collect();
 
+    // The fits are done: what remains reads the validation log only.
+    release_estimation();
     // Made after the fits, not held through them (the families' caches they read hold the
     // baseline from its fit).
     let regressors = family.regressors(val);
@@ -982,7 +1028,7 @@ fn diagnose_fits(
         plant: family.plant(),
         output: family.output().to_string(),
         formulation: family.formulation().to_string(),
-        estimation: (est.file.clone(), est.len()),
+        estimation: est_id.clone(),
         validation: (val.file.clone(), val.len()),
         validation_is_tail,
         baseline,
@@ -1006,7 +1052,7 @@ fn diagnose_fits(
         remainder_cross: rest.cross,
         remainder_grouped: rest.grouped,
         evidence,
-        unexcited: unexcited_inputs(est, val),
+        unexcited,
     })
 }
 

@@ -486,15 +486,22 @@ pub struct Inputs<'a> {
 /// Centred moving average over `seconds` (shorter at the ends).
 pub fn moving_average(y: &[f64], seconds: f64, dt_s: f64) -> Vec<f64> {
     let half = (0.5 * seconds / dt_s).round() as usize;
-    let mut prefix = Vec::with_capacity(y.len() + 1);
-    prefix.push(0.0);
-    for v in y {
-        prefix.push(prefix.last().copied().unwrap_or(0.0) + v);
-    }
+    // The window's ends only move forward: the prefix sums at both ends are accumulated as
+    // they go (the same additions, in the same order, as a prefix array, which would be a
+    // second series of the log's length).
+    let (mut at_a, mut at_b) = ((0usize, 0.0f64), (0usize, 0.0f64));
+    let prefix_to = |(i, sum): &mut (usize, f64), j: usize| {
+        while *i < j {
+            *sum += y[*i];
+            *i += 1;
+        }
+        *sum
+    };
     (0..y.len())
         .map(|k| {
             let (a, b) = (k.saturating_sub(half), (k + half + 1).min(y.len()));
-            (prefix[b] - prefix[a]) / (b - a) as f64
+            let (pa, pb) = (prefix_to(&mut at_a, a), prefix_to(&mut at_b, b));
+            (pb - pa) / (b - a) as f64
         })
         .collect()
 }
@@ -732,7 +739,7 @@ impl VacuumFamily {
                 }
             }
             let valve = best.ok_or("no valve map could be fitted to the logged pressure")?.1;
-            let (rod, it) = self.rod_map_guess(est, &valve)?;
+            let (rod, it) = self.rod_map_guess(est, &data.io, &valve)?;
             iterations += it;
             model = rod;
         }
@@ -881,8 +888,8 @@ impl VacuumFamily {
 
     /// Linear and arctan position maps fitted to the centre of the (pressure, position) band;
     /// the arctan is kept only if it lowers the error by 20 % and the line misses by > 1 %.
-    fn rod_map_guess(&self, log: &Log, model: &VacuumModel) -> Result<(VacuumModel, usize), String> {
-        let io = Inputs::from_log(log)?;
+    /// `io` are the log's inputs as the fits use them (computed once per calibration).
+    fn rod_map_guess(&self, log: &Log, io: &Inputs, model: &VacuumModel) -> Result<(VacuumModel, usize), String> {
         let x = log.col("x_pct").ok_or("no x_pct column")?;
         let p = log.col("p_act_kPa").ok_or("no p_act_kPa column")?;
         // The band's centre per 1 kPa of map pressure, from every sample off the stops: ramps
@@ -898,29 +905,25 @@ impl VacuumFamily {
         let mut pts: Vec<(f64, f64)> = Vec::new();
         for limit_kpa in [3.0, 8.0, f64::INFINITY] {
             let slow = |k: usize| (p[(k + w).min(n - 1)] - p[k.saturating_sub(w)]).abs() < limit_kpa;
-            let mut raw: Vec<(f64, f64)> = (0..n)
-                .filter(|&k| x[k] > 1.0 && x[k] < 99.0 && slow(k))
-                .map(|k| (model.p_amb_ref_kpa - (io.p_amb[k] - p[k]), x[k]))
-                .collect();
-            raw.sort_by(|a, b| a.0.total_cmp(&b.0));
+            // The positions per 1 kPa bin of map pressure, in ascending bins (a list of every
+            // (pressure, position) pair sorted by pressure was 16 B a sample of the log).
+            let mut bins: std::collections::BTreeMap<i64, Vec<f64>> = std::collections::BTreeMap::new();
+            for k in (0..n).filter(|&k| x[k] > 1.0 && x[k] < 99.0 && slow(k)) {
+                let map_p = model.p_amb_ref_kpa - (io.p_amb[k] - p[k]);
+                if map_p.is_finite() {
+                    bins.entry(map_p.floor() as i64).or_default().push(x[k]);
+                }
+            }
             pts.clear();
-            let mut i = 0;
-            while i < raw.len() {
-                let bin = raw[i].0.floor();
-                let j = raw[i..]
-                    .iter()
-                    .position(|q| q.0.floor() != bin)
-                    .map_or(raw.len(), |o| i + o);
-                if j - i >= 5 {
-                    let mut xs: Vec<f64> = raw[i..j].iter().map(|q| q.1).collect();
+            for (bin, mut xs) in bins {
+                if xs.len() >= 5 {
                     xs.sort_by(f64::total_cmp);
                     let q = |f: f64| xs[((xs.len() - 1) as f64 * f).round() as usize];
                     // Bins where the band touches a stop are clipped on one side: left out.
                     if q(0.05) > 3.0 && q(0.95) < 97.0 {
-                        pts.push((bin + 0.5, 0.5 * (q(0.05) + q(0.95))));
+                        pts.push((bin as f64 + 0.5, 0.5 * (q(0.05) + q(0.95))));
                     }
                 }
-                i = j;
             }
             if pts.len() >= 10 {
                 break;
@@ -1148,6 +1151,26 @@ impl Family for VacuumFamily {
 mod tests {
     use super::*;
     use model_core::vacuum::{VacuumInputs, VacuumValveActuator};
+
+    #[test]
+    fn moving_average_is_the_prefix_sum_average_bit_for_bit() {
+        let y: Vec<f64> = (0..5000)
+            .map(|k| 100.0 + (k as f64 * 0.37).sin() * 3.1 + (k % 7) as f64 * 0.01)
+            .collect();
+        for (seconds, dt) in [(1.0, 0.01), (0.3, 0.001), (0.05, 0.01), (100.0, 0.01)] {
+            let half = (0.5 * seconds / dt).round() as usize;
+            let mut prefix = vec![0.0];
+            for v in &y {
+                prefix.push(prefix.last().unwrap() + v);
+            }
+            let got = moving_average(&y, seconds, dt);
+            for (k, g) in got.iter().enumerate() {
+                let (a, b) = (k.saturating_sub(half), (k + half + 1).min(y.len()));
+                let want = (prefix[b] - prefix[a]) / (b - a) as f64;
+                assert_eq!(g.to_bits(), want.to_bits(), "{seconds} s, sample {k}");
+            }
+        }
+    }
 
     /// Bench-like inputs: steps and ramps at changing voltage.
     fn inputs(n: usize) -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>) {
