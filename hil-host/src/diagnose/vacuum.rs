@@ -1157,7 +1157,7 @@ mod tests {
         let y: Vec<f64> = (0..5000)
             .map(|k| 100.0 + (k as f64 * 0.37).sin() * 3.1 + (k % 7) as f64 * 0.01)
             .collect();
-        for (seconds, dt) in [(1.0, 0.01), (0.3, 0.001), (0.05, 0.01), (100.0, 0.01)] {
+        for (seconds, dt) in [(1.0f64, 0.01f64), (0.3, 0.001), (0.05, 0.01), (100.0, 0.01)] {
             let half = (0.5 * seconds / dt).round() as usize;
             let mut prefix = vec![0.0];
             for v in &y {
