@@ -111,8 +111,9 @@ struct Data<'a> {
     volt: &'a [f64],
     /// Empty when the loop is not used (open-loop windows).
     reference: &'a [f64],
-    /// Crank revolutions from the start of the log to each sample.
-    revs: Vec<f64>,
+    /// Crank revolutions from the start of the log to each sample: made when a belt model or
+    /// the order spectrum first asks (`Data::revs`), not for every fit.
+    revs: std::sync::OnceLock<Vec<f64>>,
     drive: Drive,
     /// Phase resolution of the measurement (0: not quantized).
     lsb: f64,
@@ -142,6 +143,19 @@ fn detect_resolution(y: &[f64]) -> f64 {
 }
 
 impl<'a> Data<'a> {
+    /// Crank revolutions from the start of the log to each sample.
+    fn revs(&self) -> &[f64] {
+        self.revs.get_or_init(|| {
+            let mut revs = Vec::with_capacity(self.rpm.len());
+            let mut theta = 0.0;
+            for &n in self.rpm {
+                revs.push(theta);
+                theta += n.max(0.0) / 60.0 * self.dt;
+            }
+            revs
+        })
+    }
+
     fn from_log(log: &'a Log, window_s: f64, ramp_lsb: f64) -> Result<Self, String> {
         let col = |name: &str| log.col(name).ok_or_else(|| format!("{}: no `{name}` column", log.file));
         let y = col("phase_deg")?;
@@ -154,12 +168,6 @@ impl<'a> Data<'a> {
         let dt = log.dt_s;
         let meta = |k: &str| log.meta_f64(k).map_err(|e| e.to_string());
         let lsb = detect_resolution(y);
-        let mut revs = Vec::with_capacity(y.len());
-        let mut theta = 0.0;
-        for &n in rpm {
-            revs.push(theta);
-            theta += n.max(0.0) / 60.0 * dt;
-        }
         let (ymin, ymax) = y
             .iter()
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
@@ -193,7 +201,7 @@ impl<'a> Data<'a> {
             rpm,
             volt,
             reference,
-            revs,
+            revs: std::sync::OnceLock::new(),
             drive,
             lsb,
             ramp: ramp_lsb,
@@ -278,7 +286,8 @@ impl Model {
 fn simulate(m: &Model, d: &Data, out: &mut [f64]) -> Result<(), String> {
     let n = d.y.len().min(out.len());
     let belt_on = m.belt_on();
-    let belt = |k: usize| if belt_on { m.belt_deg(d.revs[k]) } else { 0.0 };
+    let revs: &[f64] = if belt_on { d.revs() } else { &[] };
+    let belt = |k: usize| if belt_on { m.belt_deg(revs[k]) } else { 0.0 };
     let mut x1 = (d.y[0] - belt(0)).clamp(d.stop_lo, d.stop_hi);
     let mut x2 = 0.0;
     let mut u_held = 0.0;
@@ -624,12 +633,12 @@ impl EvvtFamily {
                     *e = -*e;
                 }
                 let (olo, ohi) = self.order_range(d);
-                let (order, _) = order_peak(&resid, &d.revs, olo, ohi).ok_or(
+                let (order, _) = order_peak(&resid, d.revs(), olo, ohi).ok_or(
                     "no order spectrum: the log is too short or its sample rate too low for orders above the minimum",
                 )?;
-                let (c, s) = project_sinusoid(&resid, &d.revs, order);
+                let (c, s) = project_sinusoid(&resid, d.revs(), order);
                 // The order is refined within the peak's main lobe (± 1/total revolutions).
-                let lobe = 1.0 / d.revs.last().copied().unwrap_or(1.0).max(1.0);
+                let lobe = 1.0 / d.revs().last().copied().unwrap_or(1.0).max(1.0);
                 (
                     vec![order, c, s],
                     vec![order - lobe, -20.0, -20.0],
@@ -674,7 +683,7 @@ impl EvvtFamily {
             };
             simulate(&off, d, &mut out)?;
             let resid: Vec<f64> = d.y.iter().zip(&out).map(|(y, p)| y - p).collect();
-            let (c, s) = project_sinusoid(&resid, &d.revs, m.belt_order);
+            let (c, s) = project_sinusoid(&resid, d.revs(), m.belt_order);
             let amp = m.belt_cos.hypot(m.belt_sin);
             let phase = c.atan2(s);
             let on = Model {
@@ -827,7 +836,7 @@ impl Family for EvvtFamily {
             let (_, ohi) = self.order_range(&d);
             let sinusoid = |o: f64, f: fn(f64) -> f64| {
                 Cow::Owned(
-                    d.revs
+                    d.revs()
                         .iter()
                         .map(|th| f(2.0 * PI * (o * th).fract()))
                         .collect::<Vec<f64>>(),
@@ -841,7 +850,7 @@ impl Family for EvvtFamily {
                 let mut pred = vec![0.0; d.y.len()];
                 if simulate(&ctx, &d, &mut pred).is_ok() {
                     let resid: Vec<f64> = d.y.iter().zip(&pred).map(|(y, p)| y - p).collect();
-                    if let Some((o, amp)) = order_peak(&resid, &d.revs, self.min_order, ohi) {
+                    if let Some((o, amp)) = order_peak(&resid, d.revs(), self.min_order, ohi) {
                         out.push((format!("sin(2π·{o:.3}·crank revolutions) (order-spectrum peak of the baseline residual, {amp:.2} deg)"), sinusoid(o, f64::sin)));
                         out.push((
                             format!("cos(2π·{o:.3}·crank revolutions) (order-spectrum peak)"),
