@@ -576,6 +576,8 @@ impl EcuLink for NativeLink {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Unit {
     pub ehvva: EhvvaParams,
+    /// The cam phaser.
+    pub evvt: EvvtParams,
     /// LPT, HPT, HPC.
     pub vacuum: [VacuumParams; 3],
 }
@@ -584,6 +586,7 @@ impl Default for Unit {
     fn default() -> Self {
         Self {
             ehvva: EhvvaParams::paper_default(),
+            evvt: EvvtParams::default(),
             vacuum: [VacuumParams::lpt(), VacuumParams::hpt(), VacuumParams::hpc()],
         }
     }
@@ -868,7 +871,7 @@ pub fn run_with_unit(
     .map_err(|e| err("EHVVA plant", &e))?;
     let mut coil = RlCoil::<f64>::new(&solenoid);
     let (mut pilot_armed, mut pilot_dropped) = (false, false);
-    let mut evvt = EvvtPlant::<f32>::new(&EvvtParams::default()).map_err(|e| err("EVVT plant", &e))?;
+    let mut evvt = EvvtPlant::<f32>::new(&unit.evvt).map_err(|e| err("EVVT plant", &e))?;
     evvt.reset(sc.cam_phase_setpoint_deg.at(0.0) as f32);
     let [lpt, hpt, hpc] = &unit.vacuum;
     let mut vacuum = VacuumSystem::<f32>::new(lpt, hpt, hpc, &VacuumTankParams::paper(), sc.p_tank_initial_kpa)

@@ -472,3 +472,43 @@ fn the_command_line_calibrates_and_runs_the_unit_with_its_image() {
     assert!(err.contains("calibration image corrupted"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `run --unit` on a generated EVVT unit: its plant is the one the generator drew (α, β at the
+/// nominal point as in the truth), and a unit whose advance is slower (the `direction` effect)
+/// tracks the sweep's advance step worse than the same unit made symmetric. A unit with a
+/// command delay (outside the catalogue; `run`'s plant has none) is refused by name.
+#[test]
+fn an_evvt_unit_runs_from_its_truth_and_its_slow_advance_shows() {
+    use model_core::evvt::EvvtPlant;
+    let dir = workdir("evvt-unit");
+    let case = generate::generate(Plant::Evvt, "direction", 4).unwrap();
+    let (_, truth) = write_case(&case, &dir.join("unit"));
+    let get = |k: &str| case.truth.iter().find(|(n, _)| n == k).unwrap().1;
+    let unit = calibrate::unit_from_truth(&truth).unwrap();
+    assert_eq!(unit.evvt.advance_alpha_factor, get("advance_alpha_factor"));
+    let (a, b) = EvvtPlant::<f64>::new(&unit.evvt)
+        .unwrap()
+        .alpha_beta(get("nominal_engine_rpm"), get("nominal_voltage_V"));
+    assert!(
+        (a / get("alpha_at_nominal_deg_per_s2_rpm") - 1.0).abs() < 1e-12,
+        "alpha {a}"
+    );
+    assert!((b / get("beta_at_nominal_per_s") - 1.0).abs() < 1e-12, "beta {b}");
+
+    let slow = run_unit(&sweep(), None, EcuCoreConfig::default(), unit).unwrap();
+    let mut symmetric = unit;
+    symmetric.evvt.advance_alpha_factor = 1.0;
+    let sym = run_unit(&sweep(), None, EcuCoreConfig::default(), symmetric).unwrap();
+    assert!(
+        slow.evvt_rms_error_deg.is_finite() && slow.evvt_rms_error_deg > 1.02 * sym.evvt_rms_error_deg,
+        "slow advance {} vs symmetric {}",
+        slow.evvt_rms_error_deg,
+        sym.evvt_rms_error_deg
+    );
+
+    let delayed = generate::generate(Plant::Evvt, "command-delay", 4).unwrap();
+    let (_, truth) = write_case(&delayed, &dir.join("delayed"));
+    let e = calibrate::unit_from_truth(&truth).unwrap_err();
+    assert!(e.contains("command_delay_s") && e.contains("truth.json"), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

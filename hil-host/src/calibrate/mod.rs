@@ -483,9 +483,13 @@ pub fn unit_from_truth(path: &Path) -> Result<Unit, String> {
             let fitted: Vec<(String, f64)> = params.into_iter().filter(|(n, _)| !n.starts_with("preset_")).collect();
             unit.vacuum[k] = vacuum_params(k, cause, &fitted).map_err(|e| bad(&e))?;
         }
+        "evvt" => {
+            let get = |n: &str| params.iter().find(|(k, _)| k == n).map(|(_, v)| *v);
+            unit.evvt = crate::generate::evvt::unit_from_truth(&get).map_err(|e| bad(&e))?;
+        }
         other => {
             return Err(bad(&format!(
-                "plant `{other}`: run simulates generated ehvva and vacuum units"
+                "plant `{other}`: run simulates generated ehvva, evvt and vacuum units"
             )))
         }
     }

@@ -72,27 +72,102 @@ struct Point {
     u_batt_v: f64,
 }
 
+/// What makes a generated EVVT unit: the scales of the designed table, the nominal point and
+/// the catalogue effects' values (truth.json records them under these names).
+#[derive(Clone, Copy, Debug)]
+struct UnitValues {
+    alpha_scale: f64,
+    beta_scale: f64,
+    nominal_voltage_v: f64,
+    nominal_engine_rpm: f64,
+    voltage_effect_scale: f64,
+    engine_speed_effect_scale: f64,
+    advance_alpha_factor: f64,
+    belt_amplitude_deg: f64,
+    belt_order: f64,
+    belt_phase_rad: f64,
+}
+
+/// The plant of a unit: the designed table scaled; without the speed or voltage effect the
+/// plant is LTI, one α and β (the scaled table at the nominal point, written as a uniform
+/// table: what the baseline model assumes).
+fn unit_params(v: &UnitValues) -> EvvtParams {
+    let mut table = EvvtLpvTable::PAPER_DESIGN;
+    for row in table.alpha_deg_per_s2_rpm.iter_mut() {
+        row.iter_mut().for_each(|a| *a *= v.alpha_scale);
+    }
+    for row in table.beta_per_s.iter_mut() {
+        row.iter_mut().for_each(|b| *b *= v.beta_scale);
+    }
+    let mut p = EvvtParams {
+        lpv: table,
+        voltage_effect_scale: v.voltage_effect_scale,
+        engine_speed_effect_scale: v.engine_speed_effect_scale,
+        nominal_voltage_v: v.nominal_voltage_v,
+        nominal_engine_rpm: v.nominal_engine_rpm,
+        advance_alpha_factor: v.advance_alpha_factor,
+        belt_vibration_amplitude_deg: v.belt_amplitude_deg,
+        ..EvvtParams::default()
+    };
+    if v.belt_amplitude_deg != 0.0 {
+        p.belt_vibration_order = v.belt_order;
+        p.belt_vibration_phase_rad = v.belt_phase_rad;
+    }
+    if p.voltage_effect_scale == 0.0 && p.engine_speed_effect_scale == 0.0 {
+        let plant = EvvtPlant::<f64>::new(&p).ok();
+        let (a, b) = plant.map_or((0.5, 6.0), |pl| {
+            pl.alpha_beta(p.nominal_engine_rpm, p.nominal_voltage_v)
+        });
+        p.lpv = EvvtLpvTable::uniform(a, b);
+    }
+    p
+}
+
+/// The plant of the unit a generated truth.json describes (its `params`, looked up by `get`),
+/// as [`draw_params`] made it for the estimation run; `hil-host run --unit` simulates it. A
+/// truth with physics outside the catalogue the plant does not model (a command delay) is
+/// refused by name.
+pub fn unit_from_truth(get: &dyn Fn(&str) -> Option<f64>) -> Result<EvvtParams, String> {
+    let need = |k: &str| get(k).ok_or_else(|| format!("params.{k} missing"));
+    if get("command_delay_s").is_some() {
+        return Err(
+            "params.command_delay_s: the EVVT plant of `run` has no command delay (physics outside the catalogue)"
+                .into(),
+        );
+    }
+    let v = UnitValues {
+        alpha_scale: need("alpha_scale_of_design")?,
+        beta_scale: need("beta_scale_of_design")?,
+        nominal_voltage_v: need("nominal_voltage_V")?,
+        nominal_engine_rpm: need("nominal_engine_rpm")?,
+        voltage_effect_scale: get("voltage_effect_scale").unwrap_or(0.0),
+        engine_speed_effect_scale: get("engine_speed_effect_scale").unwrap_or(0.0),
+        advance_alpha_factor: get("advance_alpha_factor").unwrap_or(1.0),
+        belt_amplitude_deg: get("belt_amplitude_deg").unwrap_or(0.0),
+        belt_order: get("belt_order").unwrap_or(0.0),
+        belt_phase_rad: get("belt_phase_rad").unwrap_or(0.0),
+    };
+    let p = unit_params(&v);
+    EvvtPlant::<f64>::new(&p).map_err(|e| format!("the unit's EVVT plant: {e:?}"))?;
+    Ok(p)
+}
+
 /// Draws the plant for the estimation and the validation run (they differ only in the belt
 /// disturbance's phase) and the truth.
 fn draw_params(effects: &[&str], rng: &mut Rng) -> (EvvtParams, EvvtParams, Vec<(String, f64)>) {
     let alpha_scale = rng.uniform(0.6, 1.3);
     let beta_scale = rng.uniform(0.7, 1.3);
-    let mut table = EvvtLpvTable::PAPER_DESIGN;
-    for row in table.alpha_deg_per_s2_rpm.iter_mut() {
-        row.iter_mut().for_each(|a| *a *= alpha_scale);
-    }
-    for row in table.beta_per_s.iter_mut() {
-        row.iter_mut().for_each(|b| *b *= beta_scale);
-    }
-    let mut p = EvvtParams {
-        lpv: table,
-        voltage_effect_scale: 0.0,
-        engine_speed_effect_scale: 0.0,
+    let mut v = UnitValues {
+        alpha_scale,
+        beta_scale,
         nominal_voltage_v: rng.uniform(12.0, 14.0),
         nominal_engine_rpm: 1100.0,
+        voltage_effect_scale: 0.0,
+        engine_speed_effect_scale: 0.0,
         advance_alpha_factor: 1.0,
-        belt_vibration_amplitude_deg: 0.0,
-        ..EvvtParams::default()
+        belt_amplitude_deg: 0.0,
+        belt_order: 0.0,
+        belt_phase_rad: 0.0,
     };
     let mut truth = vec![
         ("alpha_scale_of_design".to_string(), alpha_scale),
@@ -102,43 +177,35 @@ fn draw_params(effects: &[&str], rng: &mut Rng) -> (EvvtParams, EvvtParams, Vec<
     for effect in effects {
         match *effect {
             "supply-voltage" => {
-                p.nominal_engine_rpm = rng.uniform(1200.0, 1400.0);
-                p.voltage_effect_scale = rng.uniform(0.7, 1.0);
-                truth.push(("voltage_effect_scale".into(), p.voltage_effect_scale));
+                v.nominal_engine_rpm = rng.uniform(1200.0, 1400.0);
+                v.voltage_effect_scale = rng.uniform(0.7, 1.0);
+                truth.push(("voltage_effect_scale".into(), v.voltage_effect_scale));
             }
             "engine-speed" => {
-                p.nominal_voltage_v = rng.uniform(9.5, 10.0);
-                p.engine_speed_effect_scale = rng.uniform(0.7, 1.0);
-                truth.push(("engine_speed_effect_scale".into(), p.engine_speed_effect_scale));
+                v.nominal_voltage_v = rng.uniform(9.5, 10.0);
+                v.engine_speed_effect_scale = rng.uniform(0.7, 1.0);
+                truth.push(("engine_speed_effect_scale".into(), v.engine_speed_effect_scale));
             }
             "direction" => {
-                p.advance_alpha_factor = rng.uniform(0.5, 0.75);
-                truth.push(("advance_alpha_factor".into(), p.advance_alpha_factor));
+                v.advance_alpha_factor = rng.uniform(0.5, 0.75);
+                truth.push(("advance_alpha_factor".into(), v.advance_alpha_factor));
             }
             "belt-vibration" => {
-                p.belt_vibration_amplitude_deg = rng.uniform(0.6, 1.5);
-                p.belt_vibration_order = rng.uniform(0.5, 2.0);
-                p.belt_vibration_phase_rad = rng.uniform(-std::f64::consts::PI, std::f64::consts::PI);
+                v.belt_amplitude_deg = rng.uniform(0.6, 1.5);
+                v.belt_order = rng.uniform(0.5, 2.0);
+                v.belt_phase_rad = rng.uniform(-std::f64::consts::PI, std::f64::consts::PI);
                 belt_phase_validation = rng.uniform(-std::f64::consts::PI, std::f64::consts::PI);
                 truth.extend([
-                    ("belt_amplitude_deg".into(), p.belt_vibration_amplitude_deg),
-                    ("belt_order".into(), p.belt_vibration_order),
-                    ("belt_phase_rad".into(), p.belt_vibration_phase_rad),
+                    ("belt_amplitude_deg".into(), v.belt_amplitude_deg),
+                    ("belt_order".into(), v.belt_order),
+                    ("belt_phase_rad".into(), v.belt_phase_rad),
                     ("belt_phase_validation_rad".into(), belt_phase_validation),
                 ]);
             }
             _ => {}
         }
     }
-    // Without the speed or voltage effect the plant is LTI: one α and β, the scaled table at
-    // the nominal point, written as a uniform table (what the baseline model assumes).
-    if p.voltage_effect_scale == 0.0 && p.engine_speed_effect_scale == 0.0 {
-        let plant = EvvtPlant::<f64>::new(&p).ok();
-        let (a, b) = plant.map_or((0.5, 6.0), |pl| {
-            pl.alpha_beta(p.nominal_engine_rpm, p.nominal_voltage_v)
-        });
-        p.lpv = EvvtLpvTable::uniform(a, b);
-    }
+    let p = unit_params(&v);
     let (a, b) = EvvtPlant::<f64>::new(&p).map_or((f64::NAN, f64::NAN), |pl| {
         pl.alpha_beta(p.nominal_engine_rpm, p.nominal_voltage_v)
     });
@@ -648,5 +715,28 @@ mod tests {
         assert_eq!(a.estimation_csv, b.estimation_csv);
         assert_eq!(a.validation_csv, b.validation_csv);
         assert_ne!(a.estimation_csv, generate("direction", 10).unwrap().estimation_csv);
+    }
+
+    #[test]
+    fn the_unit_of_a_truth_is_the_plant_the_generator_drew() {
+        for effects in [
+            &[][..],
+            &["supply-voltage"][..],
+            &["engine-speed"][..],
+            &["direction"][..],
+            &["belt-vibration"][..],
+            &["supply-voltage", "belt-vibration"][..],
+        ] {
+            for seed in [1, 29] {
+                let (p, _, truth) = draw_params(effects, &mut Rng::new(seed));
+                let get = |k: &str| truth.iter().find(|(n, _)| n == k).map(|(_, v)| *v);
+                assert_eq!(unit_from_truth(&get).unwrap(), p, "{effects:?}, seed {seed}");
+            }
+        }
+        let e = unit_from_truth(&|k: &str| (k == "command_delay_s").then_some(0.04)).unwrap_err();
+        assert!(e.contains("command_delay_s"), "{e}");
+        assert!(unit_from_truth(&|_: &str| None)
+            .unwrap_err()
+            .contains("alpha_scale_of_design"));
     }
 }
