@@ -401,12 +401,14 @@ fn bad_images_logs_and_units_are_refused_by_name() {
     assert!(e.contains("calibration image incomplete"), "{e}");
     // EVVT logs that are not the 3x3 PRBS grid: refused with the reason, nothing written.
     let case = generate::generate(Plant::Evvt, "none", 3).unwrap();
-    let (est, truth) = write_case(&case, &dir.join("evvt"));
+    let (est, _) = write_case(&case, &dir.join("evvt"));
     let e = calibrate::calibrate(&[est], &mut |_| {}).unwrap_err();
     assert!(e.contains("estimation.csv") || e.contains("EVVT"), "{e}");
-    // A unit run does not simulate: named.
+    // A unit run does not simulate (the positioner is no ECU actuator): named.
+    let case = generate::generate(Plant::Positioner, "none", 3).unwrap();
+    let (_, truth) = write_case(&case, &dir.join("positioner"));
     let e = calibrate::unit_from_truth(&truth).unwrap_err();
-    assert!(e.contains("evvt"), "{e}");
+    assert!(e.contains("positioner") && e.contains("truth.json"), "{e}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 
