@@ -514,3 +514,31 @@ fn an_evvt_unit_runs_from_its_truth_and_its_slow_advance_shows() {
     assert!(e.contains("command_delay_s") && e.contains("truth.json"), "{e}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `calibrate` on an EVVT bench recording over nine jittered operating points (one log, the
+/// test points 806-856 rpm apart by more than the 50 rpm grouping): the segments are
+/// identified and grouped into the 3×3 table, whose α and β are the unit's (an LTI unit: every
+/// cell the truth's α and β at the nominal point).
+#[test]
+fn an_evvt_recording_calibrates_the_units_table() {
+    let dir = workdir("evvt-recording");
+    let case = generate::generate(Plant::Evvt, "none", 9).unwrap();
+    let (est, _) = write_case(&case, &dir.join("unit"));
+    let get = |k: &str| case.truth.iter().find(|(n, _)| n == k).unwrap().1;
+    let outcome = calibrate::calibrate(std::slice::from_ref(&est), &mut |_| {}).unwrap();
+    let t = outcome.calibration.evvt_lpv;
+    for i in 0..3 {
+        for j in 0..3 {
+            let (a, b) = (t.alpha_deg_per_s2_rpm[i][j], t.beta_per_s[i][j]);
+            assert!(
+                (a / get("alpha_at_nominal_deg_per_s2_rpm") - 1.0).abs() < 0.05,
+                "alpha {a} in {t:?}"
+            );
+            assert!(
+                (b / get("beta_at_nominal_per_s") - 1.0).abs() < 0.10,
+                "beta {b} in {t:?}"
+            );
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -240,9 +240,12 @@ fn evvt(logs: &[Log], out: &mut Outcome, progress: &mut dyn FnMut(&str)) -> Resu
     use crate::identify::evvt as id;
     let opts = id::EvvtIdentifyOptions::default();
     let mut points = Vec::new();
+    // Each log may be one operating point (the paper's PRBS experiment) or a recording over
+    // several (segmented by engine speed and voltage, transitions left out).
     for log in logs {
         progress(&format!("identify evvt: {}", log.file));
-        points.push(id::identify_log(log, &opts).map_err(|e| format!("{}: {e}", log.file))?);
+        let rec = id::identify_recording(log, &opts).map_err(|e| format!("{}: {e}", log.file))?;
+        points.extend(rec.segments);
     }
     let table = id::lpv_table(&points).map_err(|e| format!("EVVT logs ({}): {e}", names(logs).join(", ")))?;
     out.calibration.evvt_lpv = table;

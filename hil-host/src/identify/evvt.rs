@@ -886,12 +886,36 @@ fn breakpoints(values: &[f64], tol: f64) -> Vec<f64> {
     groups.iter().map(|g| mean(g)).collect()
 }
 
+/// Three breakpoints from values that form three clusters: by `tol` as [`breakpoints`], or,
+/// where jitter spreads a cluster wider than `tol` (a bench's test points 806, 838 and 856
+/// rpm), split at the two largest gaps when every cluster is narrower than half the smaller
+/// of those gaps (clearly separated).
+fn breakpoints3(values: &[f64], tol: f64) -> Vec<f64> {
+    let by_tol = breakpoints(values, tol);
+    if by_tol.len() == 3 || values.len() < 3 {
+        return by_tol;
+    }
+    let mut v = values.to_vec();
+    v.sort_by(f64::total_cmp);
+    let mut gaps: Vec<(f64, usize)> = v.windows(2).enumerate().map(|(i, w)| (w[1] - w[0], i + 1)).collect();
+    gaps.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let (mut cut, smaller_gap) = ([gaps[0].1, gaps[1].1], gaps[1].0);
+    cut.sort_unstable();
+    let clusters = [&v[..cut[0]], &v[cut[0]..cut[1]], &v[cut[1]..]];
+    let separated = clusters.iter().all(|c| c[c.len() - 1] - c[0] < 0.5 * smaller_gap);
+    if separated {
+        clusters.iter().map(|c| mean(c)).collect()
+    } else {
+        by_tol
+    }
+}
+
 /// The model-core table from the points when they form a 3×3 grid of engine speed (groups
-/// within 5 % of 1000 rpm... 50 rpm) and battery voltage (groups within 0.5 V); several
+/// within 50 rpm, or split at the two largest gaps: [`breakpoints3`]) and battery voltage (groups within 0.5 V, likewise); several
 /// points in a cell are averaged. The breakpoints are the group means.
 pub fn lpv_table(points: &[EvvtPointResult]) -> Result<EvvtLpvTable, String> {
-    let speeds = breakpoints(&points.iter().map(|p| p.engine_rpm).collect::<Vec<_>>(), 50.0);
-    let volts = breakpoints(&points.iter().map(|p| p.u_batt_v).collect::<Vec<_>>(), 0.5);
+    let speeds = breakpoints3(&points.iter().map(|p| p.engine_rpm).collect::<Vec<_>>(), 50.0);
+    let volts = breakpoints3(&points.iter().map(|p| p.u_batt_v).collect::<Vec<_>>(), 0.5);
     if speeds.len() != 3 || volts.len() != 3 {
         return Err(format!(
             "the points give {} engine speeds and {} battery voltages; model-core's EvvtLpvTable needs a 3×3 grid",
