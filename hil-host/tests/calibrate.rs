@@ -399,11 +399,12 @@ fn bad_images_logs_and_units_are_refused_by_name() {
     std::fs::write(&p, &image[..IMAGE_BYTES / 2]).unwrap();
     let e = calibrate::ecu_config_from_image(&p).unwrap_err();
     assert!(e.contains("calibration image incomplete"), "{e}");
-    // EVVT logs that are not the 3x3 PRBS grid: refused with the reason, nothing written.
-    let case = generate::generate(Plant::Evvt, "none", 3).unwrap();
-    let (est, _) = write_case(&case, &dir.join("evvt"));
-    let e = calibrate::calibrate(&[est], &mut |_| {}).unwrap_err();
-    assert!(e.contains("estimation.csv") || e.contains("EVVT"), "{e}");
+    // EVVT logs that do not cover the 3x3 grid (one operating point): refused with the reason.
+    let (name, text) = generate::evvt::identification_grid(5).unwrap().remove(0);
+    let one_point = dir.join(name);
+    std::fs::write(&one_point, text).unwrap();
+    let e = calibrate::calibrate(&[one_point], &mut |_| {}).unwrap_err();
+    assert!(e.contains("EVVT logs") && e.contains("3×3 grid"), "{e}");
     // A unit run does not simulate (the positioner is no ECU actuator): named.
     let case = generate::generate(Plant::Positioner, "none", 3).unwrap();
     let (_, truth) = write_case(&case, &dir.join("positioner"));
