@@ -24,7 +24,7 @@
 use std::borrow::Cow;
 use std::collections::hash_map::DefaultHasher;
 use std::hash::{Hash, Hasher};
-use std::sync::{Arc, Mutex};
+use std::sync::Mutex;
 
 use model_core::ehvva::{EhvvaInputs, EhvvaParams, EhvvaPlant, EhvvaReduced, EhvvaTables};
 
@@ -875,11 +875,7 @@ impl Family for EhvvaFamily {
         measured[..skip].copy_from_slice(&lift[..skip]);
         predicted[..skip].copy_from_slice(&lift[..skip]);
         drop(dv);
-        // Every fit measures the same validation output: the parent's copy is shared.
-        let measured: Arc<[f64]> = match parent {
-            Some(f) if f.measured[..] == measured[..] => f.measured.clone(),
-            _ => measured.into(),
-        };
+        let measured = Fit::shared_measured(parent, &measured);
         let params = knobs.iter().zip(&r.x).map(|(k, v)| (k.name.to_string(), *v)).collect();
         let names: Vec<String> = knobs.iter().map(|k| k.name.to_string()).collect();
         let lo: Vec<f64> = knobs.iter().map(|k| k.lo).collect();

@@ -1044,11 +1044,7 @@ impl Family for VacuumFamily {
         let measured = val
             .col("x_pct")
             .ok_or_else(|| format!("{}: no `x_pct` column", val.file))?;
-        // Every fit measures the same validation output: the parent's copy is shared.
-        let measured: std::sync::Arc<[f64]> = match parent {
-            Some(f) if f.measured[..] == measured[..] => f.measured.clone(),
-            _ => measured.into(),
-        };
+        let measured = Fit::shared_measured(parent, measured);
         let mut fit = Fit::with_shared(&Fit::label(effects), model.named(&names), ci95, measured, x, iterations);
         fit.est_cost = last.cost;
         fit.convergence = format!(
