@@ -110,9 +110,6 @@ struct Data<'a> {
     volt: &'a [f64],
     /// Empty when the loop is not used (open-loop windows).
     reference: &'a [f64],
-    /// Crank revolutions from the start of the log to each sample: made when a belt model or
-    /// the order spectrum first asks (`Data::revs`), not for every fit.
-    revs: std::sync::OnceLock<Vec<f64>>,
     drive: Drive,
     /// Phase resolution of the measurement (0: not quantized).
     lsb: f64,
@@ -142,16 +139,15 @@ fn detect_resolution(y: &[f64]) -> f64 {
 }
 
 impl<'a> Data<'a> {
-    /// Crank revolutions from the start of the log to each sample.
-    fn revs(&self) -> &[f64] {
-        self.revs.get_or_init(|| {
-            let mut revs = Vec::with_capacity(self.rpm.len());
-            let mut theta = 0.0;
-            for &n in self.rpm {
-                revs.push(theta);
-                theta += n.max(0.0) / 60.0 * self.dt;
-            }
-            revs
+    /// Crank revolutions from the start of the log to each sample, integrated from the engine
+    /// speed as they are read: a held series of them was 8 B a row of a long record's peak,
+    /// and a pass of the order spectrum or a belt simulation costs far more than the sum.
+    fn revs(&self) -> impl Iterator<Item = f64> + Clone + '_ {
+        let dt = self.dt;
+        self.rpm.iter().scan(0.0, move |theta: &mut f64, &n| {
+            let at = *theta;
+            *theta += n.max(0.0) / 60.0 * dt;
+            Some(at)
         })
     }
 
@@ -200,7 +196,6 @@ impl<'a> Data<'a> {
             rpm,
             volt,
             reference,
-            revs: std::sync::OnceLock::new(),
             drive,
             lsb,
             ramp: ramp_lsb,
@@ -285,15 +280,23 @@ impl Model {
 fn simulate(m: &Model, d: &Data, out: &mut [f64]) -> Result<(), String> {
     let n = d.y.len().min(out.len());
     let belt_on = m.belt_on();
-    let revs: &[f64] = if belt_on { d.revs() } else { &[] };
-    let belt = |k: usize| if belt_on { m.belt_deg(revs[k]) } else { 0.0 };
-    let mut x1 = (d.y[0] - belt(0)).clamp(d.stop_lo, d.stop_hi);
+    // The revolutions start at 0 (`Data::revs`).
+    let mut revs = d.revs();
+    let mut belt = || {
+        if belt_on {
+            m.belt_deg(revs.next().unwrap_or(0.0))
+        } else {
+            0.0
+        }
+    };
+    let b0 = if belt_on { m.belt_deg(0.0) } else { 0.0 };
+    let mut x1 = (d.y[0] - b0).clamp(d.stop_lo, d.stop_hi);
     let mut x2 = 0.0;
     let mut u_held = 0.0;
     let mut key = (f64::NAN, f64::NAN);
     let mut z = zoh(0.0, 0.0, d.dt);
     for (k, slot) in out.iter_mut().enumerate().take(n) {
-        let b = belt(k);
+        let b = belt();
         if let Drive::OpenLoop { window } = d.drive {
             if k % window == 0 {
                 x1 = (d.y[k] - b).clamp(d.stop_lo, d.stop_hi);
@@ -502,7 +505,7 @@ impl EvvtFamily {
                 )?;
                 let (c, s) = project_sinusoid(&resid, d.revs(), order);
                 // The order is refined within the peak's main lobe (± 1/total revolutions).
-                let lobe = 1.0 / d.revs().last().copied().unwrap_or(1.0).max(1.0);
+                let lobe = 1.0 / d.revs().last().unwrap_or(1.0).max(1.0);
                 (
                     vec![order, c, s],
                     vec![order - lobe, -20.0, -20.0],
@@ -695,12 +698,7 @@ impl Family for EvvtFamily {
             }
             let (_, ohi) = self.order_range(&d);
             let sinusoid = |o: f64, f: fn(f64) -> f64| {
-                Cow::Owned(
-                    d.revs()
-                        .iter()
-                        .map(|th| f(2.0 * PI * (o * th).fract()))
-                        .collect::<Vec<f64>>(),
-                )
+                Cow::Owned(d.revs().map(|th| f(2.0 * PI * (o * th).fract())).collect::<Vec<f64>>())
             };
             // The peak of the baseline residual's order spectrum on this record: a disturbance
             // locked to crank angle shows here whatever the engine speed.

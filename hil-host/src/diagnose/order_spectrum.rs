@@ -3,17 +3,8 @@
 //! its sinusoid's coefficients. Used by the EVVT family (`diagnose/evvt.rs`).
 use std::f64::consts::PI;
 
-use rustfft::num_complex::Complex64;
-
-/// In-place forward FFT (`rustfft`, any length), X_m = Σ x_k e^{−2πi mk/n}.
-fn fft(x: &mut [Complex64]) {
-    if x.len() >= 2 {
-        rustfft::FftPlanner::new().plan_fft_forward(x.len()).process(x);
-    }
-}
-
 /// Σ (r_k − mean) e^{−2πi o θ_k} by direct summation (the centred series is not copied).
-fn order_dft(r: &[f64], mean: f64, revs: &[f64], order: f64) -> (f64, f64) {
+fn order_dft(r: &[f64], mean: f64, revs: impl Iterator<Item = f64>, order: f64) -> (f64, f64) {
     let (mut c, mut s) = (0.0, 0.0);
     for (x, th) in r.iter().zip(revs) {
         let v = x - mean;
@@ -34,16 +25,25 @@ fn order_dft(r: &[f64], mean: f64, revs: &[f64], order: f64) -> (f64, f64) {
 /// are averaged (Bartlett), then the coarse peak is located on the direct transform of the whole
 /// record: one transform of a 425 000-row record's 2^21 points held about 100 MB (its re/im, the
 /// FFT's complex buffer and scratch); the segments hold the real grid and 2 MB.
-pub(super) fn order_peak(r: &[f64], revs: &[f64], lo: f64, hi: f64) -> Option<(f64, f64)> {
+///
+/// `revs` yields the crank revolutions at each sample of `r` and is walked once per pass (the
+/// EVVT family makes them from the engine speed as they are read instead of holding a series).
+pub(super) fn order_peak<I>(r: &[f64], revs: I, lo: f64, hi: f64) -> Option<(f64, f64)>
+where
+    I: Iterator<Item = f64> + Clone,
+{
     order_peak_in_segments(r, revs, lo, hi, ORDER_SEGMENT_BINS)
 }
 
 /// Grid bins per transform of [`order_peak`] (a power of two).
 const ORDER_SEGMENT_BINS: usize = 1 << 16;
 
-fn order_peak_in_segments(r: &[f64], revs: &[f64], lo: f64, hi: f64, segment_bins: usize) -> Option<(f64, f64)> {
-    let total = *revs.last()?;
-    if !(hi > lo && total > 20.0 && r.len() == revs.len()) {
+fn order_peak_in_segments<I>(r: &[f64], revs: I, lo: f64, hi: f64, segment_bins: usize) -> Option<(f64, f64)>
+where
+    I: Iterator<Item = f64> + Clone,
+{
+    let total = revs.clone().last()?;
+    if !(hi > lo && total > 20.0 && r.len() == revs.clone().count()) {
         return None;
     }
     let mean = r.iter().sum::<f64>() / r.len() as f64;
@@ -66,27 +66,31 @@ fn order_peak_in_segments(r: &[f64], revs: &[f64], lo: f64, hi: f64, segment_bin
         return None;
     }
     let mut power_sum = vec![0.0; m_hi - m_lo + 1];
-    // Each segment's bins are gridded straight into the transform's buffer (a pass over the
-    // samples per segment; no grid of the whole record is held).
-    let mut x = vec![Complex64::new(0.0, 0.0); nfft];
+    // One real-input plan, its buffers and scratch for all segments (a real transform holds
+    // half of a complex one's: about 3 MB for 2^17 points). Each segment's bins are gridded
+    // straight into the transform's input (a pass over the samples per segment; no grid of
+    // the whole record is held).
+    let plan = realfft::RealFftPlanner::<f64>::new().plan_fft_forward(nfft);
+    let (mut x, mut spectrum, mut scratch) = (plan.make_input_vec(), plan.make_output_vec(), plan.make_scratch_vec());
     for first in (0..bins).step_by(seg) {
         let end = (first + seg).min(bins);
-        x.fill(Complex64::new(0.0, 0.0));
-        for (v, th) in r.iter().zip(revs) {
+        // The transform uses its input as work space: zero it for every segment.
+        x.fill(0.0);
+        for (v, th) in r.iter().zip(revs.clone()) {
             let i = (th * per_rev).round() as usize;
             if (first..end).contains(&i) {
-                x[i - first].re += v - mean;
+                x[i - first] += v - mean;
             }
         }
-        fft(&mut x);
+        plan.process_with_scratch(&mut x, &mut spectrum, &mut scratch).ok()?;
         for (m, p) in (m_lo..=m_hi).zip(power_sum.iter_mut()) {
-            *p += x[m].re * x[m].re + x[m].im * x[m].im;
+            *p += spectrum[m].norm_sqr();
         }
     }
-    drop(x);
+    drop((x, spectrum, scratch, plan));
     let best = m_lo + (0..power_sum.len()).max_by(|&a, &b| power_sum[a].total_cmp(&power_sum[b]))?;
     let power = |o: f64| {
-        let (c, s) = order_dft(r, mean, revs, o);
+        let (c, s) = order_dft(r, mean, revs.clone(), o);
         c * c + s * s
     };
     let (mut a, mut b) = ((best as f64 - 1.0) * bin_order, (best as f64 + 1.0) * bin_order);
@@ -123,7 +127,7 @@ fn order_peak_in_segments(r: &[f64], revs: &[f64], lo: f64, hi: f64, segment_bin
 }
 
 /// Least-squares (c, s) of `r ≈ c cos(2π o θ) + s sin(2π o θ)`.
-pub(super) fn project_sinusoid(r: &[f64], revs: &[f64], order: f64) -> (f64, f64) {
+pub(super) fn project_sinusoid(r: &[f64], revs: impl Iterator<Item = f64>, order: f64) -> (f64, f64) {
     let (mut cc, mut ss, mut cs, mut rc, mut rs) = (0.0, 0.0, 0.0, 0.0, 0.0);
     for (v, th) in r.iter().zip(revs) {
         let (sn, c) = (2.0 * PI * (order * th).fract()).sin_cos();
@@ -146,24 +150,6 @@ mod tests {
     use crate::generate::Rng;
 
     #[test]
-    fn fft_matches_the_direct_transform() {
-        let mut rng = Rng::new(4);
-        let x: Vec<f64> = (0..64).map(|_| rng.normal()).collect();
-        let mut xf: Vec<Complex64> = x.iter().map(|&v| Complex64::new(v, 0.0)).collect();
-        fft(&mut xf);
-        let (re, im): (Vec<f64>, Vec<f64>) = xf.iter().map(|c| (c.re, c.im)).unzip();
-        for m in [0, 1, 7, 31, 32, 50] {
-            let (mut c, mut s) = (0.0, 0.0);
-            for (k, v) in x.iter().enumerate() {
-                let a = -2.0 * PI * (m * k) as f64 / 64.0;
-                c += v * a.cos();
-                s += v * a.sin();
-            }
-            assert!((re[m] - c).abs() < 1e-9 && (im[m] - s).abs() < 1e-9, "bin {m}");
-        }
-    }
-
-    #[test]
     fn order_peak_finds_a_crank_locked_sinusoid() {
         let mut rng = Rng::new(8);
         let dt = 0.01;
@@ -177,15 +163,15 @@ mod tests {
             .iter()
             .map(|t| 0.7 * (2.0 * PI * 1.37 * t + 0.4).sin() + 0.5 * rng.normal())
             .collect();
-        let (o, amp) = order_peak(&r, &revs, 0.25, 2.1).unwrap();
+        let (o, amp) = order_peak(&r, revs.iter().copied(), 0.25, 2.1).unwrap();
         assert!((o - 1.37).abs() < 2e-4, "order {o}");
         assert!((amp - 0.7).abs() < 0.05, "amplitude {amp}");
         // The same record in segments of 4096 bins (a long record's path: 15 segments here)
         // finds the same peak.
-        let (os, amps) = order_peak_in_segments(&r, &revs, 0.25, 2.1, 1 << 12).unwrap();
+        let (os, amps) = order_peak_in_segments(&r, revs.iter().copied(), 0.25, 2.1, 1 << 12).unwrap();
         assert!((os - 1.37).abs() < 2e-4, "order in segments {os}");
         assert!((amps - 0.7).abs() < 0.05, "amplitude in segments {amps}");
-        let (c, s) = project_sinusoid(&r, &revs, o);
+        let (c, s) = project_sinusoid(&r, revs.iter().copied(), o);
         assert!((c.hypot(s) - 0.7).abs() < 0.05 && (c.atan2(s) - 0.4).abs() < 0.1);
     }
 }
