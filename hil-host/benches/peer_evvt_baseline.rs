@@ -5,7 +5,8 @@
 //!   `peer_evvt_baseline.py`;
 //! - the positioner's Coulomb-friction fit on the EMPS benchmark (IDIM-LS: filters,
 //!   derivatives, decimation, linear least squares, the validation log predicted), scipy's
-//!   peer `peer_positioner_idim.py` (skipped with a message without ../shared).
+//!   peer `peer_positioner_idim.py` (skipped with a message without ../shared); and its
+//!   least-squares solve alone on the same regression, scipy's `least_squares` timed alone.
 //!
 //! `cargo bench -p hil-host --bench peer_evvt_baseline`
 //!
@@ -49,6 +50,19 @@ fn bench_positioner(c: &mut Criterion) {
             let fit = family.fit(&["coulomb-friction"], None, &est, &val).expect("fit");
             assert!((fit.params[0].1 - 95.067).abs() < 0.01, "{:?}", fit.params);
             fit
+        })
+    });
+    // The least-squares solve alone, on the same decimated regression (scipy's
+    // `least_squares` on `A θ - y` is timed alone the same way by the peer script).
+    let family = hil_host::diagnose::positioner::PositionerFamily::default();
+    let (cols, y) = family
+        .idim_regression(&est, Some("coulomb-friction"))
+        .expect("EMPS regression");
+    c.bench_function("positioner coulomb-friction least squares alone, EMPS", |b| {
+        b.iter(|| {
+            let theta = hil_host::lsq::linear_lsq(&cols, &y).expect("solve");
+            assert!((theta[0] - 95.067).abs() < 0.01, "{theta:?}");
+            theta
         })
     });
 }

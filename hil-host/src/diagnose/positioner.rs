@@ -136,6 +136,14 @@ impl PositionerFamily {
 }
 
 impl PositionerFamily {
+    /// The IDIM-LS regression of a log for `effect` (`None`: the baseline): the decimated
+    /// regressor columns and force, as `fit` solves them. Public for the peer benchmark, which
+    /// times the least-squares solve alone next to scipy's `least_squares` on the same matrix.
+    pub fn idim_regression(&self, log: &Log, effect: Option<&str>) -> Result<(Vec<Vec<f64>>, Vec<f64>), String> {
+        let (cols, _, y) = self.columns(&self.motion(log)?, effect, 1.0 / log.dt_s)?;
+        Ok((cols, y))
+    }
+
     /// The RMS force error of the formulation itself (see `noise_floor`).
     fn formulation_error(&self, val: &Log, fit: &Fit) -> Result<f64, String> {
         let get = |k: &str| fit.params.iter().find(|(n, _)| n == k).map(|(_, v)| *v);
