@@ -940,11 +940,16 @@ impl<R: Real> VacuumValveActuator<R> {
         // Damping implicit: stable for any b.
         let mut v = (self.v_pct_s + h * drive * self.inv_mass) / (R::ONE + h * b * self.inv_mass);
         let mut x_new = x + h * v;
-        if x_new <= R::ZERO {
-            x_new = R::ZERO;
+        // The membrane's stops lie half the clearance beyond the valve's travel: x_pct is
+        // measured on the valve, whose 0 and 100 % are its own seat and stop, so a unit with
+        // clearance still reaches both (the membrane takes up the play beyond them).
+        let x_min = -self.half_backlash_pct;
+        let x_max = hundred + self.half_backlash_pct;
+        if x_new <= x_min {
+            x_new = x_min;
             v = v.max(R::ZERO);
-        } else if x_new >= hundred {
-            x_new = hundred;
+        } else if x_new >= x_max {
+            x_new = x_max;
             v = v.min(R::ZERO);
         }
         // Dahl eq. (10) with α = 1 is linear in x for a fixed sign of motion:
@@ -1345,10 +1350,30 @@ mod tests {
         assert_eq!(back, 0.0);
     }
 
+    /// x_pct is the valve's own travel: with a linkage clearance the valve still reaches its
+    /// seat (0 %) and its stop (100 %), the membrane taking up the play beyond them; before,
+    /// the membrane stopped at the valve's stops and the valve half the clearance short.
+    #[test]
+    fn a_valve_with_clearance_reaches_both_stops() {
+        let mut p = VacuumParams::lpt();
+        p.backlash_pct = 8.0;
+        p.effects.backlash = true;
+        let mut a = VacuumValveActuator::<f64>::new(&p).unwrap();
+        let (mut lo, mut hi) = (f64::MAX, f64::MIN);
+        for duty in [0.0, 100.0, 0.0] {
+            for _ in 0..3000 {
+                let o = a.step(&inp(duty, 13.5, 20.0), 0.001);
+                lo = lo.min(o.x_pct);
+                hi = hi.max(o.x_pct);
+            }
+        }
+        assert_eq!((lo, hi), (0.0, 100.0), "the valve's travel with 8 % clearance");
+    }
+
     proptest! {
-        /// Whatever the duty sequence: the Dahl friction never exceeds Fc, positions stay on the
-        /// stroke, the valve stays within half the clearance of the membrane, and the pressure
-        /// stays between tank and ambient.
+        /// Whatever the duty sequence: the Dahl friction never exceeds Fc, the valve stays on its
+        /// stroke and the membrane within half the clearance beyond it, the valve stays within
+        /// half the clearance of the membrane, and the pressure stays between tank and ambient.
         #[test]
         fn states_stay_physical(duties in proptest::collection::vec(0.0f64..100.0, 1..40), u in 8.0f64..16.0) {
             let p = VacuumParams::hpc();
@@ -1357,7 +1382,8 @@ mod tests {
                 for _ in 0..50 {
                     let o = a.step(&inp(d, u, 30.0), 0.002);
                     prop_assert!(a.friction_kpa().abs() <= p.fc_kpa + 1e-9);
-                    prop_assert!((0.0..=100.0).contains(&o.x_membrane_pct) && (0.0..=100.0).contains(&o.x_pct));
+                    let half = 0.5 * p.backlash_pct;
+                    prop_assert!((-half..=100.0 + half).contains(&o.x_membrane_pct) && (0.0..=100.0).contains(&o.x_pct));
                     prop_assert!((o.x_pct - o.x_membrane_pct).abs() <= 0.5 * p.backlash_pct + 1e-9);
                     prop_assert!((30.0 - 1e-9..=100.0 + 1e-9).contains(&o.p_act_kpa));
                     prop_assert!(o.flow_to_tank_mg_s >= 0.0);

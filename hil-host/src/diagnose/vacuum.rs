@@ -36,8 +36,9 @@
 //!
 //! No pair nests: friction acts between pressure and membrane (the membrane stalls until the
 //! pressure has changed by 2·Fc, so the hysteresis width in x follows the map's slope), the
-//! clearance between membrane and valve (constant width in x, the valve stops short of the end
-//! stops by half the clearance, and the membrane's own dynamics continue through the reversal).
+//! clearance between membrane and valve (constant width in x; the membrane travels half the
+//! clearance beyond the valve's stops, so the valve still reaches 0 and 100 %, and its own
+//! dynamics continue through the reversal).
 //! Neither can reproduce the other exactly, and the simulation error decides between them.
 //!
 //! Calibration and weighting: with `p_act_kPa` logged, the model is a cascade (the pressure of
