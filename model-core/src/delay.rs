@@ -56,8 +56,10 @@ impl<R: Real, const N: usize> DelayLine<R, N> {
         } else {
             delay_samples
         };
-        let whole = floor_to_usize(d).min(N - 1);
-        let frac = d - R::from_f64(whole as f64);
+        // d is in [0, N-1]: its integer part indexes the line (no f64 on the way: that is
+        // soft-float on the target).
+        let whole = (d.floor_i32().max(0) as usize).min(N - 1);
+        let frac = d - R::from_i32(whole as i32);
         let newer = self.at(whole);
         if whole + 1 > N - 1 || frac <= R::ZERO {
             return newer;
@@ -77,15 +79,6 @@ impl<R: Real, const N: usize> DelayLine<R, N> {
 }
 
 /// Whole part of a non-negative value that fits in usize (the caller has clamped it to N-1).
-fn floor_to_usize<R: Real>(x: R) -> usize {
-    let f = x.to_f64();
-    if f >= 0.0 {
-        f as usize
-    } else {
-        0
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

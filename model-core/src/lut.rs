@@ -14,7 +14,9 @@ pub enum LutError {
 }
 
 /// Index of the interval holding `x` and the interpolation weight in it, clamped to the ends.
-fn locate<R: Real, const N: usize>(axis: &[R; N], x: R) -> (usize, R) {
+/// `inv_dx[i]` = 1/(axis[i+1] − axis[i]), precomputed so a look-up divides nothing (a
+/// fixed-point division is a long software division on the target).
+fn locate<R: Real, const N: usize>(axis: &[R; N], inv_dx: &[R; N], x: R) -> (usize, R) {
     if x <= axis[0] {
         return (0, R::ZERO);
     }
@@ -26,8 +28,17 @@ fn locate<R: Real, const N: usize>(axis: &[R; N], x: R) -> (usize, R) {
     while i + 2 < N && x >= axis[i + 1] {
         i += 1;
     }
-    let w = (x - axis[i]) / (axis[i + 1] - axis[i]);
+    let w = (x - axis[i]) * inv_dx[i];
     (i, w)
+}
+
+/// The reciprocal breakpoint spacings of `axis` (the last entry unused, 0).
+fn inverse_spacing<R: Real, const N: usize>(axis: &[f64; N]) -> [R; N] {
+    let mut inv = [R::ZERO; N];
+    for i in 0..N.saturating_sub(1) {
+        inv[i] = R::from_f64(1.0 / (axis[i + 1] - axis[i]));
+    }
+    inv
 }
 
 fn check_axis(axis: &[f64], which: u8) -> Result<(), LutError> {
@@ -47,6 +58,7 @@ fn check_axis(axis: &[f64], which: u8) -> Result<(), LutError> {
 #[derive(Clone, Copy, Debug)]
 pub struct Lut1<R: Real, const N: usize> {
     x: [R; N],
+    inv_dx: [R; N],
     y: [R; N],
 }
 
@@ -55,11 +67,12 @@ impl<R: Real, const N: usize> Lut1<R, N> {
         check_axis(&x, 0)?;
         Ok(Self {
             x: x.map(R::from_f64),
+            inv_dx: inverse_spacing(&x),
             y: y.map(R::from_f64),
         })
     }
     pub fn eval(&self, x: R) -> R {
-        let (i, w) = locate(&self.x, x);
+        let (i, w) = locate(&self.x, &self.inv_dx, x);
         self.y[i] + w * (self.y[i + 1] - self.y[i])
     }
     pub fn breakpoints(&self) -> &[R; N] {
@@ -76,6 +89,8 @@ impl<R: Real, const N: usize> Lut1<R, N> {
 pub struct Lut2<R: Real, const NX: usize, const NY: usize> {
     x: [R; NX],
     y: [R; NY],
+    inv_dx: [R; NX],
+    inv_dy: [R; NY],
     z: [[R; NY]; NX],
 }
 
@@ -86,12 +101,14 @@ impl<R: Real, const NX: usize, const NY: usize> Lut2<R, NX, NY> {
         Ok(Self {
             x: x.map(R::from_f64),
             y: y.map(R::from_f64),
+            inv_dx: inverse_spacing(&x),
+            inv_dy: inverse_spacing(&y),
             z: z.map(|row| row.map(R::from_f64)),
         })
     }
     pub fn eval(&self, x: R, y: R) -> R {
-        let (i, wx) = locate(&self.x, x);
-        let (j, wy) = locate(&self.y, y);
+        let (i, wx) = locate(&self.x, &self.inv_dx, x);
+        let (j, wy) = locate(&self.y, &self.inv_dy, y);
         let z0 = self.z[i][j] + wy * (self.z[i][j + 1] - self.z[i][j]);
         let z1 = self.z[i + 1][j] + wy * (self.z[i + 1][j + 1] - self.z[i + 1][j]);
         z0 + wx * (z1 - z0)

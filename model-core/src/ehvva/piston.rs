@@ -139,6 +139,15 @@ impl<R: Real> Piston<R> {
         self.quadratic_gain_with(cd, self.inv_a2_top(lift, closing, switch_on), lift, stroke)
     }
 
+    /// [`Self::quadratic_gain`] with 1/Cd² given: Cd is constant over a step, so a model that
+    /// sub-steps divides once per step instead of once per sub-step.
+    pub(crate) fn quadratic_gain_inv_cd2(&self, inv_cd2: R, lift: R, vel: R, stroke: R, switch_on: bool) -> R {
+        let closing = vel < R::ZERO;
+        let top = self.half_rho_at3 * self.inv_a2_top(lift, closing, switch_on);
+        let bottom = self.half_rho_ab3 * self.inv_a2_bottom(lift, stroke);
+        (top + bottom) * inv_cd2
+    }
+
     /// As [`Self::quadratic_gain`] with the top orifice's 1/Aorit² given (the ninth-order model
     /// meters the main valve by its spool position).
     pub fn quadratic_gain_with(&self, cd: R, inv_a2_top: R, lift: R, stroke: R) -> R {

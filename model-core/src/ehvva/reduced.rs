@@ -77,6 +77,8 @@ pub struct EhvvaReduced<R: Real, const N: usize = DEFAULT_DELAY_SAMPLES> {
     inv_dt: R,
     h: R,
     substeps: usize,
+    /// 1/substeps, converted once (a run-time `from_f64` is soft-float on the target).
+    inv_substeps: R,
     p_mo: R,
     /// Lift, velocity, accumulators and the last seat landing (shared with the other models).
     m: Moving<R>,
@@ -97,6 +99,7 @@ impl<R: Real, const N: usize> EhvvaReduced<R, N> {
             inv_dt: R::from_f64(1.0 / dt_ms),
             h: R::from_f64(dt_ms / substeps as f64),
             substeps,
+            inv_substeps: R::from_f64(1.0 / substeps as f64),
             p_mo: inputs.p_back_mpa,
             m: Moving {
                 lift: R::ZERO,
@@ -137,7 +140,10 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaReduced<R, N> {
         let d_open = td_open * self.inv_dt;
         let d_close = td_close * self.inv_dt;
         let lag = self.h / tau;
-        let inv_n = R::ONE / R::from_f64(self.substeps as f64);
+        // Per-step constants of the sub-step loop: its implicit Pmo update and 1/Cd².
+        let inv_1_plus_lag = R::ONE / (R::ONE + lag);
+        let inv_cd2 = R::ONE / (cd * cd);
+        let inv_n = self.inv_substeps;
         self.pmo_history.push(self.p_mo);
         let mut back = R::ZERO;
         for _ in 0..self.substeps {
@@ -150,11 +156,11 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaReduced<R, N> {
             back += inv_n;
             // Eq. (10): τp dPmo/dt = −Pmo + u(Ph − Pl) + Pl.
             let p_in = if u_pilot { self.m.p_high } else { self.m.p_low };
-            self.p_mo = (self.p_mo + lag * p_in) / (R::ONE + lag);
+            self.p_mo = (self.p_mo + lag * p_in) * inv_1_plus_lag;
             // Eq. (12) first line, with eqs. (5)-(6) as damping.
             let k = self
                 .piston
-                .quadratic_gain(cd, self.m.lift, self.m.vel, stroke, inputs.snubber_on);
+                .quadratic_gain_inv_cd2(inv_cd2, self.m.lift, self.m.vel, stroke, inputs.snubber_on);
             let force = self.piston.static_force(p_top, self.m.p_low, self.m.lift);
             // Piston, end stops and eqs. (7)-(8).
             self.piston.advance(
