@@ -4,7 +4,7 @@
 //! A bench log is a sequence of valve events (DATA-FORMAT: conditions may jump between them).
 //! The log is cut at each rising pilot command ([`Events::from_log`]): a segment starts
 //! `PRE_MS` before the edge, where the valve is at rest, and runs to the next segment. Each
-//! segment is simulated by model-core's reduced model of eq. (12) ([`EhvvaReduced`], f64)
+//! segment is simulated by model-core's reduced model of eq. (12) ([`EhvvaReduced`](model_core::ehvva::EhvvaReduced), f64)
 //! from rest at the segment's operating point: supply and back pressure are the set-points
 //! read from the samples at rest before the edge (the logged pressures dip while the valve
 //! moves, as the accumulators of eqs. (7)-(8) do in the model), temperature the segment's
@@ -26,606 +26,23 @@
 //!   a collapsed trust region is restarted from where it stopped.
 
 use std::borrow::Cow;
-use std::collections::hash_map::DefaultHasher;
-use std::hash::{Hash, Hasher};
 use std::sync::Mutex;
 
-use model_core::ehvva::{EhvvaInputs, EhvvaParams, EhvvaPlant, EhvvaReduced, EhvvaTables};
+use model_core::ehvva::EhvvaParams;
 
 use super::catalogue::{Effect, EhvvaEffect};
 use super::{Family, Fit};
 use crate::log::{Log, Plant};
 use crate::lsq::{solve, LsqOptions, LsqResult, StopReason};
 
+mod events;
+mod knobs;
+
+pub use events::*;
+pub use knobs::*;
+
 /// The catalogue effects of this family (DATA-FORMAT.md), from the typed catalogue.
 pub const EFFECTS: [&str; 4] = EhvvaEffect::NAMES;
-
-/// Rest kept before each rising command edge (the segment start), ms.
-pub const PRE_MS: f64 = 1.0;
-/// The fits use at most this many estimation events (chosen by [`Events::for_fitting`]); the
-/// validation data are always predicted whole. Ten or so parameters are well determined by a
-/// few dozen events that cover every test condition, while the cost of each fit grows with
-/// the events: a long bench record (hundreds of events of a repeated test matrix) adds time,
-/// not information.
-pub const MAX_FIT_EVENTS: usize = 64;
-
-/// Delay-line length of the simulated model: 1024 samples hold 10 ms even at a 0.01 ms step.
-const DELAY_SAMPLES: usize = 1024;
-
-/// One valve event of a log: the samples from rest before a pilot command to the next event.
-#[derive(Clone, Debug)]
-pub struct Event {
-    /// Index of the first sample in the log.
-    pub start: usize,
-    pub u_pilot: Vec<bool>,
-    /// Measured lift.
-    pub lift_mm: Vec<f64>,
-    /// The operating point (set-points, temperature, valve states).
-    pub inputs: EhvvaInputs<f64>,
-    /// Index (in the event) of the rising command edge and of the last falling one.
-    pub on_index: usize,
-    pub off_index: Option<usize>,
-}
-
-impl Event {
-    pub fn stroke_mm(&self, p: &EhvvaParams) -> f64 {
-        if self.inputs.lift_high {
-            p.lift_high_mm
-        } else {
-            p.lift_low_mm
-        }
-    }
-}
-
-/// A log cut into valve events.
-#[derive(Clone, Debug)]
-pub struct Events {
-    pub dt_ms: f64,
-    pub events: Vec<Event>,
-    /// Samples in the log (the events cover it from the first one's start).
-    pub samples: usize,
-    pub file: String,
-}
-
-fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(f64::total_cmp);
-    if v.is_empty() {
-        f64::NAN
-    } else {
-        v[v.len() / 2]
-    }
-}
-
-impl Events {
-    pub fn from_log(log: &Log) -> Result<Self, String> {
-        let col = |name: &str| log.col(name).ok_or_else(|| format!("{}: no `{name}` column", log.file));
-        let (u, ph, pl, temp, high, snub, lift) = (
-            col("u_pilot")?,
-            col("p_supply_MPa")?,
-            col("p_back_MPa")?,
-            col("temp_C")?,
-            col("lift_high")?,
-            col("snubber_on")?,
-            col("lift_mm")?,
-        );
-        let dt_ms = log.dt_s * 1e3;
-        if !(dt_ms > 0.0 && dt_ms <= 0.1) {
-            return Err(format!(
-                "{}: sample period {} ms; the EHVVA models need 0.1 ms or less (10 kHz or more)",
-                log.file, dt_ms
-            ));
-        }
-        let n = lift.len();
-        let pre = ((PRE_MS / dt_ms).round() as usize).max(1);
-        // A command already on at the first sample began before the log: not an edge.
-        let rising: Vec<usize> = (1..n).filter(|&k| u[k] > 0.5 && u[k - 1] <= 0.5).collect();
-        if rising.is_empty() {
-            return Err(format!("{}: no valve event (u_pilot never rises)", log.file));
-        }
-        let skip = unsettled_prefix(u, lift, rising[0], pre);
-        let mut starts: Vec<usize> = Vec::with_capacity(rising.len());
-        for (i, &r) in rising.iter().enumerate() {
-            let s = if i == 0 {
-                skip
-            } else {
-                r.saturating_sub(pre).max(starts[i - 1] + 1)
-            };
-            starts.push(s);
-        }
-        let mut events = Vec::with_capacity(rising.len());
-        for i in 0..rising.len() {
-            let (s, e) = (starts[i], if i + 1 < starts.len() { starts[i + 1] } else { n });
-            let on = rising[i] - s;
-            // Set-points: the samples at rest before the edge (at most PRE_MS of them).
-            let rest = rising[i].saturating_sub(pre).max(s)..rising[i];
-            // The mean, not the median: the median of quantized samples is itself on the
-            // quantizer's grid (±½ LSB), the mean of noisy ones resolves below it.
-            let setpoint = |x: &[f64]| {
-                if rest.len() >= 3 {
-                    x[rest.clone()].iter().sum::<f64>() / rest.len() as f64
-                } else {
-                    let mut v: Vec<f64> = x[s..e].to_vec();
-                    median(&mut v)
-                }
-            };
-            let off_index = (s + on + 1..e)
-                .rev()
-                .find(|&k| u[k] <= 0.5 && u[k - 1] > 0.5)
-                .map(|k| k - s);
-            let inputs = EhvvaInputs {
-                p_supply_mpa: setpoint(ph),
-                p_back_mpa: setpoint(pl),
-                temp_c: temp[s..e].iter().sum::<f64>() / (e - s) as f64,
-                lift_high: high[rising[i]] > 0.5,
-                snubber_on: snub[rising[i]] > 0.5,
-            };
-            events.push(Event {
-                start: s,
-                u_pilot: u[s..e].iter().map(|&v| v > 0.5).collect(),
-                lift_mm: lift[s..e].to_vec(),
-                inputs,
-                on_index: on,
-                off_index,
-            });
-        }
-        Ok(Events {
-            dt_ms,
-            events,
-            samples: n,
-            file: log.file.clone(),
-        })
-    }
-
-    /// Samples before the first event: the log began while the valve was still moving (e.g. a
-    /// held-out tail cut from a longer record), a state the model cannot start from.
-    pub fn skipped(&self) -> usize {
-        self.events.first().map_or(0, |e| e.start)
-    }
-
-    /// The measured lift over the whole log (what `simulate_all` predicts).
-    pub fn measured(&self) -> Vec<f64> {
-        let mut y = vec![0.0; self.samples];
-        for ev in &self.events {
-            y[ev.start..ev.start + ev.lift_mm.len()].copy_from_slice(&ev.lift_mm);
-        }
-        y
-    }
-
-    /// Total samples covered by the events.
-    pub fn covered(&self) -> usize {
-        self.events.iter().map(|e| e.lift_mm.len()).sum()
-    }
-
-    /// A subset of the events (e.g. one test condition), keeping the period.
-    pub fn subset(&self, keep: impl Fn(&Event) -> bool) -> Events {
-        let events: Vec<Event> = self.events.iter().filter(|e| keep(e)).cloned().collect();
-        let mut at = 0;
-        let events = events
-            .into_iter()
-            .map(|mut e| {
-                e.start = at;
-                at += e.lift_mm.len();
-                e
-            })
-            .collect();
-        Events {
-            dt_ms: self.dt_ms,
-            events,
-            samples: at,
-            file: self.file.clone(),
-        }
-    }
-
-    /// At most `max_events` of the events for a fit, the operating conditions represented.
-    /// Conditions are nested: lift and snubber states, then temperature (to 10 °C), supply
-    /// pressure (to 0.5 MPa) and back pressure (to 0.5 MPa). Each place goes to the event whose
-    /// condition is least represented so far, coarsest level first (so every lift/snubber
-    /// combination, then every temperature within it, is covered before finer differences),
-    /// ties to the event farthest in the record from those already chosen (so a drift over a
-    /// long run is sampled too). All events when there are not more.
-    pub fn for_fitting(&self, max_events: usize) -> Events {
-        if self.events.len() <= max_events {
-            return self.clone();
-        }
-        let keep = self.fitting_choice(max_events);
-        let starts: std::collections::HashSet<usize> = (0..self.events.len())
-            .filter(|&k| keep[k])
-            .map(|k| self.events[k].start)
-            .collect();
-        self.subset(|e| starts.contains(&e.start))
-    }
-
-    /// Which events [`Events::for_fitting`] keeps (a flag per event).
-    fn fitting_choice(&self, max_events: usize) -> Vec<bool> {
-        let levels = |e: &Event| -> [[i64; 5]; 4] {
-            let i = &e.inputs;
-            let full = [
-                i.lift_high as i64,
-                i.snubber_on as i64,
-                (i.temp_c / 10.0).round() as i64,
-                (i.p_supply_mpa / 0.5).round() as i64,
-                (i.p_back_mpa / 0.5).round() as i64,
-            ];
-            // Level l keeps the first 2 + l entries; the rest is masked.
-            core::array::from_fn(|l| core::array::from_fn(|k| if k < 2 + l { full[k] } else { i64::MIN }))
-        };
-        let keys: Vec<[[i64; 5]; 4]> = self.events.iter().map(levels).collect();
-        let mut counts: std::collections::HashMap<[i64; 5], usize> = std::collections::HashMap::new();
-        let mut keep = vec![false; self.events.len()];
-        let mut chosen: Vec<usize> = Vec::with_capacity(max_events);
-        for _ in 0..max_events {
-            let score = |k: usize| {
-                let represented: [usize; 4] = core::array::from_fn(|l| counts.get(&keys[k][l]).copied().unwrap_or(0));
-                let gap = chosen.iter().map(|&c| c.abs_diff(k)).min().unwrap_or(usize::MAX);
-                (represented, std::cmp::Reverse(gap))
-            };
-            let Some(best) = (0..self.events.len()).filter(|&k| !keep[k]).min_by_key(|&k| score(k)) else {
-                break;
-            };
-            keep[best] = true;
-            chosen.push(best);
-            for key in &keys[best] {
-                *counts.entry(*key).or_insert(0) += 1;
-            }
-        }
-        keep
-    }
-
-    fn key(&self) -> u64 {
-        let mut h = DefaultHasher::new();
-        self.samples.hash(&mut h);
-        self.dt_ms.to_bits().hash(&mut h);
-        for e in &self.events {
-            e.start.hash(&mut h);
-            for v in &e.lift_mm {
-                v.to_bits().hash(&mut h);
-            }
-        }
-        h.finish()
-    }
-}
-
-/// Lift band about the rest level inside which the valve counts as at rest, mm (a seated
-/// valve's lift is sensor noise, σ ≤ 6 µm).
-const REST_BAND_MM: f64 = 0.05;
-
-/// How many leading samples precede the valve's rest before the first command edge `first_on`:
-/// a log cut out of a longer record may begin with a command on or the valve still closing.
-/// Those samples are left out of every event (0 when the log begins at rest). The rest level is
-/// the mean lift over the `pre` samples before the edge.
-fn unsettled_prefix(u: &[f64], lift: &[f64], first_on: usize, pre: usize) -> usize {
-    let rest = first_on.saturating_sub(pre)..first_on;
-    if rest.is_empty() {
-        return 0;
-    }
-    let level = lift[rest.clone()].iter().sum::<f64>() / rest.len() as f64;
-    (0..first_on)
-        .rev()
-        .find(|&k| u[k] > 0.5 || (lift[k] - level).abs() > REST_BAND_MM)
-        .map_or(0, |k| k + 1)
-}
-
-/// Simulates one event from rest with model-core's reduced model, writing the lift into `out`
-/// (same length as the event).
-pub fn simulate_event(params: &EhvvaParams, ev: &Event, dt_ms: f64, out: &mut [f64]) -> Result<(), String> {
-    let mut m = EhvvaReduced::<f64, DELAY_SAMPLES>::new(params, &ev.inputs, dt_ms).map_err(|e| format!("{e:?}"))?;
-    let settle = ((2.0 / dt_ms).round() as usize).max(1);
-    let mut seated_for = 0usize;
-    let last_off = ev.off_index.unwrap_or(usize::MAX);
-    for (k, slot) in out.iter_mut().enumerate() {
-        if k < ev.on_index {
-            // At rest before the command: the model's steady state.
-            *slot = 0.0;
-            continue;
-        }
-        if seated_for >= settle {
-            *slot = 0.0;
-            continue;
-        }
-        let y = m.step(ev.u_pilot[k], &ev.inputs);
-        if !y.is_finite() {
-            return Err(format!("simulation diverged at sample {}", ev.start + k));
-        }
-        *slot = y;
-        seated_for = if k > last_off && y == 0.0 && m.velocity_m_s() == 0.0 {
-            seated_for + 1
-        } else {
-            0
-        };
-    }
-    Ok(())
-}
-
-/// Simulates every event into `out` (the log's length); the samples before the first event
-/// ([`Events::skipped`]) are set to 0, as [`Events::measured`] has them.
-pub fn simulate_all(params: &EhvvaParams, set: &Events, out: &mut [f64]) -> Result<(), String> {
-    out[..set.skipped()].fill(0.0);
-    for ev in &set.events {
-        simulate_event(params, ev, set.dt_ms, &mut out[ev.start..ev.start + ev.lift_mm.len()])?;
-    }
-    Ok(())
-}
-
-/// As [`simulate_all`], with the events shared among `threads` threads: they are independent
-/// (each from rest), so the result is the same as on one; the events go in contiguous runs
-/// of about equal sample counts.
-pub fn simulate_all_on(params: &EhvvaParams, set: &Events, out: &mut [f64], threads: usize) -> Result<(), String> {
-    let threads = threads.clamp(1, set.events.len().max(1));
-    if threads == 1 {
-        return simulate_all(params, set, out);
-    }
-    let skip = set.skipped();
-    out[..skip].fill(0.0);
-    let per_thread = set.covered().div_ceil(threads);
-    // Runs of events: (events, their output slice).
-    let mut runs: Vec<(&[Event], &mut [f64])> = Vec::with_capacity(threads);
-    let (mut rest_events, mut rest_out) = (&set.events[..], &mut out[skip..]);
-    while !rest_events.is_empty() {
-        let (mut count, mut len) = (0, 0);
-        while count < rest_events.len() && (len < per_thread || runs.len() + 1 == threads) {
-            len += rest_events[count].lift_mm.len();
-            count += 1;
-        }
-        let (ev, more_ev) = rest_events.split_at(count);
-        let (o, more_o) = std::mem::take(&mut rest_out).split_at_mut(len);
-        runs.push((ev, o));
-        (rest_events, rest_out) = (more_ev, more_o);
-    }
-    std::thread::scope(|s| {
-        let handles: Vec<_> = runs
-            .into_iter()
-            .map(|(events, o)| {
-                s.spawn(move || {
-                    let mut at = 0;
-                    for ev in events {
-                        let len = ev.lift_mm.len();
-                        simulate_event(params, ev, set.dt_ms, &mut o[at..at + len])?;
-                        at += len;
-                    }
-                    Ok::<(), String>(())
-                })
-            })
-            .collect();
-        handles
-            .into_iter()
-            .try_for_each(|h| h.join().map_err(|_| "event simulation thread panicked".to_string())?)
-    })
-}
-
-/// A fitted parameter: its name, bounds and how it sets the model's parameters.
-#[derive(Clone, Copy, Debug)]
-pub struct Knob {
-    pub name: &'static str,
-    pub lo: f64,
-    pub hi: f64,
-    pub apply: fn(&mut EhvvaParams, f64),
-}
-
-/// The reference the baseline scales: paper tables at their reference points.
-fn reference() -> (f64, f64, f64) {
-    let p = EhvvaParams::baseline();
-    let t = EhvvaTables::<f64>::new(&p).expect("the paper's parameters are valid");
-    (t.t_delay_ms(7.0, 22.0, true), t.cd(22.0), t.tau_p_ms(6.5, 22.0))
-}
-
-/// td at 7 MPa, 22 °C (mean of VO and VC), Cd at 22 °C and τp at 6.5 MPa, 22 °C of the paper's
-/// tables: the values the baseline knobs scale.
-pub fn reference_values() -> (f64, f64, f64) {
-    reference()
-}
-
-fn scale_td(p: &mut EhvvaParams, td_ms: f64) {
-    let base = EhvvaParams::baseline().tables;
-    let s = td_ms / reference().0;
-    for i in 0..4 {
-        for j in 0..5 {
-            p.tables.td_open_ms[i][j] = base.td_open_ms[i][j] * s;
-            p.tables.td_close_ms[i][j] = base.td_close_ms[i][j] * s;
-        }
-    }
-}
-fn scale_cd(p: &mut EhvvaParams, cd: f64) {
-    let base = EhvvaParams::baseline().tables;
-    let s = cd / reference().1;
-    for i in 0..4 {
-        p.tables.cd[i] = (base.cd[i] * s).min(0.99);
-    }
-}
-fn scale_tau(p: &mut EhvvaParams, tau_ms: f64) {
-    let base = EhvvaParams::baseline().tables;
-    let s = tau_ms / reference().2;
-    for i in 0..2 {
-        for j in 0..3 {
-            p.tables.tau_ms[i][j] = base.tau_ms[i][j] * s;
-        }
-    }
-}
-
-/// The top snubber's fixed orifice and notch areas together, relative to the paper's: how
-/// freely the oil leaves the top chamber on closing outside the snubbing zone, with the notch
-/// that the `snubber` effect covers keeping its share (so the effect keeps its strength
-/// relative to the unit's path). Applied before the switch orifice, which is its own knob.
-fn scale_top_snubber_path(p: &mut EhvvaParams, scale: f64) {
-    let base = EhvvaParams::baseline();
-    p.area_top_orifice_mm2 = base.area_top_orifice_mm2 * scale;
-    p.area_top_notch_mm2 = base.area_top_notch_mm2 * scale;
-}
-
-/// The bottom port and notch areas together, relative to the paper's (the notch's own shape
-/// over its zone is kept): one unit's bottom flow path.
-fn scale_bottom_path(p: &mut EhvvaParams, scale: f64) {
-    let base = EhvvaParams::baseline();
-    p.area_bottom_port_mm2 = base.area_bottom_port_mm2 * scale;
-    p.area_bottom_notch_mm2 = base.area_bottom_notch_mm2 * scale;
-    p.area_bottom_min_mm2 = base.area_bottom_min_mm2 * scale;
-}
-
-/// How much of the paper's temperature trend of td (Fig. 4: longer when cold) the unit has:
-/// 0 a delay that does not depend on the oil temperature, 1 the paper's. Each column of the
-/// (already scaled) tables moves toward the 22 °C column, so td at 22 °C stays the td knob's.
-fn scale_td_temperature(p: &mut EhvvaParams, gain: f64) {
-    const J_22C: usize = 2;
-    for table in [&mut p.tables.td_open_ms, &mut p.tables.td_close_ms] {
-        for row in table.iter_mut() {
-            let at_22c = row[J_22C];
-            for v in row.iter_mut() {
-                *v = at_22c + gain * (*v - at_22c);
-            }
-        }
-    }
-}
-
-/// Index of Cd among [`BASELINE_KNOBS`].
-const CD: usize = 1;
-
-/// Knobs of the baseline (module doc).
-pub const BASELINE_KNOBS: [Knob; 4] = [
-    Knob {
-        name: "td_ms_at_7MPa_22C",
-        lo: 1.0,
-        hi: 7.0,
-        apply: scale_td,
-    },
-    Knob {
-        name: "cd_at_22C",
-        lo: 0.1,
-        hi: 0.9,
-        apply: scale_cd,
-    },
-    Knob {
-        name: "tau_p_ms_at_6p5MPa_22C",
-        lo: 0.02,
-        hi: 0.5,
-        apply: scale_tau,
-    },
-    Knob {
-        name: "mass_kg",
-        lo: 0.02,
-        hi: 0.6,
-        apply: |p, v| p.mass_kg = v,
-    },
-];
-
-/// What varies from unit to unit beyond the four knobs of the paper's calibration: spring rate
-/// and preload, friction, the bottom piston area, every flow path (main valve, the top
-/// snubber's path, its switch orifice, the bottom port and notch) and how much of the paper's
-/// temperature trend the delay has. The diagnosis fits them all with the baseline, from the
-/// four knobs' optimum, and reports from the confidence intervals what the data cannot
-/// identify. Bounds are wide: a valve of another design (a spring three times stiffer with a
-/// quarter of the preload, a bottom area six times the paper's, a delay that does not depend
-/// on temperature) is a unit too, and a bound that excludes it leaves every effect smaller
-/// than the baseline's error.
-///
-/// The piston top area At is not among them: the reduced model is invariant to scaling the
-/// moving mass, both piston areas, the spring, the friction and Cd by one factor (every force
-/// of eq. (13) and the orifice losses ρ At³/(2 Cd² Aorit²) L'² scale alike, the chamber
-/// pressure does not depend on them), so lift data cannot see that scale. At is held at the
-/// paper's value as the reference and reported as not identifiable; the fitted mass, areas,
-/// spring and friction are the unit's relative to it. With every flow path free, Cd is held
-/// at the paper's value too (the losses see Cd·A only), and the areas are the unit's at it.
-pub const UNIT_KNOBS: [Knob; 9] = [
-    Knob {
-        name: "td_temperature_gain",
-        lo: 0.0,
-        hi: 2.0,
-        apply: scale_td_temperature,
-    },
-    Knob {
-        name: "spring_N_per_mm",
-        lo: 2.0,
-        hi: 60.0,
-        apply: |p, v| p.spring_n_per_mm = v,
-    },
-    Knob {
-        name: "spring_preload_mm",
-        lo: 2.0,
-        hi: 60.0,
-        apply: |p, v| p.spring_preload_mm = v,
-    },
-    Knob {
-        name: "friction_N_per_m_s",
-        lo: 0.0,
-        hi: 100.0,
-        apply: |p, v| p.friction_n_per_m_s = v,
-    },
-    Knob {
-        name: "area_bottom_mm2",
-        lo: 1.0,
-        hi: 48.0,
-        apply: |p, v| p.area_bottom_mm2 = v,
-    },
-    Knob {
-        name: "area_main_mm2",
-        lo: 2.0,
-        hi: 40.0,
-        apply: |p, v| p.area_main_mm2 = v,
-    },
-    Knob {
-        name: "top_snubber_path_scale",
-        lo: 0.05,
-        hi: 30.0,
-        apply: scale_top_snubber_path,
-    },
-    Knob {
-        name: "area_top_switch_orifice_mm2",
-        lo: 0.05,
-        hi: 20.0,
-        apply: |p, v| p.area_top_switch_orifice_mm2 = v,
-    },
-    Knob {
-        name: "bottom_path_scale",
-        lo: 0.1,
-        hi: 30.0,
-        apply: scale_bottom_path,
-    },
-];
-
-/// The paper's value of a unit knob.
-fn unit_nominal(k: &Knob) -> f64 {
-    let p = EhvvaParams::baseline();
-    match k.name {
-        "spring_N_per_mm" => p.spring_n_per_mm,
-        "spring_preload_mm" => p.spring_preload_mm,
-        "friction_N_per_m_s" => p.friction_n_per_m_s,
-        "area_main_mm2" => p.area_main_mm2,
-        "top_snubber_path_scale" => 1.0,
-        "area_top_switch_orifice_mm2" => p.area_top_switch_orifice_mm2,
-        "bottom_path_scale" => 1.0,
-        "td_temperature_gain" => 1.0,
-        "snub_bottom_len_mm" => p.snub_bottom_len_mm,
-        _ => p.area_bottom_mm2,
-    }
-}
-
-/// The knob each catalogue effect adds: its model-core gain, 0 (neutral, the baseline) to 2
-/// (1 = the paper).
-pub fn effect_knob(effect: &str) -> Result<Knob, String> {
-    let e = EhvvaEffect::from_name(effect)?;
-    let apply: fn(&mut EhvvaParams, f64) = match e {
-        EhvvaEffect::Viscosity => |p, v| p.effect_viscosity = v,
-        EhvvaEffect::PressureDelay => |p, v| p.effect_pressure_delay = v,
-        EhvvaEffect::DirectionDelay => |p, v| p.effect_direction_delay = v,
-        EhvvaEffect::Snubber => |p, v| p.effect_snubber = v,
-    };
-    // The snubbing zone is the paper's Ls1 (0.486 mm) times the gain: a unit's undercut may be
-    // several times longer (up to ~3 mm, still inside the low lift's 4 mm stroke).
-    let hi = if e == EhvvaEffect::Snubber { 6.0 } else { 2.0 };
-    Ok(Knob {
-        name: e.params()[0].0,
-        lo: 0.0,
-        hi,
-        apply,
-    })
-}
-
-/// `base` with the knobs set to `x`.
-pub fn apply_knobs(base: &EhvvaParams, knobs: &[Knob], x: &[f64]) -> EhvvaParams {
-    let mut p = *base;
-    for (k, &v) in knobs.iter().zip(x) {
-        (k.apply)(&mut p, v);
-    }
-    p
-}
 
 /// Fits `knobs` (starting at `x0`) on the lift simulation error of `set` by the trust-region
 /// solver: the calibration problem of eqs. (16)-(20), shared by `diagnose` and `identify`.
@@ -747,10 +164,6 @@ pub fn edge_delays_ms(
 /// A calibrated baseline: its knobs, solution and solver run.
 #[derive(Clone, Debug)]
 struct Baseline {
-    /// The parameters the knobs act on: the paper's (Cd stays at the paper's value when the
-    /// unit knobs are fitted: every orifice area is then free, and Cd trades exactly with their
-    /// common scale).
-    base: EhvvaParams,
     /// The paper's four knobs at their own optimum (a start for the extensions).
     four_x: Vec<f64>,
     knobs: Vec<Knob>,
@@ -801,7 +214,7 @@ impl EhvvaFamily {
     /// The baseline's start: paper values, with td moved so that the mean opening delay of the
     /// simulated events matches the measured one (a shift the solver need not search for).
     fn baseline_start(&self, set: &Events) -> Result<Vec<f64>, String> {
-        let (td0, cd0, tau0) = reference();
+        let (td0, cd0, tau0) = reference_values();
         let mut x = vec![td0, cd0, tau0, EhvvaParams::baseline().mass_kg];
         let p = apply_knobs(&EhvvaParams::baseline(), &BASELINE_KNOBS, &x);
         let mut sim = vec![0.0; set.samples];
@@ -839,7 +252,6 @@ impl EhvvaFamily {
         let x0 = self.baseline_start(set)?;
         let r4 = calibrate(&EhvvaParams::baseline(), &BASELINE_KNOBS, &x0, set, &self.lsq)?;
         let four = Baseline {
-            base: EhvvaParams::baseline(),
             four_x: r4.x.clone(),
             knobs: BASELINE_KNOBS.to_vec(),
             x: r4.x.clone(),
@@ -852,18 +264,16 @@ impl EhvvaFamily {
             // ρ A³/(2 Cd² Aₒ²) see only Cd·Aₒ, so Cd and the areas' common scale are one
             // direction the lift cannot tell apart; the areas are the unit's at the paper's Cd.
             // (The four knobs' Cd is no anchor: on a unit unlike the paper's it ends on a bound.)
-            let base = EhvvaParams::baseline();
             let mut knobs: Vec<Knob> = BASELINE_KNOBS.to_vec();
             knobs.remove(CD);
             knobs.extend(UNIT_KNOBS);
             let mut x0 = four.x.clone();
             x0.remove(CD);
             x0.extend(UNIT_KNOBS.iter().map(unit_nominal));
-            let r = calibrate_restarted(&base, &knobs, &x0, set, &self.unit_lsq())?;
+            let r = calibrate_restarted(&EhvvaParams::baseline(), &knobs, &x0, set, &self.unit_lsq())?;
             // The unit fit starts from the four-knob optimum; never keep one that ended worse.
             if r.cost <= four.r.cost {
                 b = Baseline {
-                    base,
                     four_x: four.x.clone(),
                     knobs,
                     x: r.x.clone(),
@@ -949,9 +359,9 @@ impl Family for EhvvaFamily {
             } else {
                 self.unit_lsq()
             };
-            let mut r = calibrate_restarted(&base.base, &knobs, &start(1.0), &de, &lsq)?;
+            let mut r = calibrate_restarted(&EhvvaParams::baseline(), &knobs, &start(1.0), &de, &lsq)?;
             if r.cost > parent_cost {
-                let r0 = calibrate_restarted(&base.base, &knobs, &start(0.0), &de, &lsq)?;
+                let r0 = calibrate_restarted(&EhvvaParams::baseline(), &knobs, &start(0.0), &de, &lsq)?;
                 if r0.cost < r.cost {
                     r = r0;
                 }
@@ -971,13 +381,13 @@ impl Family for EhvvaFamily {
                     },
                 )
                 .collect();
-            let rf = calibrate_restarted(&base.base, &knobs, &fresh, &de, &lsq)?;
+            let rf = calibrate_restarted(&EhvvaParams::baseline(), &knobs, &fresh, &de, &lsq)?;
             if rf.cost < r.cost {
                 r = rf;
             }
             r
         };
-        let p = apply_knobs(&base.base, &knobs, &r.x);
+        let p = apply_knobs(&EhvvaParams::baseline(), &knobs, &r.x);
         // Cut after the fit, not held through it with the solver's arrays.
         let dv = Events::from_log(val)?;
         let mut predicted = vec![0.0; dv.samples];
@@ -1027,7 +437,7 @@ impl Family for EhvvaFamily {
             } else {
                 fit.not_identifiable.push(format!(
                     "cd_at_22C (trades exactly with the common scale of the orifice areas; held at the paper's {:.4})",
-                    reference().1
+                    reference_values().1
                 ));
             }
         }

@@ -1,0 +1,362 @@
+//! The events of an EHVVA log and their simulation: the log cut at each rising pilot command,
+//! each event simulated from rest by model-core's reduced model (the module doc of
+//! [`super`]).
+
+use std::collections::hash_map::DefaultHasher;
+use std::hash::{Hash, Hasher};
+
+use model_core::ehvva::{EhvvaInputs, EhvvaParams, EhvvaPlant, EhvvaReduced};
+
+use crate::log::Log;
+
+/// Rest kept before each rising command edge (the segment start), ms.
+pub const PRE_MS: f64 = 1.0;
+/// The fits use at most this many estimation events (chosen by [`Events::for_fitting`]); the
+/// validation data are always predicted whole. Ten or so parameters are well determined by a
+/// few dozen events that cover every test condition, while the cost of each fit grows with
+/// the events: a long bench record (hundreds of events of a repeated test matrix) adds time,
+/// not information.
+pub const MAX_FIT_EVENTS: usize = 64;
+
+/// Delay-line length of the simulated model: 1024 samples hold 10 ms even at a 0.01 ms step.
+const DELAY_SAMPLES: usize = 1024;
+
+/// One valve event of a log: the samples from rest before a pilot command to the next event.
+#[derive(Clone, Debug)]
+pub struct Event {
+    /// Index of the first sample in the log.
+    pub start: usize,
+    pub u_pilot: Vec<bool>,
+    /// Measured lift.
+    pub lift_mm: Vec<f64>,
+    /// The operating point (set-points, temperature, valve states).
+    pub inputs: EhvvaInputs<f64>,
+    /// Index (in the event) of the rising command edge and of the last falling one.
+    pub on_index: usize,
+    pub off_index: Option<usize>,
+}
+
+impl Event {
+    pub fn stroke_mm(&self, p: &EhvvaParams) -> f64 {
+        if self.inputs.lift_high {
+            p.lift_high_mm
+        } else {
+            p.lift_low_mm
+        }
+    }
+}
+
+/// A log cut into valve events.
+#[derive(Clone, Debug)]
+pub struct Events {
+    pub dt_ms: f64,
+    pub events: Vec<Event>,
+    /// Samples in the log (the events cover it from the first one's start).
+    pub samples: usize,
+    pub file: String,
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    if v.is_empty() {
+        f64::NAN
+    } else {
+        v[v.len() / 2]
+    }
+}
+
+impl Events {
+    pub fn from_log(log: &Log) -> Result<Self, String> {
+        let col = |name: &str| log.col(name).ok_or_else(|| format!("{}: no `{name}` column", log.file));
+        let (u, ph, pl, temp, high, snub, lift) = (
+            col("u_pilot")?,
+            col("p_supply_MPa")?,
+            col("p_back_MPa")?,
+            col("temp_C")?,
+            col("lift_high")?,
+            col("snubber_on")?,
+            col("lift_mm")?,
+        );
+        let dt_ms = log.dt_s * 1e3;
+        if !(dt_ms > 0.0 && dt_ms <= 0.1) {
+            return Err(format!(
+                "{}: sample period {} ms; the EHVVA models need 0.1 ms or less (10 kHz or more)",
+                log.file, dt_ms
+            ));
+        }
+        let n = lift.len();
+        let pre = ((PRE_MS / dt_ms).round() as usize).max(1);
+        // A command already on at the first sample began before the log: not an edge.
+        let rising: Vec<usize> = (1..n).filter(|&k| u[k] > 0.5 && u[k - 1] <= 0.5).collect();
+        if rising.is_empty() {
+            return Err(format!("{}: no valve event (u_pilot never rises)", log.file));
+        }
+        let skip = unsettled_prefix(u, lift, rising[0], pre);
+        let mut starts: Vec<usize> = Vec::with_capacity(rising.len());
+        for (i, &r) in rising.iter().enumerate() {
+            let s = if i == 0 {
+                skip
+            } else {
+                r.saturating_sub(pre).max(starts[i - 1] + 1)
+            };
+            starts.push(s);
+        }
+        let mut events = Vec::with_capacity(rising.len());
+        for i in 0..rising.len() {
+            let (s, e) = (starts[i], if i + 1 < starts.len() { starts[i + 1] } else { n });
+            let on = rising[i] - s;
+            // Set-points: the samples at rest before the edge (at most PRE_MS of them).
+            let rest = rising[i].saturating_sub(pre).max(s)..rising[i];
+            // The mean, not the median: the median of quantized samples is itself on the
+            // quantizer's grid (±½ LSB), the mean of noisy ones resolves below it.
+            let setpoint = |x: &[f64]| {
+                if rest.len() >= 3 {
+                    x[rest.clone()].iter().sum::<f64>() / rest.len() as f64
+                } else {
+                    let mut v: Vec<f64> = x[s..e].to_vec();
+                    median(&mut v)
+                }
+            };
+            let off_index = (s + on + 1..e)
+                .rev()
+                .find(|&k| u[k] <= 0.5 && u[k - 1] > 0.5)
+                .map(|k| k - s);
+            let inputs = EhvvaInputs {
+                p_supply_mpa: setpoint(ph),
+                p_back_mpa: setpoint(pl),
+                temp_c: temp[s..e].iter().sum::<f64>() / (e - s) as f64,
+                lift_high: high[rising[i]] > 0.5,
+                snubber_on: snub[rising[i]] > 0.5,
+            };
+            events.push(Event {
+                start: s,
+                u_pilot: u[s..e].iter().map(|&v| v > 0.5).collect(),
+                lift_mm: lift[s..e].to_vec(),
+                inputs,
+                on_index: on,
+                off_index,
+            });
+        }
+        Ok(Events {
+            dt_ms,
+            events,
+            samples: n,
+            file: log.file.clone(),
+        })
+    }
+
+    /// Samples before the first event: the log began while the valve was still moving (e.g. a
+    /// held-out tail cut from a longer record), a state the model cannot start from.
+    pub fn skipped(&self) -> usize {
+        self.events.first().map_or(0, |e| e.start)
+    }
+
+    /// The measured lift over the whole log (what `simulate_all` predicts).
+    pub fn measured(&self) -> Vec<f64> {
+        let mut y = vec![0.0; self.samples];
+        for ev in &self.events {
+            y[ev.start..ev.start + ev.lift_mm.len()].copy_from_slice(&ev.lift_mm);
+        }
+        y
+    }
+
+    /// Total samples covered by the events.
+    pub fn covered(&self) -> usize {
+        self.events.iter().map(|e| e.lift_mm.len()).sum()
+    }
+
+    /// A subset of the events (e.g. one test condition), keeping the period.
+    pub fn subset(&self, keep: impl Fn(&Event) -> bool) -> Events {
+        let events: Vec<Event> = self.events.iter().filter(|e| keep(e)).cloned().collect();
+        let mut at = 0;
+        let events = events
+            .into_iter()
+            .map(|mut e| {
+                e.start = at;
+                at += e.lift_mm.len();
+                e
+            })
+            .collect();
+        Events {
+            dt_ms: self.dt_ms,
+            events,
+            samples: at,
+            file: self.file.clone(),
+        }
+    }
+
+    /// At most `max_events` of the events for a fit, the operating conditions represented.
+    /// Conditions are nested: lift and snubber states, then temperature (to 10 °C), supply
+    /// pressure (to 0.5 MPa) and back pressure (to 0.5 MPa). Each place goes to the event whose
+    /// condition is least represented so far, coarsest level first (so every lift/snubber
+    /// combination, then every temperature within it, is covered before finer differences),
+    /// ties to the event farthest in the record from those already chosen (so a drift over a
+    /// long run is sampled too). All events when there are not more.
+    pub fn for_fitting(&self, max_events: usize) -> Events {
+        if self.events.len() <= max_events {
+            return self.clone();
+        }
+        let keep = self.fitting_choice(max_events);
+        let starts: std::collections::HashSet<usize> = (0..self.events.len())
+            .filter(|&k| keep[k])
+            .map(|k| self.events[k].start)
+            .collect();
+        self.subset(|e| starts.contains(&e.start))
+    }
+
+    /// Which events [`Events::for_fitting`] keeps (a flag per event).
+    pub(super) fn fitting_choice(&self, max_events: usize) -> Vec<bool> {
+        let levels = |e: &Event| -> [[i64; 5]; 4] {
+            let i = &e.inputs;
+            let full = [
+                i.lift_high as i64,
+                i.snubber_on as i64,
+                (i.temp_c / 10.0).round() as i64,
+                (i.p_supply_mpa / 0.5).round() as i64,
+                (i.p_back_mpa / 0.5).round() as i64,
+            ];
+            // Level l keeps the first 2 + l entries; the rest is masked.
+            core::array::from_fn(|l| core::array::from_fn(|k| if k < 2 + l { full[k] } else { i64::MIN }))
+        };
+        let keys: Vec<[[i64; 5]; 4]> = self.events.iter().map(levels).collect();
+        let mut counts: std::collections::HashMap<[i64; 5], usize> = std::collections::HashMap::new();
+        let mut keep = vec![false; self.events.len()];
+        let mut chosen: Vec<usize> = Vec::with_capacity(max_events);
+        for _ in 0..max_events {
+            let score = |k: usize| {
+                let represented: [usize; 4] = core::array::from_fn(|l| counts.get(&keys[k][l]).copied().unwrap_or(0));
+                let gap = chosen.iter().map(|&c| c.abs_diff(k)).min().unwrap_or(usize::MAX);
+                (represented, std::cmp::Reverse(gap))
+            };
+            let Some(best) = (0..self.events.len()).filter(|&k| !keep[k]).min_by_key(|&k| score(k)) else {
+                break;
+            };
+            keep[best] = true;
+            chosen.push(best);
+            for key in &keys[best] {
+                *counts.entry(*key).or_insert(0) += 1;
+            }
+        }
+        keep
+    }
+
+    pub(super) fn key(&self) -> u64 {
+        let mut h = DefaultHasher::new();
+        self.samples.hash(&mut h);
+        self.dt_ms.to_bits().hash(&mut h);
+        for e in &self.events {
+            e.start.hash(&mut h);
+            for v in &e.lift_mm {
+                v.to_bits().hash(&mut h);
+            }
+        }
+        h.finish()
+    }
+}
+
+/// Lift band about the rest level inside which the valve counts as at rest, mm (a seated
+/// valve's lift is sensor noise, σ ≤ 6 µm).
+const REST_BAND_MM: f64 = 0.05;
+
+/// How many leading samples precede the valve's rest before the first command edge `first_on`:
+/// a log cut out of a longer record may begin with a command on or the valve still closing.
+/// Those samples are left out of every event (0 when the log begins at rest). The rest level is
+/// the mean lift over the `pre` samples before the edge.
+fn unsettled_prefix(u: &[f64], lift: &[f64], first_on: usize, pre: usize) -> usize {
+    let rest = first_on.saturating_sub(pre)..first_on;
+    if rest.is_empty() {
+        return 0;
+    }
+    let level = lift[rest.clone()].iter().sum::<f64>() / rest.len() as f64;
+    (0..first_on)
+        .rev()
+        .find(|&k| u[k] > 0.5 || (lift[k] - level).abs() > REST_BAND_MM)
+        .map_or(0, |k| k + 1)
+}
+
+/// Simulates one event from rest with model-core's reduced model, writing the lift into `out`
+/// (same length as the event).
+pub fn simulate_event(params: &EhvvaParams, ev: &Event, dt_ms: f64, out: &mut [f64]) -> Result<(), String> {
+    let mut m = EhvvaReduced::<f64, DELAY_SAMPLES>::new(params, &ev.inputs, dt_ms).map_err(|e| format!("{e:?}"))?;
+    let settle = ((2.0 / dt_ms).round() as usize).max(1);
+    let mut seated_for = 0usize;
+    let last_off = ev.off_index.unwrap_or(usize::MAX);
+    for (k, slot) in out.iter_mut().enumerate() {
+        if k < ev.on_index {
+            // At rest before the command: the model's steady state.
+            *slot = 0.0;
+            continue;
+        }
+        if seated_for >= settle {
+            *slot = 0.0;
+            continue;
+        }
+        let y = m.step(ev.u_pilot[k], &ev.inputs);
+        if !y.is_finite() {
+            return Err(format!("simulation diverged at sample {}", ev.start + k));
+        }
+        *slot = y;
+        seated_for = if k > last_off && y == 0.0 && m.velocity_m_s() == 0.0 {
+            seated_for + 1
+        } else {
+            0
+        };
+    }
+    Ok(())
+}
+
+/// Simulates every event into `out` (the log's length); the samples before the first event
+/// ([`Events::skipped`]) are set to 0, as [`Events::measured`] has them.
+pub fn simulate_all(params: &EhvvaParams, set: &Events, out: &mut [f64]) -> Result<(), String> {
+    out[..set.skipped()].fill(0.0);
+    for ev in &set.events {
+        simulate_event(params, ev, set.dt_ms, &mut out[ev.start..ev.start + ev.lift_mm.len()])?;
+    }
+    Ok(())
+}
+
+/// As [`simulate_all`], with the events shared among `threads` threads: they are independent
+/// (each from rest), so the result is the same as on one; the events go in contiguous runs
+/// of about equal sample counts.
+pub fn simulate_all_on(params: &EhvvaParams, set: &Events, out: &mut [f64], threads: usize) -> Result<(), String> {
+    let threads = threads.clamp(1, set.events.len().max(1));
+    if threads == 1 {
+        return simulate_all(params, set, out);
+    }
+    let skip = set.skipped();
+    out[..skip].fill(0.0);
+    let per_thread = set.covered().div_ceil(threads);
+    // Runs of events: (events, their output slice).
+    let mut runs: Vec<(&[Event], &mut [f64])> = Vec::with_capacity(threads);
+    let (mut rest_events, mut rest_out) = (&set.events[..], &mut out[skip..]);
+    while !rest_events.is_empty() {
+        let (mut count, mut len) = (0, 0);
+        while count < rest_events.len() && (len < per_thread || runs.len() + 1 == threads) {
+            len += rest_events[count].lift_mm.len();
+            count += 1;
+        }
+        let (ev, more_ev) = rest_events.split_at(count);
+        let (o, more_o) = std::mem::take(&mut rest_out).split_at_mut(len);
+        runs.push((ev, o));
+        (rest_events, rest_out) = (more_ev, more_o);
+    }
+    std::thread::scope(|s| {
+        let handles: Vec<_> = runs
+            .into_iter()
+            .map(|(events, o)| {
+                s.spawn(move || {
+                    let mut at = 0;
+                    for ev in events {
+                        let len = ev.lift_mm.len();
+                        simulate_event(params, ev, set.dt_ms, &mut o[at..at + len])?;
+                        at += len;
+                    }
+                    Ok::<(), String>(())
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .try_for_each(|h| h.join().map_err(|_| "event simulation thread panicked".to_string())?)
+    })
+}
