@@ -10,6 +10,7 @@ pub mod lsq;
 pub mod mf4;
 pub mod numbers;
 pub mod output;
+pub mod paper_check;
 pub mod pil;
 pub mod plot;
 pub mod residuals;

@@ -13,7 +13,7 @@ use hil_host::run::Scenario;
 use super::progress::{self, Counter, Spinner};
 use super::{
     CalibrateArgs, CalibrationArgs, CheckArgs, Cli, Command, DiagnoseArgs, GenerateArgs, IdentifyArgs, IdentifyCommand,
-    PilArgs, RunArgs, TargetBenchArgs,
+    PaperCheckArgs, PilArgs, RunArgs, TargetBenchArgs,
 };
 
 /// A failed command (exit status 1); usage errors are clap's (exit status 2).
@@ -53,6 +53,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Pil(a) => pil(a),
         Command::Calibrate(a) => calibrate(a),
         Command::TargetBench(a) => target_bench(a),
+        Command::PaperCheck(a) => paper_check(a),
         Command::Completions { shell } => {
             use clap::CommandFactory;
             clap_complete::generate(shell, &mut Cli::command(), "hil-host", &mut std::io::stdout());
@@ -518,4 +519,13 @@ fn calibrate(a: CalibrateArgs) -> Result<()> {
         model_core::ecu::calibration::IMAGE_BYTES
     );
     Ok(())
+}
+
+/// `paper-check`: every model against its paper (hil_host::paper_check).
+fn paper_check(a: PaperCheckArgs) -> Result<()> {
+    if hil_host::paper_check::run(a.json.as_deref()).map_err(fail)? {
+        Ok(())
+    } else {
+        Err(fail("paper-check: some rows fail (marked FAIL above)"))
+    }
 }

@@ -121,6 +121,13 @@ Examples:
   hil-host target-bench --steps 20000 --out out/bench
   hil-host target-bench --json out/target-bench.json")]
     TargetBench(TargetBenchArgs),
+    /// Each model against its paper: one row per published value (paper, model, relative
+    /// error, tolerance, pass); exit status 1 when a row fails
+    #[command(after_help = "\
+Examples:
+  hil-host paper-check
+  hil-host paper-check --json out/paper-check.json")]
+    PaperCheck(PaperCheckArgs),
     /// Print a shell completion script
     #[command(after_help = "\
 Examples:
@@ -349,6 +356,13 @@ pub struct TargetBenchArgs {
     /// Write into a directory that holds other files or another run's outputs
     #[arg(long)]
     pub force: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct PaperCheckArgs {
+    /// Also write the rows as JSON, `{"rows": [...]}`
+    #[arg(long, value_name = "FILE")]
+    pub json: Option<PathBuf>,
 }
 
 #[cfg(test)]

@@ -213,6 +213,12 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaLpv<R, N> {
             let a = self.affine.a_matrix(&self.theta);
             let b = self.affine.b_matrix(&self.theta);
             let u = [u_delayed, R::ONE - u_delayed];
+            // The lift before this sub-step, read from the state as stored (after the last
+            // clamp, exactly 0 on the seat): reconstructing it from the new state as
+            // `lift − h·v` leaves a rounding residue of (ds + h·v) − ds − h·v that made every
+            // sub-step on the seat look like a fresh landing at h·a ≈ 0.005 m/s, overwriting the
+            // real seating velocity (issue #14).
+            let lift_before = self.x[1] - self.preload;
             // Semi-implicit Gauss-Seidel sweep: velocity, position, pressure.
             for row in [2usize, 1, 0] {
                 let mut rate = b[row][0] * u[0] + b[row][1] * u[1];
@@ -224,7 +230,6 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaLpv<R, N> {
                 self.x[row] = (self.x[row] + self.h * rate) / (R::ONE - self.h * a[row][row]);
             }
             let lift = self.x[1] - self.preload;
-            let lift_before = lift - self.h * self.x[2];
             let (lift, vel, impact) = Piston::stops(lift, self.x[2], stroke);
             if impact.is_some() && lift_before > R::ZERO {
                 self.seat_velocity = impact;
@@ -296,5 +301,39 @@ mod tests {
         let th = m.theta();
         assert!(th[0] > 5.0 && th[0] < 20.0, "1/τp = {}", th[0]);
         assert!((th[4] - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn seating_velocity_is_the_landing_not_the_seat_holding_the_valve() {
+        // Over the 15 tests of Table 1 the LPV model lands as fast as the reduced model it is
+        // transformed from (they share eqs. (1), (5)-(6)); before the fix 3 of them (all now
+        // landing at 0.05-1.6 m/s) reported about 0.005 m/s: the seat holding the valve.
+        use crate::ehvva::event::{run_event, ValveEvent};
+        use crate::ehvva::params::PAPER_TESTS;
+        use crate::ehvva::reduced::EhvvaReduced;
+        let p = EhvvaParams::paper_default();
+        for t in PAPER_TESTS.iter() {
+            let inputs = EhvvaInputs::<f64>::from_test(t);
+            let stroke = if t.lift_high { p.lift_high_mm } else { p.lift_low_mm };
+            let ev = ValveEvent::with_dwell(t.dwell_ms);
+            let mut red = EhvvaReduced::<f64>::new(&p, &inputs, 0.02).unwrap();
+            let mut lpv = EhvvaLpv::<f64>::new(&p, &inputs, 0.02).unwrap();
+            let v_red = run_event(&mut red, &ev, &inputs, stroke, |_, _| {})
+                .seating_velocity_m_s
+                .unwrap();
+            let v_lpv = run_event(&mut lpv, &ev, &inputs, stroke, |_, _| {})
+                .seating_velocity_m_s
+                .unwrap();
+            assert!(v_red > 0.04, "test {}: reduced {v_red}", t.number);
+            // Here the LPV model sees the set-point pressures, the reduced model its
+            // accumulators; at 2-4 MPa back pressure the returned oil raises Pl during the slow
+            // seating, so only the 1 MPa tests are held to 10 %.
+            let tol = if t.p_back_mpa <= 1.0 { 0.1 } else { 0.5 };
+            assert!(
+                (v_lpv - v_red).abs() <= tol * v_red,
+                "test {}: LPV {v_lpv} m/s, reduced {v_red} m/s",
+                t.number
+            );
+        }
     }
 }

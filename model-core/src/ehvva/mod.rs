@@ -42,7 +42,9 @@
 //! on the reduced model, f64) to the paper's measured responses: Table 3 opening times, the
 //! Table 4 trends, the seating velocities of Sec. 2 (0.25 vs 0.69 m/s) with the ~1 ms tail,
 //! and the ~7 ms later closing at 4 MPa back pressure (Fig. 10); the remaining values are
-//! engineering choices for a passenger-car intake valve.
+//! engineering choices for a passenger-car intake valve. Every value not from the paper is
+//! listed in docs/invented-values.md; `hil-host paper-check` shows how far the model is from each
+//! published value.
 //!
 //! | symbol | field | value | source / reason |
 //! |---|---|---|---|
