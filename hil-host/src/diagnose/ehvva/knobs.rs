@@ -50,9 +50,8 @@ fn scale_tau(p: &mut EhvvaParams, tau_ms: f64) {
 }
 
 /// The top snubber's fixed orifice and notch areas together, relative to the paper's: how
-/// freely the oil leaves the top chamber on closing outside the snubbing zone, with the notch
-/// that the `snubber` effect covers keeping its share (so the effect keeps its strength
-/// relative to the unit's path). Applied before the switch orifice, which is its own knob.
+/// freely the oil leaves the top chamber inside the snubbing zone (the zone's length is the
+/// `snubber` effect's gain). Applied before the switch orifice, which is its own knob.
 fn scale_top_snubber_path(p: &mut EhvvaParams, scale: f64) {
     let base = EhvvaParams::baseline();
     p.area_top_orifice_mm2 = base.area_top_orifice_mm2 * scale;
@@ -115,8 +114,8 @@ pub const BASELINE_KNOBS: [Knob; 4] = [
 ];
 
 /// What varies from unit to unit beyond the four knobs of the paper's calibration: spring rate
-/// and preload, friction, the bottom piston area, every flow path (main valve, the top
-/// snubber's path, its switch orifice, the bottom port and notch) and how much of the paper's
+/// and preload, friction, the bottom piston area, the flow paths outside the snubbers (the main
+/// valve's supply edge, its return edge, the bottom port and notch) and how much of the paper's
 /// temperature trend the delay has. The diagnosis fits them all with the baseline, from the
 /// four knobs' optimum, and reports from the confidence intervals what the data cannot
 /// identify. Bounds are wide: a valve of another design (a spring three times stiffer with a
@@ -131,7 +130,11 @@ pub const BASELINE_KNOBS: [Knob; 4] = [
 /// paper's value as the reference and reported as not identifiable; the fitted mass, areas,
 /// spring and friction are the unit's relative to it. With every flow path free, Cd is held
 /// at the paper's value too (the losses see Cd·A only), and the areas are the unit's at it.
-pub const UNIT_KNOBS: [Knob; 9] = [
+///
+/// The top snubber's orifices are not among them: they restrict only inside the snubbing zone
+/// (Sec. 2), whose length is the `snubber` effect's gain, so a model without that effect does
+/// not depend on them; they are fitted with it ([`SNUBBER_KNOBS`]).
+pub const UNIT_KNOBS: [Knob; 8] = [
     Knob {
         name: "td_temperature_gain",
         lo: 0.0,
@@ -164,10 +167,27 @@ pub const UNIT_KNOBS: [Knob; 9] = [
     },
     Knob {
         name: "area_main_mm2",
-        lo: 2.0,
+        lo: 1.0,
         hi: 40.0,
         apply: |p, v| p.area_main_mm2 = v,
     },
+    Knob {
+        name: "area_main_return_mm2",
+        lo: 3.0,
+        hi: 300.0,
+        apply: |p, v| p.area_main_return_mm2 = v,
+    },
+    Knob {
+        name: "bottom_path_scale",
+        lo: 0.1,
+        hi: 300.0,
+        apply: scale_bottom_path,
+    },
+];
+
+/// The unit knobs that only the `snubber` effect makes visible (see [`UNIT_KNOBS`]): fitted
+/// whenever a candidate has that effect, from the parent's values or the paper's.
+pub const SNUBBER_KNOBS: [Knob; 2] = [
     Knob {
         name: "top_snubber_path_scale",
         lo: 0.05,
@@ -180,13 +200,13 @@ pub const UNIT_KNOBS: [Knob; 9] = [
         hi: 20.0,
         apply: |p, v| p.area_top_switch_orifice_mm2 = v,
     },
-    Knob {
-        name: "bottom_path_scale",
-        lo: 0.1,
-        hi: 30.0,
-        apply: scale_bottom_path,
-    },
 ];
+
+/// Whether a knob is a unit knob (the baseline's or the snubber's), as opposed to one of the
+/// paper's four or an effect gain.
+pub(super) fn is_unit_knob(name: &str) -> bool {
+    UNIT_KNOBS.iter().chain(&SNUBBER_KNOBS).any(|u| u.name == name)
+}
 
 /// The paper's value of a unit knob.
 pub(super) fn unit_nominal(k: &Knob) -> f64 {
@@ -196,6 +216,7 @@ pub(super) fn unit_nominal(k: &Knob) -> f64 {
         "spring_preload_mm" => p.spring_preload_mm,
         "friction_N_per_m_s" => p.friction_n_per_m_s,
         "area_main_mm2" => p.area_main_mm2,
+        "area_main_return_mm2" => p.area_main_return_mm2,
         "top_snubber_path_scale" => 1.0,
         "area_top_switch_orifice_mm2" => p.area_top_switch_orifice_mm2,
         "bottom_path_scale" => 1.0,

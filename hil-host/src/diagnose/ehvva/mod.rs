@@ -339,6 +339,11 @@ impl Family for EhvvaFamily {
         for e in effects {
             knobs.push(effect_knob(e)?);
         }
+        // The snubber's orifices matter only with its zone (SNUBBER_KNOBS); with a baseline at
+        // the paper's unit they stay at the paper's values too.
+        if !base.paper_unit && effects.contains(&EhvvaEffect::Snubber.name()) {
+            knobs.extend(SNUBBER_KNOBS);
+        }
         let r = if effects.is_empty() {
             rb
         } else {
@@ -351,8 +356,20 @@ impl Family for EhvvaFamily {
                     .and_then(|f| f.internal.iter().find(|(n, _)| n == name).map(|(_, v)| *v))
                     .or_else(|| base.knobs.iter().position(|k| k.name == name).map(|i| xb[i]))
             };
-            let start =
-                |new_gain: f64| -> Vec<f64> { knobs.iter().map(|k| from_parent(k.name).unwrap_or(new_gain)).collect() };
+            // A unit knob new to this candidate (the snubber's) starts at the paper's value, a
+            // new effect gain at `new_gain`.
+            let start = |new_gain: f64| -> Vec<f64> {
+                knobs
+                    .iter()
+                    .map(|k| {
+                        from_parent(k.name).unwrap_or(if is_unit_knob(k.name) {
+                            unit_nominal(k)
+                        } else {
+                            new_gain
+                        })
+                    })
+                    .collect()
+            };
             let parent_cost = parent.map_or(rb.cost, |f| f.est_cost);
             let lsq = if base.paper_unit {
                 self.lsq.clone()
@@ -376,7 +393,7 @@ impl Family for EhvvaFamily {
                 .map(
                     |k| match base.four_x.iter().zip(&BASELINE_KNOBS).find(|(_, b)| b.name == k.name) {
                         Some((v, _)) => *v,
-                        None if UNIT_KNOBS.iter().any(|u| u.name == k.name) => unit_nominal(k).clamp(k.lo, k.hi),
+                        None if is_unit_knob(k.name) => unit_nominal(k).clamp(k.lo, k.hi),
                         None => 1.0,
                     },
                 )
