@@ -67,6 +67,15 @@ fn scale_bottom_path(p: &mut EhvvaParams, scale: f64) {
     p.area_bottom_min_mm2 = base.area_bottom_min_mm2 * scale;
 }
 
+/// The bottom snubber's notch and what is left of it at full lift, relative to the bottom
+/// path (applied after [`scale_bottom_path`]): the cushion of the landing at full lift, which
+/// varies from unit to unit apart from the port (a few per cent of it move the landing's lift
+/// by far more than the sensor noise).
+fn scale_bottom_cushion(p: &mut EhvvaParams, scale: f64) {
+    p.area_bottom_notch_mm2 *= scale;
+    p.area_bottom_min_mm2 *= scale;
+}
+
 /// How much of the paper's temperature trend of td (Fig. 4: longer when cold) the unit has:
 /// 0 a delay that does not depend on the oil temperature, 1 the paper's. Each column of the
 /// (already scaled) tables moves toward the 22 °C column, so td at 22 °C stays the td knob's.
@@ -134,7 +143,7 @@ pub const BASELINE_KNOBS: [Knob; 4] = [
 /// The top snubber's orifices are not among them: they restrict only inside the snubbing zone
 /// (Sec. 2), whose length is the `snubber` effect's gain, so a model without that effect does
 /// not depend on them; they are fitted with it ([`SNUBBER_KNOBS`]).
-pub const UNIT_KNOBS: [Knob; 8] = [
+pub const UNIT_KNOBS: [Knob; 9] = [
     Knob {
         name: "td_temperature_gain",
         lo: 0.0,
@@ -172,16 +181,22 @@ pub const UNIT_KNOBS: [Knob; 8] = [
         apply: |p, v| p.area_main_mm2 = v,
     },
     Knob {
-        name: "area_main_return_mm2",
-        lo: 3.0,
-        hi: 300.0,
-        apply: |p, v| p.area_main_return_mm2 = v,
+        name: "main_return_restriction",
+        lo: 0.0,
+        hi: 100.0,
+        apply: set_main_return_restriction,
     },
     Knob {
         name: "bottom_path_scale",
         lo: 0.1,
         hi: 300.0,
         apply: scale_bottom_path,
+    },
+    Knob {
+        name: "bottom_cushion_scale",
+        lo: 0.05,
+        hi: 20.0,
+        apply: scale_bottom_cushion,
     },
 ];
 
@@ -202,6 +217,18 @@ pub const SNUBBER_KNOBS: [Knob; 2] = [
     },
 ];
 
+/// The main valve's return edge as a restriction: (A_paper / A)², the pressure drop per flow²
+/// relative to the paper's. The closing's losses are linear in it, so a fit can switch the
+/// edge off (0, an edge much wider than the rest of the path) and back: parametrized by the
+/// area, a fit that widened it lost its gradient (1/A² → 0) and stayed there while friction
+/// took the damping over.
+fn set_main_return_restriction(p: &mut EhvvaParams, restriction: f64) {
+    let paper = EhvvaParams::baseline().area_main_return_mm2;
+    // 1e-6 of the paper's drop (an area 1000 times the paper's) stands for none: the model
+    // needs a finite area.
+    p.area_main_return_mm2 = paper / restriction.max(1e-6).sqrt();
+}
+
 /// Whether a knob is a unit knob (the baseline's or the snubber's), as opposed to one of the
 /// paper's four or an effect gain.
 pub(super) fn is_unit_knob(name: &str) -> bool {
@@ -216,10 +243,11 @@ pub(super) fn unit_nominal(k: &Knob) -> f64 {
         "spring_preload_mm" => p.spring_preload_mm,
         "friction_N_per_m_s" => p.friction_n_per_m_s,
         "area_main_mm2" => p.area_main_mm2,
-        "area_main_return_mm2" => p.area_main_return_mm2,
+        "main_return_restriction" => 1.0,
         "top_snubber_path_scale" => 1.0,
         "area_top_switch_orifice_mm2" => p.area_top_switch_orifice_mm2,
         "bottom_path_scale" => 1.0,
+        "bottom_cushion_scale" => 1.0,
         "td_temperature_gain" => 1.0,
         _ => p.area_bottom_mm2,
     }
@@ -235,9 +263,10 @@ pub fn effect_knob(effect: &str) -> Result<Knob, String> {
         EhvvaEffect::DirectionDelay => |p, v| p.effect_direction_delay = v,
         EhvvaEffect::Snubber => |p, v| p.effect_snubber = v,
     };
-    // The snubbing zone is the paper's Ls1 (0.486 mm) times the gain: a unit's undercut may be
-    // several times longer (up to ~3 mm, still inside the low lift's 4 mm stroke).
-    let hi = if e == EhvvaEffect::Snubber { 6.0 } else { 2.0 };
+    // The snubbing zone is the paper's Ls1 (0.83 mm) times the gain: a unit's undercut may be
+    // several times longer (up to 4 Ls1, 3.3 mm, as model-core allows, inside the low lift's
+    // 4 mm stroke).
+    let hi = if e == EhvvaEffect::Snubber { 4.0 } else { 2.0 };
     Ok(Knob {
         name: e.params()[0].0,
         lo: 0.0,
