@@ -42,9 +42,7 @@ fn long_case(plant: Plant, effect: &str) -> Option<Result<Case, String>> {
 /// EHVVA at 20 kHz: `generate::ehvva::generate` with its Table 1-like estimation matrix
 /// repeated (each time newly jittered and shuffled) until the log holds 100 000 samples.
 fn ehvva_long_case(effect: &str) -> Result<Case, String> {
-    use generate::ehvva::{
-        draw_params, estimation_tests, log_text, run_bench, seating_on, validation_tests, Sensors, DT_MS,
-    };
+    use generate::ehvva::{draw_params, estimation_tests, log_text, run_bench, validation_tests, Sensors, DT_MS};
     use model_core::ehvva::{EhvvaInputs, EhvvaReduced};
     let mut rng = generate::Rng::new(SEED);
     let parts = generate::parse_effects(Plant::Ehvva, effect)?;
@@ -61,14 +59,10 @@ fn ehvva_long_case(effect: &str) -> Result<Case, String> {
     let mut tests = Vec::new();
     // About 30 ms per event: 170 events fill 100 000 samples; the matrix has 20.
     while tests.len() < 200 {
-        tests.extend(estimation_tests(&mut rng).into_iter().map(|t| seating_on(t, &params)));
+        tests.extend(estimation_tests(&mut rng));
     }
     let est = run_bench(&tests, DT_MS, &sensors, &mut rng, make)?;
-    let val_tests: Vec<_> = validation_tests(&mut rng, 24)
-        .into_iter()
-        .map(|t| seating_on(t, &params))
-        .collect();
-    let val = run_bench(&val_tests, DT_MS, &sensors, &mut rng, make)?;
+    let val = run_bench(&validation_tests(&mut rng, 24), DT_MS, &sensors, &mut rng, make)?;
     Ok(Case {
         plant: Plant::Ehvva,
         seed: SEED,

@@ -281,9 +281,7 @@ fn pressure_delay_unit(seed: u64, dir: &Path) -> (PathBuf, PathBuf) {
         td0 * rng.uniform(0.85, 1.15),
         cd0 * rng.uniform(0.85, 1.15),
         tau0 * rng.uniform(0.8, 1.25),
-        // The moving mass ±10 % about the paper's (0.165-0.2 kg about 0.183 kg before the
-        // issue #14 refit; now about 0.171 kg).
-        EhvvaParams::baseline().mass_kg * rng.uniform(0.9, 1.1),
+        rng.uniform(0.165, 0.2),
     ];
     let mut p = apply_knobs(&EhvvaParams::baseline(), &BASELINE_KNOBS, &x);
     let knob = effect_knob("pressure-delay").unwrap();

@@ -3,27 +3,31 @@
 
 use hil_host::paper_check::{self, Check, Row, TOLERANCE};
 
-/// Rows that still fail, each for a reason no physical fix in the paper's model structure has
-/// removed yet (docs/models.md, "paper-check"). CI holds every other row; a row that starts
-/// passing is printed so it can leave the list.
-/// - The closing of a 7.5 mm stroke at 7.2 MPa (2.8 ms, Sec. 2) and of a 4 mm stroke at 5 MPa
-///   (3.5/3.0 ms, Table 4) cannot both hold in eq. (12): the closing is driven by the spring
-///   against Pl alone, Ph does not enter it, so the longer stroke cannot close faster. The
-///   geometry fit splits the difference (+23 %, −21 %, −19 %).
-/// - Table 4's trends: the opening 22 → 100 °C is 7 % faster (paper 29 %) and the closing
-///   22 → −20 °C 52 % slower (paper 14 %): with the piston forces of eq. (12) and one mean Cd(T)
-///   for every orifice, the fit cannot make the opening more temperature-sensitive than the
-///   closing without breaking Table 3 or the seating rows; the single times pass.
+/// Rows that still fail on main's models, each with its cause (docs/models.md, "paper-check").
+/// CI holds every other row; a row that starts passing is printed so it can leave the list.
+/// - The top snubber restricts the whole closing stroke, not only its zone (L < Ls1), and one
+///   main-valve area meters both the opening (supply edge) and the closing (return edge): the
+///   7.2 MPa high-lift closing takes 5.7 ms (paper 2.8 ms), the -20 °C closing is 53 % slow,
+///   the switch valve's tail 26 % short, and Cd(T) cannot slow the opening (100 °C +24 %)
+///   without throttling the closing, so Table 4's trends miss. The fix (snubber in its zone, a
+///   return-edge area, the geometry refitted) exists in the history (merge 4c65022) and brings
+///   the 7.2 MPa closing to +23 %; it changes every EHVVA response the diagnosis, the
+///   calibration and the ECU's valve-motion tables are built on, and is not on main yet.
+/// - Even with that fix, the closing of a 7.5 mm stroke at 7.2 MPa (2.8 ms, Sec. 2) and of a
+///   4 mm stroke at 5 MPa (3.5 ms, Table 4) cannot both hold in eq. (12): the closing is driven
+///   by the spring against Pl alone, Ph does not enter it, so the longer stroke cannot close
+///   faster.
 /// - Fig. 10's opening 2 ms faster at 4 MPa back pressure: in eqs. (10)-(12) Pl only opposes
-///   the opening (Ab·Pl) and td(Ph, T) does not depend on it; the model is 0.07 ms slower.
+///   the opening (Ab·Pl) and td(Ph, T) does not depend on it; the model is 0.1 ms slower.
 /// - Vacuum: HPC more voltage-sensitive than HPT and HPC sticking at 1 %, not 10 %. A refit
 ///   that passes both rows exists (HPT position map a4 5 kPa, HPC a2 80 %/rad, a3 71.9 kPa,
 ///   a4 32 kPa, clearance 20 %) but breaks five controller and ECU tests (vacuum_position,
 ///   vacuum_task) and a friction test; not landed.
-const KNOWN_FAILING: [&str; 8] = [
+const KNOWN_FAILING: [&str; 9] = [
     "ehvva.table3.closing_ms.high_lift.7p2MPa",
-    "ehvva.table4.vc_time_ms.22C",
-    "ehvva.table4.vc_time_ms.60C",
+    "ehvva.fig2.tail_ms.7p2MPa",
+    "ehvva.table4.vc_time_ms.m20C",
+    "ehvva.table4.vo_time_ms.100C",
     "ehvva.table4.vc_time_ratio.m20C_over_22C",
     "ehvva.table4.vo_time_ratio.100C_over_22C",
     "ehvva.fig10.opening_faster_ms.4MPa",

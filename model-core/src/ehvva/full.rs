@@ -98,6 +98,7 @@ pub struct EhvvaFull<R: Real, const N: usize = DEFAULT_DELAY_SAMPLES> {
     inv_pilot_stroke: R,
     overlap: R,
     inv_metering_span: R,
+    inv_a2_main_full: R,
     pilot_fraction: R,
     lag_open: R,
     lag_close: R,
@@ -195,6 +196,7 @@ impl<R: Real, const N: usize> EhvvaFull<R, N> {
             inv_pilot_stroke: r(1.0 / v.pilot_stroke_mm),
             overlap: r(v.main_overlap_mm),
             inv_metering_span: r(1.0 / (v.main_stroke_mm - v.main_overlap_mm)),
+            inv_a2_main_full: r(1.0 / (params.area_main_mm2 * params.area_main_mm2)),
             pilot_fraction: r(v.pilot_delay_fraction),
             lag_open: r(v.dynamic_lag_open_ms),
             lag_close: r(v.dynamic_lag_close_ms),
@@ -314,7 +316,7 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaFull<R, N> {
             // Eq. (9) line 5 with eq. (5): main valve metering in series with the top snubber.
             let closing = self.m.vel < R::ZERO;
             let frac = if closing { R::ONE - s_main } else { s_main }.max(s_min);
-            let inv_a2_top = self.piston.inv_a2_main_edge(closing) / (frac * frac)
+            let inv_a2_top = self.inv_a2_main_full / (frac * frac)
                 + self.piston.inv_a2_top_snubber(self.m.lift, closing, inputs.snubber_on);
             let k = self.piston.quadratic_gain_with(cd, inv_a2_top, self.m.lift, stroke);
             let force = self.piston.static_force(p_main, self.m.p_low, self.m.lift);

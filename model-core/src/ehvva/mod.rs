@@ -39,33 +39,32 @@
 //! # Parameters (`EhvvaParams::paper_default`)
 //! The paper prints the lifts, the fluid, the calibrated Cd(T) and delays at 5 MPa, and the
 //! measured responses, but none of the geometry. The geometry below was fitted (random search
-//! on the reduced model, f64, `hil-host/examples/ehvva_fit.rs`) to the paper's measured
-//! responses as `hil-host paper-check` lists them: Table 3 opening times, Sec. 2's 3.7/2.8 ms at
-//! 7.2 MPa, the seating velocities of Sec. 2 (0.25 vs 0.69 m/s) with the ~1 ms tail, Table 4's
-//! opening and closing times, and the ~7 ms later closing at 4 MPa back pressure (Fig. 10); the
-//! remaining values are engineering choices for a passenger-car intake valve. Every value not
-//! from the paper is listed in docs/invented-values.md.
+//! on the reduced model, f64) to the paper's measured responses: Table 3 opening times, the
+//! Table 4 trends, the seating velocities of Sec. 2 (0.25 vs 0.69 m/s) with the ~1 ms tail,
+//! and the ~7 ms later closing at 4 MPa back pressure (Fig. 10); the remaining values are
+//! engineering choices for a passenger-car intake valve. Every value not from the paper is
+//! listed in docs/invented-values.md; `hil-host paper-check` shows how far the model is from each
+//! published value.
 //!
 //! | symbol | field | value | source / reason |
 //! |---|---|---|---|
-//! | me | `mass_kg` | 0.171 kg | fitted; valve + piston + 1/3 spring of a car valve train is 0.1-0.2 kg |
-//! | At | `area_top_mm2` | 61.4 mm² | fitted (≈ 8.8 mm piston); sets the opening force Ph·At |
-//! | Ab | `area_bottom_mm2` | 2.89 mm² | fitted; annulus under the piston |
-//! | ks | `spring_n_per_mm` | 7.22 N/mm | fitted; soft enough that high lift opens at 6 MPa |
-//! | ds | `spring_preload_mm` | 34.8 mm | fitted; preload ks·ds = 251 N holds the valve closed against Pl(At − Ab), which gives Fig. 10's long tail at 4 MPa |
-//! | Cf | `friction_n_per_m_s` | 0.055 N/(m/s) | fitted; small (seals), damping comes from the orifices |
+//! | me | `mass_kg` | 0.183 kg | fitted; valve + piston + 1/3 spring of a car valve train is 0.1-0.2 kg |
+//! | At | `area_top_mm2` | 60.8 mm² | fitted (≈ 8.7 mm piston); sets the opening force Ph·At |
+//! | Ab | `area_bottom_mm2` | 4.1 mm² | fitted; annulus under the piston |
+//! | ks | `spring_n_per_mm` | 7.67 N/mm | fitted; soft enough that high lift opens at 6 MPa |
+//! | ds | `spring_preload_mm` | 32.9 mm | fitted; preload ks·ds = 252 N holds the valve closed against Pl(At − Ab) up to Pl ≈ 4.45 MPa, which gives Fig. 10's long tail at 4 MPa |
+//! | Cf | `friction_n_per_m_s` | 0.2 N/(m/s) | fitted; small (seals), damping comes from the orifices |
 //! | S1, S2 | `lift_high_mm`, `lift_low_mm` | 7.5, 4 mm | paper Sec. 3 |
 //! | ρ | `density_kg_m3` | 850 kg/m³ | automatic transmission fluid (Sec. 5.3) |
-//! | – | `area_main_mm2` | 5.90 mm² | fitted; main valve supply edge + top port, Aorit while opening: with Cd(T) it sets Table 4's opening-time trend |
-//! | – | `area_main_return_mm2` | 33.8 mm² | fitted; main valve return edge + top port, Aorit while closing |
-//! | – | `area_top_orifice_mm2` | 0.40 mm² | fitted to the 0.25 m/s seating with the switch valve on |
-//! | – | `area_top_switch_orifice_mm2` | 0.51 mm² | fitted to 0.69 m/s with the switch valve off |
-//! | – | `area_top_notch_mm2` | 0.60 mm² | fitted; top notch, covered linearly in the zone |
-//! | Ls1 | `snub_top_len_mm` | 0.83 mm | fitted to the ~1 ms tail (Sec. 2); the snubber restricts only in this zone |
-//! | – | `area_bottom_port_mm2` | 0.855 mm² | fitted; bottom port, part of Aorib |
-//! | – | `area_bottom_notch_mm2` | 0.109 mm² | fitted; bottom notch |
-//! | – | `area_bottom_min_mm2` | 0.0122 mm² | fitted; what is left at full lift |
-//! | Ls2 | `snub_bottom_len_mm` | 1.4 mm | fitted, bounded to ≤ 1.5 mm (a zone near the stop) |
+//! | – | `area_main_mm2` | 11.6 mm² | fitted; main valve + top port, part of Aorit |
+//! | – | `area_top_orifice_mm2` | 0.30 mm² | fitted to the 0.25 m/s seating with the switch valve on |
+//! | – | `area_top_switch_orifice_mm2` | 0.33 mm² | fitted to 0.69 m/s with the switch valve off |
+//! | – | `area_top_notch_mm2` | 1.86 mm² | fitted; top notch, covered linearly in the zone |
+//! | Ls1 | `snub_top_len_mm` | 0.486 mm | fitted to the ~1 ms tail (Sec. 2) |
+//! | – | `area_bottom_port_mm2` | 0.593 mm² | fitted; bottom port, part of Aorib |
+//! | – | `area_bottom_notch_mm2` | 0.122 mm² | fitted; bottom notch |
+//! | – | `area_bottom_min_mm2` | 0.0245 mm² | fitted; what is left at full lift |
+//! | Ls2 | `snub_bottom_len_mm` | 1.5 mm | fitted, bounded to ≤ 1.5 mm (a zone near the stop) |
 //! | Cach | `cap_high_mm3_per_mpa` | 3500 mm³/MPa | fitted; Ph drops ≈ 0.13 MPa per high-lift opening (Fig. 2 shows a visible dip) |
 //! | Cacl | `cap_low_mm3_per_mpa` | 2000 mm³/MPa | same order as Cach |
 //! | Qpump | `pump_flow_mm3_per_ms` | 20 mm³/ms | 1.2 l/min: refills one high-lift opening in ≈ 25 ms |
@@ -92,9 +91,7 @@
 //!   closing (volume balance of the two chambers); the printed (At + Ab) term reads as an
 //!   extraction error.
 //! - Eq. (15): B5 carries −Ab/me (the back pressure closes the valve, eq. (1)).
-//! - The top snubber acts only while closing (its check valve opens at valve opening, Sec. 2)
-//!   and only inside the snubbing zone L < Ls1 (above it the fluid leaves through the undercut).
-//! - Aorit's main-valve part differs between opening (supply edge) and closing (return edge).
+//! - The top snubber acts only while closing: its check valve opens at valve opening (Sec. 2).
 //! - Eq. (4) and the main valve of eq. (9): see [`full`] for how the delays t0, t1 are placed.
 
 pub mod event;

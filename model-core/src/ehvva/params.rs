@@ -206,12 +206,8 @@ pub struct EhvvaParams {
     pub lift_low_mm: f64,
     /// Fluid density ρoil (automatic transmission fluid, Sec. 5.3).
     pub density_kg_m3: f64,
-    /// Top port and fully open main valve's supply edge (Ph to the top chamber), the part of
-    /// Aorit outside the snubber while the valve opens (eq. (5)).
+    /// Top port and fully open main valve, the part of Aorit outside the snubber (eq. (5)).
     pub area_main_mm2: f64,
-    /// The same for the main valve's return edge (top chamber to Pl), while the valve closes: a
-    /// three-way main valve meters the two flows at two different edges (Sec. 2, Fig. 1).
-    pub area_main_return_mm2: f64,
     /// Top snubber orifice that stays open (eq. (5), Sec. 2).
     pub area_top_orifice_mm2: f64,
     /// Second top orifice, closed while the switch valve is on (Sec. 5.3).
@@ -253,7 +249,7 @@ pub struct EhvvaParams {
     /// VO and VC, for both edges), 1 = Fig. 4. Range 0..=2.
     pub effect_direction_delay: f64,
     /// Effect `snubber`: the top snubbing zone is g·Ls1 long; 0 = off (no snubbing zone: the
-    /// top orifice stays fully open down to the seat), 1 = paper. Range 0..=4.
+    /// top orifice stays fully open down to the seat), 1 = paper. Range 0..=2.
     pub effect_snubber: f64,
     /// Supply pressure at which td is read when `effect_pressure_delay` is 0.
     pub delay_nominal_p_supply_mpa: f64,
@@ -263,25 +259,24 @@ impl EhvvaParams {
     /// The calibration documented in the module table of [`crate::ehvva`], all effects on.
     pub const fn paper_default() -> Self {
         Self {
-            mass_kg: 0.171,
-            area_top_mm2: 61.4,
-            area_bottom_mm2: 2.89,
-            spring_n_per_mm: 7.22,
-            spring_preload_mm: 34.8,
-            friction_n_per_m_s: 0.055,
+            mass_kg: 0.183,
+            area_top_mm2: 60.8,
+            area_bottom_mm2: 4.1,
+            spring_n_per_mm: 7.67,
+            spring_preload_mm: 32.9,
+            friction_n_per_m_s: 0.2,
             lift_high_mm: 7.5,
             lift_low_mm: 4.0,
             density_kg_m3: 850.0,
-            area_main_mm2: 5.90,
-            area_main_return_mm2: 33.8,
-            area_top_orifice_mm2: 0.40,
-            area_top_switch_orifice_mm2: 0.51,
-            area_top_notch_mm2: 0.60,
-            snub_top_len_mm: 0.83,
-            area_bottom_port_mm2: 0.855,
-            area_bottom_notch_mm2: 0.109,
-            area_bottom_min_mm2: 0.0122,
-            snub_bottom_len_mm: 1.4,
+            area_main_mm2: 11.6,
+            area_top_orifice_mm2: 0.30,
+            area_top_switch_orifice_mm2: 0.33,
+            area_top_notch_mm2: 1.86,
+            snub_top_len_mm: 0.486,
+            area_bottom_port_mm2: 0.593,
+            area_bottom_notch_mm2: 0.122,
+            area_bottom_min_mm2: 0.0245,
+            snub_bottom_len_mm: 1.5,
             cap_high_mm3_per_mpa: 3500.0,
             cap_low_mm3_per_mpa: 2000.0,
             pump_flow_mm3_per_ms: 20.0,
@@ -309,7 +304,7 @@ impl EhvvaParams {
 
     /// Checks every scalar; the error names the first bad one.
     pub fn validate(&self) -> Result<(), EhvvaError> {
-        let positive: [(f64, &'static str); 23] = [
+        let positive: [(f64, &'static str); 22] = [
             (self.mass_kg, "mass_kg"),
             (self.area_top_mm2, "area_top_mm2"),
             (self.area_bottom_mm2, "area_bottom_mm2"),
@@ -318,7 +313,6 @@ impl EhvvaParams {
             (self.lift_low_mm, "lift_low_mm"),
             (self.density_kg_m3, "density_kg_m3"),
             (self.area_main_mm2, "area_main_mm2"),
-            (self.area_main_return_mm2, "area_main_return_mm2"),
             (self.area_top_orifice_mm2, "area_top_orifice_mm2"),
             (self.area_top_notch_mm2, "area_top_notch_mm2"),
             (self.snub_top_len_mm, "snub_top_len_mm"),
@@ -359,10 +353,7 @@ impl EhvvaParams {
             (self.effect_snubber, "effect_snubber"),
         ];
         for (v, name) in gains {
-            // The snubbing zone may be up to 4·Ls1 (3.3 mm, inside the low lift's 4 mm stroke):
-            // a unit's undercut may be several times the paper's.
-            let max = if name == "effect_snubber" { 4.0 } else { 2.0 };
-            if !(v.is_finite() && (0.0..=max).contains(&v)) {
+            if !(v.is_finite() && (0.0..=2.0).contains(&v)) {
                 return Err(EhvvaError::InvalidParameter(name));
             }
         }

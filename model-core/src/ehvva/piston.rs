@@ -27,7 +27,6 @@ pub(crate) struct Piston<R: Real> {
     half_rho_at3: R,
     half_rho_ab3: R,
     inv_a2_main: R,
-    inv_a2_main_return: R,
     area_top_orifice: R,
     area_top_switch: R,
     area_top_notch: R,
@@ -65,7 +64,6 @@ impl<R: Real> Piston<R> {
             half_rho_at3: r(half_rho * p.area_top_mm2 * p.area_top_mm2 * p.area_top_mm2),
             half_rho_ab3: r(half_rho * p.area_bottom_mm2 * p.area_bottom_mm2 * p.area_bottom_mm2),
             inv_a2_main: r(1.0 / (p.area_main_mm2 * p.area_main_mm2)),
-            inv_a2_main_return: r(1.0 / (p.area_main_return_mm2 * p.area_main_return_mm2)),
             area_top_orifice: r(p.area_top_orifice_mm2),
             area_top_switch: r(p.area_top_switch_orifice_mm2),
             area_top_notch: r(p.area_top_notch_mm2),
@@ -94,30 +92,16 @@ impl<R: Real> Piston<R> {
 
     /// 1/Aorit² of the equivalent top orifice (eq. (5)): the main valve and top port in
     /// series with the top snubber. Opening (`closing == false`): the snubber's check valve
-    /// opens and only the main valve's supply edge restricts. Closing: its return edge in series
-    /// with the snubber ([`Self::inv_a2_top_snubber`]).
+    /// opens and only the main valve restricts. Closing: the notch is covered linearly over the
+    /// snubbing zone `L < Ls1`, leaving the fixed orifice plus the switch orifice when the
+    /// switch valve is off.
     pub fn inv_a2_top(&self, lift: R, closing: bool, switch_on: bool) -> R {
-        self.inv_a2_main_edge(closing) + self.inv_a2_top_snubber(lift, closing, switch_on)
+        self.inv_a2_main + self.inv_a2_top_snubber(lift, closing, switch_on)
     }
 
-    /// 1/A² of the fully open main valve and top port: the supply edge while opening, the
-    /// return edge while closing.
-    pub fn inv_a2_main_edge(&self, closing: bool) -> R {
-        if closing {
-            self.inv_a2_main_return
-        } else {
-            self.inv_a2_main
-        }
-    }
-
-    /// 1/A² of the top snubber alone. Sec. 2: only "when the actuation piston moves up and past
-    /// the top undercut into the snubbing zone" is the fluid "forced to escape only through the
-    /// orifices and the notch"; above the zone (`lift >= Ls1`) it leaves through the undercut and
-    /// the snubber does not restrict (0). Inside the zone the notch is covered linearly, leaving
-    /// the fixed orifice plus the switch orifice when the switch valve is off. 0 while opening
-    /// (the check valve bypasses it).
+    /// 1/A² of the top snubber alone (0 while opening: the check valve bypasses it).
     pub fn inv_a2_top_snubber(&self, lift: R, closing: bool, switch_on: bool) -> R {
-        if !closing || lift >= self.snub_top_len {
+        if !closing {
             return R::ZERO;
         }
         let fixed = if switch_on {
@@ -125,8 +109,12 @@ impl<R: Real> Piston<R> {
         } else {
             self.area_top_orifice + self.area_top_switch
         };
-        // snub_top_len > lift here, so the division is safe (and snub_top_len > 0).
-        let uncovered = (lift / self.snub_top_len).clamp(R::ZERO, R::ONE);
+        let uncovered = if lift >= self.snub_top_len {
+            R::ONE
+        } else {
+            // snub_top_len > lift >= 0 here, so the division is safe.
+            (lift / self.snub_top_len).clamp(R::ZERO, R::ONE)
+        };
         let area = fixed + self.area_top_notch * uncovered;
         R::ONE / (area * area)
     }

@@ -50,8 +50,9 @@ fn scale_tau(p: &mut EhvvaParams, tau_ms: f64) {
 }
 
 /// The top snubber's fixed orifice and notch areas together, relative to the paper's: how
-/// freely the oil leaves the top chamber inside the snubbing zone (the zone's length is the
-/// `snubber` effect's gain). Applied before the switch orifice, which is its own knob.
+/// freely the oil leaves the top chamber on closing outside the snubbing zone, with the notch
+/// that the `snubber` effect covers keeping its share (so the effect keeps its strength
+/// relative to the unit's path). Applied before the switch orifice, which is its own knob.
 fn scale_top_snubber_path(p: &mut EhvvaParams, scale: f64) {
     let base = EhvvaParams::baseline();
     p.area_top_orifice_mm2 = base.area_top_orifice_mm2 * scale;
@@ -65,15 +66,6 @@ fn scale_bottom_path(p: &mut EhvvaParams, scale: f64) {
     p.area_bottom_port_mm2 = base.area_bottom_port_mm2 * scale;
     p.area_bottom_notch_mm2 = base.area_bottom_notch_mm2 * scale;
     p.area_bottom_min_mm2 = base.area_bottom_min_mm2 * scale;
-}
-
-/// The bottom snubber's notch and what is left of it at full lift, relative to the bottom
-/// path (applied after [`scale_bottom_path`]): the cushion of the landing at full lift, which
-/// varies from unit to unit apart from the port (a few per cent of it move the landing's lift
-/// by far more than the sensor noise).
-fn scale_bottom_cushion(p: &mut EhvvaParams, scale: f64) {
-    p.area_bottom_notch_mm2 *= scale;
-    p.area_bottom_min_mm2 *= scale;
 }
 
 /// How much of the paper's temperature trend of td (Fig. 4: longer when cold) the unit has:
@@ -123,8 +115,8 @@ pub const BASELINE_KNOBS: [Knob; 4] = [
 ];
 
 /// What varies from unit to unit beyond the four knobs of the paper's calibration: spring rate
-/// and preload, friction, the bottom piston area, the flow paths outside the snubbers (the main
-/// valve's supply edge, its return edge, the bottom port and notch) and how much of the paper's
+/// and preload, friction, the bottom piston area, every flow path (main valve, the top
+/// snubber's path, its switch orifice, the bottom port and notch) and how much of the paper's
 /// temperature trend the delay has. The diagnosis fits them all with the baseline, from the
 /// four knobs' optimum, and reports from the confidence intervals what the data cannot
 /// identify. Bounds are wide: a valve of another design (a spring three times stiffer with a
@@ -139,10 +131,6 @@ pub const BASELINE_KNOBS: [Knob; 4] = [
 /// paper's value as the reference and reported as not identifiable; the fitted mass, areas,
 /// spring and friction are the unit's relative to it. With every flow path free, Cd is held
 /// at the paper's value too (the losses see Cd·A only), and the areas are the unit's at it.
-///
-/// The top snubber's orifices are not among them: they restrict only inside the snubbing zone
-/// (Sec. 2), whose length is the `snubber` effect's gain, so a model without that effect does
-/// not depend on them; they are fitted with it ([`SNUBBER_KNOBS`]).
 pub const UNIT_KNOBS: [Knob; 9] = [
     Knob {
         name: "td_temperature_gain",
@@ -176,33 +164,10 @@ pub const UNIT_KNOBS: [Knob; 9] = [
     },
     Knob {
         name: "area_main_mm2",
-        lo: 1.0,
+        lo: 2.0,
         hi: 40.0,
         apply: |p, v| p.area_main_mm2 = v,
     },
-    Knob {
-        name: "main_return_restriction",
-        lo: 0.0,
-        hi: 100.0,
-        apply: set_main_return_restriction,
-    },
-    Knob {
-        name: "bottom_path_scale",
-        lo: 0.1,
-        hi: 300.0,
-        apply: scale_bottom_path,
-    },
-    Knob {
-        name: "bottom_cushion_scale",
-        lo: 0.05,
-        hi: 20.0,
-        apply: scale_bottom_cushion,
-    },
-];
-
-/// The unit knobs that only the `snubber` effect makes visible (see [`UNIT_KNOBS`]): fitted
-/// whenever a candidate has that effect, from the parent's values or the paper's.
-pub const SNUBBER_KNOBS: [Knob; 2] = [
     Knob {
         name: "top_snubber_path_scale",
         lo: 0.05,
@@ -215,25 +180,13 @@ pub const SNUBBER_KNOBS: [Knob; 2] = [
         hi: 20.0,
         apply: |p, v| p.area_top_switch_orifice_mm2 = v,
     },
+    Knob {
+        name: "bottom_path_scale",
+        lo: 0.1,
+        hi: 30.0,
+        apply: scale_bottom_path,
+    },
 ];
-
-/// The main valve's return edge as a restriction: (A_paper / A)², the pressure drop per flow²
-/// relative to the paper's. The closing's losses are linear in it, so a fit can switch the
-/// edge off (0, an edge much wider than the rest of the path) and back: parametrized by the
-/// area, a fit that widened it lost its gradient (1/A² → 0) and stayed there while friction
-/// took the damping over.
-fn set_main_return_restriction(p: &mut EhvvaParams, restriction: f64) {
-    let paper = EhvvaParams::baseline().area_main_return_mm2;
-    // 1e-6 of the paper's drop (an area 1000 times the paper's) stands for none: the model
-    // needs a finite area.
-    p.area_main_return_mm2 = paper / restriction.max(1e-6).sqrt();
-}
-
-/// Whether a knob is a unit knob (the baseline's or the snubber's), as opposed to one of the
-/// paper's four or an effect gain.
-pub(super) fn is_unit_knob(name: &str) -> bool {
-    UNIT_KNOBS.iter().chain(&SNUBBER_KNOBS).any(|u| u.name == name)
-}
 
 /// The paper's value of a unit knob.
 pub(super) fn unit_nominal(k: &Knob) -> f64 {
@@ -243,11 +196,9 @@ pub(super) fn unit_nominal(k: &Knob) -> f64 {
         "spring_preload_mm" => p.spring_preload_mm,
         "friction_N_per_m_s" => p.friction_n_per_m_s,
         "area_main_mm2" => p.area_main_mm2,
-        "main_return_restriction" => 1.0,
         "top_snubber_path_scale" => 1.0,
         "area_top_switch_orifice_mm2" => p.area_top_switch_orifice_mm2,
         "bottom_path_scale" => 1.0,
-        "bottom_cushion_scale" => 1.0,
         "td_temperature_gain" => 1.0,
         _ => p.area_bottom_mm2,
     }
@@ -263,10 +214,9 @@ pub fn effect_knob(effect: &str) -> Result<Knob, String> {
         EhvvaEffect::DirectionDelay => |p, v| p.effect_direction_delay = v,
         EhvvaEffect::Snubber => |p, v| p.effect_snubber = v,
     };
-    // The snubbing zone is the paper's Ls1 (0.83 mm) times the gain: a unit's undercut may be
-    // several times longer (up to 4 Ls1, 3.3 mm, as model-core allows, inside the low lift's
-    // 4 mm stroke).
-    let hi = if e == EhvvaEffect::Snubber { 4.0 } else { 2.0 };
+    // The snubbing zone is the paper's Ls1 (0.486 mm) times the gain: a unit's undercut may be
+    // several times longer (up to ~3 mm, still inside the low lift's 4 mm stroke).
+    let hi = if e == EhvvaEffect::Snubber { 6.0 } else { 2.0 };
     Ok(Knob {
         name: e.params()[0].0,
         lo: 0.0,

@@ -89,68 +89,6 @@ fn calibrate_restarted(
     Ok(r)
 }
 
-/// `r` refitted from two other starts when a unit knob ended on a bound, keeping the lowest
-/// cost: every unit knob back at the paper's value with the paper's knobs and the gains settled
-/// first ([`settle_paper_knobs`]), and only the knobs on a bound back at the paper's value. A
-/// unit knob on its bound is often a valley the fit ran into, not the unit: a return edge
-/// switched off (restriction 0) with friction or a narrow bottom path taking over its damping
-/// (a snubber unit: 0.84 -> 0.16, the generating parameters 0.10).
-fn hop_off_bounds(knobs: &[Knob], mut r: LsqResult, set: &Events, opts: &LsqOptions) -> Result<LsqResult, String> {
-    let on_bound = |k: &Knob, v: f64| v <= k.lo + 1e-9 * (k.hi - k.lo) || v >= k.hi - 1e-9 * (k.hi - k.lo);
-    if !knobs.iter().zip(&r.x).any(|(k, &v)| is_unit_knob(k.name) && on_bound(k, v)) {
-        return Ok(r);
-    }
-    let nominal = |k: &Knob| unit_nominal(k).clamp(k.lo, k.hi);
-    let all_back: Vec<f64> = knobs
-        .iter()
-        .zip(&r.x)
-        .map(|(k, &v)| if is_unit_knob(k.name) { nominal(k) } else { v })
-        .collect();
-    let bounded_back: Vec<f64> = knobs
-        .iter()
-        .zip(&r.x)
-        .map(|(k, &v)| if is_unit_knob(k.name) && on_bound(k, v) { nominal(k) } else { v })
-        .collect();
-    for x in [settle_paper_knobs(knobs, all_back, set, opts)?, bounded_back] {
-        let again = calibrate_restarted(&EhvvaParams::baseline(), knobs, &x, set, opts)?;
-        if again.cost < r.cost {
-            r = LsqResult {
-                iterations: r.iterations + again.iterations,
-                evaluations: r.evaluations + again.evaluations,
-                initial_cost: r.initial_cost,
-                ..again
-            };
-        }
-    }
-    Ok(r)
-}
-
-/// `x` with the knobs that are not unit knobs (the paper's calibration and the effect gains)
-/// fitted while the unit knobs stay at their values in `x`.
-fn settle_paper_knobs(knobs: &[Knob], mut x: Vec<f64>, set: &Events, opts: &LsqOptions) -> Result<Vec<f64>, String> {
-    let free: Vec<usize> = (0..knobs.len()).filter(|&i| !is_unit_knob(knobs[i].name)).collect();
-    let held: Vec<usize> = (0..knobs.len()).filter(|&i| is_unit_knob(knobs[i].name)).collect();
-    if held.is_empty() {
-        return Ok(x);
-    }
-    let free_knobs: Vec<Knob> = free.iter().map(|&i| knobs[i]).collect();
-    let x0: Vec<f64> = free.iter().map(|&i| x[i]).collect();
-    // The unit knobs come after the paper's in the model's order (the td temperature trend
-    // acts on the scaled td tables), so applying them after the free ones is that order.
-    let held_values: Vec<(Knob, f64)> = held.iter().map(|&i| (knobs[i], x[i])).collect();
-    let derive = |p: &mut EhvvaParams| -> Result<(), String> {
-        for (k, v) in &held_values {
-            (k.apply)(p, *v);
-        }
-        Ok(())
-    };
-    let r = calibrate_with(&EhvvaParams::baseline(), &free_knobs, &x0, set, opts, &derive)?;
-    for (j, &i) in free.iter().enumerate() {
-        x[i] = r.x[j];
-    }
-    Ok(x)
-}
-
 /// As [`calibrate`], with `derive` completing the parameters from the knobs before each
 /// simulation (`identify` sets td from the lift onset there).
 pub fn calibrate_with(
@@ -333,7 +271,6 @@ impl EhvvaFamily {
             x0.remove(CD);
             x0.extend(UNIT_KNOBS.iter().map(unit_nominal));
             let r = calibrate_restarted(&EhvvaParams::baseline(), &knobs, &x0, set, &self.unit_lsq())?;
-            let r = hop_off_bounds(&knobs, r, set, &self.unit_lsq())?;
             // The unit fit starts from the four-knob optimum; never keep one that ended worse.
             if r.cost <= four.r.cost {
                 b = Baseline {
@@ -402,11 +339,6 @@ impl Family for EhvvaFamily {
         for e in effects {
             knobs.push(effect_knob(e)?);
         }
-        // The snubber's orifices matter only with its zone (SNUBBER_KNOBS); with a baseline at
-        // the paper's unit they stay at the paper's values too.
-        if !base.paper_unit && effects.contains(&EhvvaEffect::Snubber.name()) {
-            knobs.extend(SNUBBER_KNOBS);
-        }
         let r = if effects.is_empty() {
             rb
         } else {
@@ -419,20 +351,8 @@ impl Family for EhvvaFamily {
                     .and_then(|f| f.internal.iter().find(|(n, _)| n == name).map(|(_, v)| *v))
                     .or_else(|| base.knobs.iter().position(|k| k.name == name).map(|i| xb[i]))
             };
-            // A unit knob new to this candidate (the snubber's) starts at the paper's value, a
-            // new effect gain at `new_gain`.
-            let start = |new_gain: f64| -> Vec<f64> {
-                knobs
-                    .iter()
-                    .map(|k| {
-                        from_parent(k.name).unwrap_or(if is_unit_knob(k.name) {
-                            unit_nominal(k)
-                        } else {
-                            new_gain
-                        })
-                    })
-                    .collect()
-            };
+            let start =
+                |new_gain: f64| -> Vec<f64> { knobs.iter().map(|k| from_parent(k.name).unwrap_or(new_gain)).collect() };
             let parent_cost = parent.map_or(rb.cost, |f| f.est_cost);
             let lsq = if base.paper_unit {
                 self.lsq.clone()
@@ -456,22 +376,16 @@ impl Family for EhvvaFamily {
                 .map(
                     |k| match base.four_x.iter().zip(&BASELINE_KNOBS).find(|(_, b)| b.name == k.name) {
                         Some((v, _)) => *v,
-                        None if is_unit_knob(k.name) => unit_nominal(k).clamp(k.lo, k.hi),
+                        None if UNIT_KNOBS.iter().any(|u| u.name == k.name) => unit_nominal(k).clamp(k.lo, k.hi),
                         None => 1.0,
                     },
                 )
                 .collect();
-            // That start first settles the paper's knobs and the effect gains with the unit
-            // knobs held at the paper's values, then frees them all: freed at once from a
-            // start whose delay and gains are still off, the unit knobs (the return edge, the
-            // cushion, friction) run into a valley that absorbs those errors and costs 20 times
-            // the optimum (a viscosity unit: 1.04 against 0.05).
-            let fresh = settle_paper_knobs(&knobs, fresh, &de, &lsq)?;
             let rf = calibrate_restarted(&EhvvaParams::baseline(), &knobs, &fresh, &de, &lsq)?;
             if rf.cost < r.cost {
                 r = rf;
             }
-            hop_off_bounds(&knobs, r, &de, &lsq)?
+            r
         };
         let p = apply_knobs(&EhvvaParams::baseline(), &knobs, &r.x);
         // Cut after the fit, not held through it with the solver's arrays.
