@@ -21,7 +21,7 @@
 //! Effects the diagnosis switches (DATA-FORMAT.md, plant `vacuum`) are the fields of
 //! [`VacuumEffects`]; [`VacuumParams::baseline`] turns all of them off.
 
-use crate::real::Real;
+use crate::real::{horner, Real};
 
 /// Specific gas constant of air, J/(kg·K).
 pub const R_AIR_J_PER_KG_K: f64 = 287.0;
@@ -543,12 +543,15 @@ const ONE_MINUS_EXP_NEG_COEFFS: [f64; 16] = {
 /// loses ~1e-6 absolute): Taylor series to x¹⁶ below 1 (truncation < 3e-14) by Horner's rule
 /// with the coefficients precomputed (multiplications only: a division chain cost the host
 /// diagnosis, which runs this every rod substep, twice its time), the direct form above.
+///
+/// Unrolled by `horner!` so that each coefficient converts to `R` at compile time (a loop left
+/// `R::from_f64` at run time: soft-float double arithmetic on the target, ~60 % of the Q16.16
+/// actuator step). The same operations in the same order as the loop `s = c + x·s` from s = 0.
 fn one_minus_exp_neg<R: Real>(x: R) -> R {
     if x < R::ONE {
-        let mut s = R::ZERO;
-        for c in ONE_MINUS_EXP_NEG_COEFFS.iter().rev() {
-            s = R::from_f64(*c) + x * s;
-        }
+        const C: [f64; 16] = ONE_MINUS_EXP_NEG_COEFFS;
+        let s = horner!(R, x; C[0], C[1], C[2], C[3], C[4], C[5], C[6], C[7], C[8], C[9], C[10], C[11],
+            C[12], C[13], C[14], C[15]);
         x * s
     } else {
         R::ONE - (-x).exp()
@@ -557,25 +560,16 @@ fn one_minus_exp_neg<R: Real>(x: R) -> R {
 
 /// tan θ for |θ| <= 1.5 without relying on the target's sin/cos: the odd Taylor series to
 /// z¹⁵ at z = θ/4 and two double-angle steps (f64: < 1e-10 relative over the range).
+///
+/// θ/4 as θ·0.25 (the same bits in floating point; no division in fixed point) and the
+/// coefficients through `horner!` (converted at compile time, not in a run-time loop).
 fn tan_series<R: Real>(theta: R) -> R {
-    let z = theta / R::from_f64(4.0);
+    let z = theta * R::from_f64(0.25);
     let z2 = z * z;
     // tan z = z(1 + z²/3 + 2z⁴/15 + 17z⁶/315 + 62z⁸/2835 + 1382z¹⁰/155925 + 21844z¹²/6081075
     //          + 929569z¹⁴/638512875)
-    let coeffs = [
-        929569.0 / 638512875.0,
-        21844.0 / 6081075.0,
-        1382.0 / 155925.0,
-        62.0 / 2835.0,
-        17.0 / 315.0,
-        2.0 / 15.0,
-        1.0 / 3.0,
-        1.0,
-    ];
-    let mut s = R::ZERO;
-    for c in coeffs {
-        s = s * z2 + R::from_f64(c);
-    }
+    let s = horner!(R, z2; 1.0, 1.0 / 3.0, 2.0 / 15.0, 17.0 / 315.0, 62.0 / 2835.0, 1382.0 / 155925.0,
+        21844.0 / 6081075.0, 929569.0 / 638512875.0);
     let mut t = z * s;
     for _ in 0..2 {
         t = (t + t) / (R::ONE - t * t);
@@ -738,6 +732,13 @@ pub struct VacuumValveActuator<R: Real> {
     decay_dt_s: R,
     decay_rise: R,
     decay_fall: R,
+    /// The rod substeps of a step of `rods_dt_s` (0: none yet): their number, as `R`, and
+    /// their length, computed once per step length (the count goes through f64, soft-float on
+    /// the target).
+    rods_dt_s: R,
+    rods_n: u32,
+    rods_n_r: R,
+    rods_h_s: R,
 }
 
 /// Longest rod step [`VacuumValveActuator::with_rod_step_s`] accepts: the semi-implicit
@@ -785,6 +786,10 @@ impl<R: Real> VacuumValveActuator<R> {
             decay_dt_s: R::ZERO,
             decay_rise: R::ZERO,
             decay_fall: R::ZERO,
+            rods_dt_s: R::ZERO,
+            rods_n: 0,
+            rods_n_r: R::ZERO,
+            rods_h_s: R::ZERO,
         })
     }
 
@@ -796,6 +801,7 @@ impl<R: Real> VacuumValveActuator<R> {
             return Err(VacuumParamError::BadParameter("rod_step_max_s"));
         }
         self.rod_step_max_s = h_max_s;
+        self.rods_dt_s = R::ZERO;
         Ok(self)
     }
 
@@ -891,13 +897,18 @@ impl<R: Real> VacuumValveActuator<R> {
         }
         let p_old = self.p_act_kpa;
         let p_new = self.advance_pressure(inputs, dt_s);
-        let n = substeps(dt_s, self.rod_step_max_s);
-        let n_r = R::from_f64(n);
-        let h = dt_s / n_r;
+        if dt_s != self.rods_dt_s {
+            let n = substeps(dt_s, self.rod_step_max_s);
+            self.rods_dt_s = dt_s;
+            self.rods_n = n as u32;
+            self.rods_n_r = R::from_f64(n);
+            self.rods_h_s = dt_s / self.rods_n_r;
+        }
+        let (n, n_r, h) = (self.rods_n, self.rods_n_r, self.rods_h_s);
         let dp_step = (p_new - p_old) / n_r;
         let hundred = R::from_f64(100.0);
         let mut p_sub = p_old;
-        for _ in 0..(n as u32) {
+        for _ in 0..n {
             p_sub += dp_step;
             self.mechanics_substep(inputs.p_amb_kpa - p_sub, h, hundred);
         }
