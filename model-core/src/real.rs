@@ -125,12 +125,31 @@ pub trait Real:
     fn clamp(self, lo: Self, hi: Self) -> Self {
         self.max(lo).min(hi)
     }
+
+    /// A divisor prepared once for many divisions by it ([`Real::div_by`]).
+    type Divisor: Copy + Debug;
+    /// Prepares `d` as a divisor. The floats keep `d` (their division is one FPU instruction,
+    /// and [`Real::div_by`] then gives the bits of `/`); Q16.16 keeps a normalised reciprocal,
+    /// so that each division is one multiply instead of a long division.
+    fn divisor(d: Self) -> Self::Divisor;
+    /// `self / d` for `d` from [`Real::divisor`]: the bits of `/` in f32, f64 and Q32.32; in
+    /// Q16.16 the quotient rounded to nearest (`/` truncates), saturating.
+    fn div_by(self, d: Self::Divisor) -> Self;
 }
 
 impl Real for f32 {
     const ZERO: Self = 0.0;
     const ONE: Self = 1.0;
     const NAME: &'static str = "f32";
+    type Divisor = f32;
+    #[inline(always)]
+    fn divisor(d: Self) -> Self {
+        d
+    }
+    #[inline(always)]
+    fn div_by(self, d: Self) -> Self {
+        self / d
+    }
     fn from_f64(x: f64) -> Self {
         x as f32
     }
@@ -185,6 +204,15 @@ impl Real for f64 {
     const ZERO: Self = 0.0;
     const ONE: Self = 1.0;
     const NAME: &'static str = "f64";
+    type Divisor = f64;
+    #[inline(always)]
+    fn divisor(d: Self) -> Self {
+        d
+    }
+    #[inline(always)]
+    fn div_by(self, d: Self) -> Self {
+        self / d
+    }
     fn from_f64(x: f64) -> Self {
         x
     }
@@ -321,6 +349,13 @@ impl Real for Q32 {
     const ZERO: Self = Q32(I32F32::ZERO);
     const ONE: Self = Q32(I32F32::ONE);
     const NAME: &'static str = "Q32.32";
+    type Divisor = Q32;
+    fn divisor(d: Self) -> Self {
+        d
+    }
+    fn div_by(self, d: Self) -> Self {
+        self / d
+    }
     fn from_f64(x: f64) -> Self {
         // NaN maps to zero; out-of-range values saturate.
         Q32(I32F32::saturating_from_num(if x.is_nan() { 0.0 } else { x }))
@@ -396,6 +431,14 @@ impl Q16 {
             Q16(x as i32)
         }
     }
+}
+
+/// A Q16.16 divisor prepared for repeated division ([`Real::divisor`], [`Real::div_by`]): a
+/// reciprocal normalised to 30 bits and its shift.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Q16Divisor {
+    m: i32,
+    shift: u32,
 }
 
 impl Add for Q16 {
@@ -526,6 +569,30 @@ impl Real for Q16 {
     const ZERO: Self = Q16(0);
     const ONE: Self = Q16(1 << 16);
     const NAME: &'static str = "Q16.16";
+    type Divisor = Q16Divisor;
+    /// `m = round(2^(30+p) / |d|)` with p the index of |d|'s leading one, so m is in
+    /// [2^29, 2^30] (carrying d's sign) and `x / d = x · m / 2^(14+p)`: relative error below
+    /// 2^-29, far under the result's LSB. A zero divisor keeps `m = i32::MAX` and no shift, so
+    /// any nonzero dividend saturates towards its sign (1 LSB of -1 gives MIN + 1).
+    #[inline]
+    fn divisor(d: Self) -> Q16Divisor {
+        let ud = d.0.unsigned_abs();
+        if ud == 0 {
+            return Q16Divisor { m: i32::MAX, shift: 0 };
+        }
+        let p = 31 - ud.leading_zeros();
+        let m = (((1u64 << (30 + p)) + u64::from(ud / 2)) / u64::from(ud)) as i32;
+        Q16Divisor {
+            m: if d.0 < 0 { -m } else { m },
+            shift: 14 + p,
+        }
+    }
+    #[inline(always)]
+    fn div_by(self, d: Q16Divisor) -> Self {
+        let p = i64::from(self.0) * i64::from(d.m);
+        let half = (1i64 << d.shift) >> 1;
+        Q16::saturate((p + half) >> d.shift)
+    }
     #[inline(always)]
     fn from_f64(x: f64) -> Self {
         // Constants fold at compile time; a run-time conversion is soft-float on the M0+/M3.
@@ -1015,9 +1082,33 @@ mod tests {
         }
 
         #[test]
+        fn q16_div_by_rounds_the_quotient(a in any::<i32>(), b in any::<i32>(), small in 1i32..70_000) {
+            for (x, y) in [(a, b), (a, small), (a, -small), (a >> 12, b >> 16), (a, b >> 8), (a >> 16, small)] {
+                let (qx, qy) = (Q16::from_bits(x), Q16::from_bits(y));
+                let got = qx.div_by(Q16::divisor(qy));
+                if y == 0 {
+                    prop_assert!(x == 0 || (got.0 >= i32::MAX - 1 || got.0 <= i32::MIN + 1), "{} / 0 = {:?}", x, got);
+                    continue;
+                }
+                let exact = f64::from(x) * 65536.0 / f64::from(y);
+                let want = exact.clamp(f64::from(i32::MIN), f64::from(i32::MAX));
+                // Rounded to nearest: half an LSB, plus the reciprocal's 2^-29 relative error.
+                prop_assert!((f64::from(got.0) - want).abs() <= 0.5 + exact.abs() * 4e-9 + 1e-9, "{} / {}: {} vs {}", x, y, got.0, exact);
+            }
+        }
+
+        #[test]
+        fn float_div_by_is_division(a in any::<f64>(), b in any::<f64>()) {
+            prop_assert_eq!(a.div_by(f64::divisor(b)).to_bits(), (a / b).to_bits());
+            let (x, y) = (a as f32, b as f32);
+            prop_assert_eq!(x.div_by(f32::divisor(y)).to_bits(), (x / y).to_bits());
+        }
+
+        #[test]
         fn q16_ops_never_panic(a in any::<i32>(), b in any::<i32>()) {
             let (a, b) = (Q16::from_bits(a), Q16::from_bits(b));
             let _ = (a + b, a - b, a * b, a / b, -a, a.sqrt(), a.exp(), a.atan(), a.sin(), a.ln());
+            let _ = a.div_by(Q16::divisor(b));
         }
 
         #[test]

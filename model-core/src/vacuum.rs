@@ -442,7 +442,7 @@ pub fn orifice_flow_mg_s<R: Real>(p_a_kpa: R, p_b_kpa: R, area_mm2: R, c_orifice
 /// Ψ(Π) = sqrt(2γ/(γ−1)·(Π^(2/γ) − Π^((γ+1)/γ))) for γ = 1.4, i.e. sqrt(7·y¹⁰·(1 − y²))
 /// with y = Π^(1/7); Π already limited to [Π_crit, 1] (choking, eq. (3)).
 fn psi<R: Real>(ratio: R) -> R {
-    let y = (ratio.ln() / R::from_f64(7.0)).exp();
+    let y = ratio.ln().div_by(R::divisor(R::from_f64(7.0))).exp();
     let y2 = y * y;
     let y4 = y2 * y2;
     let y10 = y4 * y4 * y2;
@@ -579,21 +579,30 @@ fn tan_series<R: Real>(theta: R) -> R {
 
 /// The static relations of one valve + actuator, converted once to `R`.
 #[derive(Clone, Copy, Debug)]
-struct Maps<R> {
+struct Maps<R: Real> {
     static_map: StaticMapR<R>,
     position_map: PositionMapR<R>,
 }
 
 #[derive(Clone, Copy, Debug)]
-enum StaticMapR<R> {
+enum StaticMapR<R: Real> {
     PiecewiseLinear { k1: R, p01: R, k2: R, p02: R },
     Cubic { k1: R, p01: R, k2: R, u0: R },
 }
 
 #[derive(Clone, Copy, Debug)]
-enum PositionMapR<R> {
-    Linear { k: R, x0: R },
-    Arctan { a1: R, a2: R, a3: R, a4: R },
+enum PositionMapR<R: Real> {
+    /// `k_div` is `k` as a divisor (the inverse map divides by it).
+    Linear { k: R, x0: R, k_div: R::Divisor },
+    /// `a2_div`, `a4_div`: `a2`, `a4` as divisors.
+    Arctan {
+        a1: R,
+        a2: R,
+        a3: R,
+        a4: R,
+        a2_div: R::Divisor,
+        a4_div: R::Divisor,
+    },
 }
 
 impl<R: Real> Maps<R> {
@@ -627,6 +636,7 @@ impl<R: Real> Maps<R> {
             PositionMap::Linear { k_pct_per_kpa, x0_pct } => PositionMapR::Linear {
                 k: f(k_pct_per_kpa),
                 x0: f(x0_pct),
+                k_div: R::divisor(f(k_pct_per_kpa)),
             },
             PositionMap::Arctan {
                 a1_pct,
@@ -638,6 +648,8 @@ impl<R: Real> Maps<R> {
                 a2: f(a2_pct_per_rad),
                 a3: f(a3_kpa),
                 a4: f(a4_kpa),
+                a2_div: R::divisor(f(a2_pct_per_rad)),
+                a4_div: R::divisor(f(a4_kpa)),
             },
         };
         Self {
@@ -661,18 +673,18 @@ impl<R: Real> Maps<R> {
     /// Static position for the map pressure `p` (eq. (8)/(9)), not yet limited to the stroke.
     fn position(&self, p: R) -> R {
         match self.position_map {
-            PositionMapR::Linear { k, x0 } => k * p + x0,
-            PositionMapR::Arctan { a1, a2, a3, a4 } => a1 + a2 * ((a3 - p) / a4).atan(),
+            PositionMapR::Linear { k, x0, .. } => k * p + x0,
+            PositionMapR::Arctan { a1, a2, a3, a4_div, .. } => a1 + a2 * (a3 - p).div_by(a4_div).atan(),
         }
     }
 
     /// Inverse of `position`: the map pressure that holds the membrane at `x` with no friction.
     fn pressure_at(&self, x: R) -> R {
         match self.position_map {
-            PositionMapR::Linear { k, x0 } => (x - x0) / k,
-            PositionMapR::Arctan { a1, a2, a3, a4 } => {
+            PositionMapR::Linear { x0, k_div, .. } => (x - x0).div_by(k_div),
+            PositionMapR::Arctan { a1, a3, a4, a2_div, .. } => {
                 let lim = R::from_f64(THETA_MAX_RAD);
-                let theta = ((x - a1) / a2).clamp(-lim, lim);
+                let theta = (x - a1).div_by(a2_div).clamp(-lim, lim);
                 a3 - a4 * tan_series(theta)
             }
         }
@@ -702,7 +714,7 @@ fn saturate<R: Real>(p: R, p_tank: R, p_amb: R) -> R {
 pub struct VacuumValveActuator<R: Real> {
     maps: Maps<R>,
     effects: VacuumEffects,
-    u_ref_v: R,
+    u_ref_v: R::Divisor,
     tau_rise_s: R,
     tau_fall_s: R,
     p_amb_ref_kpa: R,
@@ -732,13 +744,17 @@ pub struct VacuumValveActuator<R: Real> {
     decay_dt_s: R,
     decay_rise: R,
     decay_fall: R,
-    /// The rod substeps of a step of `rods_dt_s` (0: none yet): their number, as `R`, and
-    /// their length, computed once per step length (the count goes through f64, soft-float on
-    /// the target).
+    /// `decay_dt_s` as a divisor (the evacuation flow divides by the step).
+    decay_dt_div: R::Divisor,
+    /// The rod substeps of a step of `rods_dt_s` (0: none yet): their number, as `R` and as a
+    /// divisor, their length, and the implicit damping's denominators 1 + h·b/m (extending,
+    /// retracting) as divisors, computed once per step length (the count goes through f64,
+    /// soft-float on the target; a prepared divisor makes a fixed-point division a multiply).
     rods_dt_s: R,
     rods_n: u32,
-    rods_n_r: R,
+    rods_n_div: R::Divisor,
     rods_h_s: R,
+    rods_damping_div: [R::Divisor; 2],
 }
 
 /// Longest rod step [`VacuumValveActuator::with_rod_step_s`] accepts: the semi-implicit
@@ -761,7 +777,7 @@ impl<R: Real> VacuumValveActuator<R> {
         Ok(Self {
             maps,
             effects: p.effects,
-            u_ref_v: f(p.u_ref_v),
+            u_ref_v: R::divisor(f(p.u_ref_v)),
             tau_rise_s: f(p.tau_rise_s),
             tau_fall_s: f(p.tau_fall_s),
             p_amb_ref_kpa: p_amb_ref,
@@ -786,10 +802,12 @@ impl<R: Real> VacuumValveActuator<R> {
             decay_dt_s: R::ZERO,
             decay_rise: R::ZERO,
             decay_fall: R::ZERO,
+            decay_dt_div: R::divisor(R::ONE),
             rods_dt_s: R::ZERO,
             rods_n: 0,
-            rods_n_r: R::ZERO,
+            rods_n_div: R::divisor(R::ONE),
             rods_h_s: R::ZERO,
+            rods_damping_div: [R::divisor(R::ONE); 2],
         })
     }
 
@@ -814,7 +832,7 @@ impl<R: Real> VacuumValveActuator<R> {
     pub fn effective_duty_pct(&self, duty_pct: R, u_batt_v: R) -> R {
         let u = duty_pct.clamp(R::ZERO, R::from_f64(100.0));
         if self.effects.supply_voltage {
-            u * u_batt_v.max(R::ZERO) / self.u_ref_v
+            (u * u_batt_v.max(R::ZERO)).div_by(self.u_ref_v)
         } else {
             u
         }
@@ -823,6 +841,11 @@ impl<R: Real> VacuumValveActuator<R> {
     /// Saturated static pressure, eqs. (1), (2)/(5).
     pub fn static_pressure_kpa(&self, inputs: &VacuumInputs<R>) -> R {
         let u = self.effective_duty_pct(inputs.duty_pct, inputs.u_batt_v);
+        self.static_pressure_at_duty(u, inputs)
+    }
+
+    /// Eq. (2)/(5) saturated at the effective duty `u`.
+    fn static_pressure_at_duty(&self, u: R, inputs: &VacuumInputs<R>) -> R {
         saturate(
             self.maps.unsaturated_pressure(u, inputs.p_amb_kpa),
             inputs.p_tank_kpa,
@@ -869,23 +892,25 @@ impl<R: Real> VacuumValveActuator<R> {
     /// (eqs. (6), (7), (10)) in substeps of at most 0.5 ms (or [`Self::with_rod_step_s`]) with
     /// the chamber pressure interpolated across the step.
     pub fn step(&mut self, inputs: &VacuumInputs<R>, dt_s: R) -> VacuumOutputs<R> {
-        let p_stat = self.static_pressure_kpa(inputs);
+        // The effective duty and the static pressure once for the whole step.
+        let u = self.effective_duty_pct(inputs.duty_pct, inputs.u_batt_v);
+        let p_stat = self.static_pressure_at_duty(u, inputs);
         if !positive(dt_s) {
             return self.outputs(p_stat, R::ZERO);
         }
         let p_old = self.p_act_kpa;
         let volume_old = self.volume_l(self.x_mem_pct);
-        self.advance(inputs, dt_s);
+        self.advance_to(inputs.p_amb_kpa, p_stat, dt_s);
         let p_new = self.p_act_kpa;
 
         // Mass flows into the tank. Leakage eq. (3) through the Fig. 13 area, from the chamber.
-        let u = self.effective_duty_pct(inputs.duty_pct, inputs.u_batt_v);
         let area = self.leak_area_per_pct * u.clamp(R::ZERO, self.leak_duty_max_pct);
         let leak = orifice_flow_mg_s(p_new, inputs.p_tank_kpa, area, self.c_orifice);
         // Eq. (12): the chamber's mass loss d(pV)/(RT), counted only when it leaves towards the
         // tank (a gain comes from ambient through the valve).
         let pv_change = p_new * self.volume_l(self.x_mem_pct) - p_old * volume_old;
-        let evacuation = (-pv_change).max(R::ZERO) * self.c_mass / dt_s;
+        // (`advance_to` has prepared the step as a divisor.)
+        let evacuation = ((-pv_change).max(R::ZERO) * self.c_mass).div_by(self.decay_dt_div);
         self.outputs(p_stat, leak + evacuation)
     }
 
@@ -895,22 +920,33 @@ impl<R: Real> VacuumValveActuator<R> {
         if !positive(dt_s) {
             return;
         }
+        let p_stat = self.static_pressure_kpa(inputs);
+        self.advance_to(inputs.p_amb_kpa, p_stat, dt_s);
+    }
+
+    /// [`Self::advance`] towards the static pressure `p_stat`, for `dt_s > 0`.
+    fn advance_to(&mut self, p_amb_kpa: R, p_stat: R, dt_s: R) {
         let p_old = self.p_act_kpa;
-        let p_new = self.advance_pressure(inputs, dt_s);
+        let p_new = self.pressure_towards(p_stat, dt_s);
         if dt_s != self.rods_dt_s {
             let n = substeps(dt_s, self.rod_step_max_s);
+            let n_r = R::from_f64(n);
+            let h = dt_s / n_r;
             self.rods_dt_s = dt_s;
             self.rods_n = n as u32;
-            self.rods_n_r = R::from_f64(n);
-            self.rods_h_s = dt_s / self.rods_n_r;
+            self.rods_n_div = R::divisor(n_r);
+            self.rods_h_s = h;
+            self.rods_damping_div = [
+                R::divisor(R::ONE + h * self.damping_extend * self.inv_mass),
+                R::divisor(R::ONE + h * self.damping_retract * self.inv_mass),
+            ];
         }
-        let (n, n_r, h) = (self.rods_n, self.rods_n_r, self.rods_h_s);
-        let dp_step = (p_new - p_old) / n_r;
+        let dp_step = (p_new - p_old).div_by(self.rods_n_div);
         let hundred = R::from_f64(100.0);
         let mut p_sub = p_old;
-        for _ in 0..n {
+        for _ in 0..self.rods_n {
             p_sub += dp_step;
-            self.mechanics_substep(inputs.p_amb_kpa - p_sub, h, hundred);
+            self.mechanics_substep(p_amb_kpa - p_sub, self.rods_h_s, hundred);
         }
     }
 
@@ -920,20 +956,27 @@ impl<R: Real> VacuumValveActuator<R> {
     pub fn advance_pressure(&mut self, inputs: &VacuumInputs<R>, dt_s: R) -> R {
         if positive(dt_s) {
             let p_stat = self.static_pressure_kpa(inputs);
-            let p_old = self.p_act_kpa;
-            // Eq. (4), exact for a constant target: p += (p_stat − p)(1 − e^(−dt/τ)).
-            if dt_s != self.decay_dt_s {
-                self.decay_dt_s = dt_s;
-                self.decay_rise = one_minus_exp_neg(dt_s / self.tau_rise_s);
-                self.decay_fall = one_minus_exp_neg(dt_s / self.tau_fall_s);
-            }
-            let decay = if self.effects.pressure_direction && p_stat < p_old {
-                self.decay_fall
-            } else {
-                self.decay_rise
-            };
-            self.p_act_kpa = p_old + (p_stat - p_old) * decay;
+            self.pressure_towards(p_stat, dt_s);
         }
+        self.p_act_kpa
+    }
+
+    /// Eq. (4) over `dt_s > 0` towards `p_stat`; the new chamber pressure.
+    fn pressure_towards(&mut self, p_stat: R, dt_s: R) -> R {
+        let p_old = self.p_act_kpa;
+        // Eq. (4), exact for a constant target: p += (p_stat − p)(1 − e^(−dt/τ)).
+        if dt_s != self.decay_dt_s {
+            self.decay_dt_s = dt_s;
+            self.decay_rise = one_minus_exp_neg(dt_s / self.tau_rise_s);
+            self.decay_fall = one_minus_exp_neg(dt_s / self.tau_fall_s);
+            self.decay_dt_div = R::divisor(dt_s);
+        }
+        let decay = if self.effects.pressure_direction && p_stat < p_old {
+            self.decay_fall
+        } else {
+            self.decay_rise
+        };
+        self.p_act_kpa = p_old + (p_stat - p_old) * decay;
         self.p_act_kpa
     }
 
@@ -942,14 +985,11 @@ impl<R: Real> VacuumValveActuator<R> {
     fn mechanics_substep(&mut self, dp_membrane_kpa: R, h: R, hundred: R) {
         let x = self.x_mem_pct;
         let spring = self.p_amb_ref_kpa - self.maps.pressure_at(x);
-        let b = if self.v_pct_s >= R::ZERO {
-            self.damping_extend
-        } else {
-            self.damping_retract
-        };
+        let b = if self.v_pct_s >= R::ZERO { 0 } else { 1 };
         let drive = dp_membrane_kpa - spring - self.friction_kpa;
         // Damping implicit: stable for any b.
-        let mut v = (self.v_pct_s + h * drive * self.inv_mass) / (R::ONE + h * b * self.inv_mass);
+        // (1 + h·b/m prepared once per step length.)
+        let mut v = (self.v_pct_s + h * drive * self.inv_mass).div_by(self.rods_damping_div[b]);
         let mut x_new = x + h * v;
         // The membrane's stops lie half the clearance beyond the valve's travel: x_pct is
         // measured on the valve, whose 0 and 100 % are its own seat and stop, so a unit with
