@@ -423,12 +423,14 @@ impl Q16 {
 
     #[inline(always)]
     fn saturate(x: i64) -> Q16 {
-        if x > i64::from(i32::MAX) {
-            Q16::MAX
-        } else if x < i64::from(i32::MIN) {
-            Q16::MIN
+        // It fits when the high word is the low word's sign extension (two 32-bit compares of
+        // a 64-bit clamp cost twice as many instructions); else the limit of x's sign.
+        let hi = (x >> 32) as i32;
+        let lo = x as i32;
+        if hi != (lo >> 31) {
+            Q16((hi >> 31) ^ i32::MAX)
         } else {
-            Q16(x as i32)
+            Q16(lo)
         }
     }
 }
@@ -439,6 +441,8 @@ impl Q16 {
 pub struct Q16Divisor {
     m: i32,
     shift: u32,
+    /// Half the shift's unit, for rounding.
+    half: i64,
 }
 
 impl Add for Q16 {
@@ -581,20 +585,24 @@ impl Real for Q16 {
     fn divisor(d: Self) -> Q16Divisor {
         let ud = d.0.unsigned_abs();
         if ud == 0 {
-            return Q16Divisor { m: i32::MAX, shift: 0 };
+            return Q16Divisor {
+                m: i32::MAX,
+                shift: 0,
+                half: 0,
+            };
         }
         let p = 31 - ud.leading_zeros();
         let m = (((1u64 << (30 + p)) + u64::from(ud / 2)) / u64::from(ud)) as i32;
         Q16Divisor {
             m: if d.0 < 0 { -m } else { m },
             shift: 14 + p,
+            half: 1 << (13 + p),
         }
     }
     #[inline(always)]
     fn div_by(self, d: Q16Divisor) -> Self {
         let p = i64::from(self.0) * i64::from(d.m);
-        let half = (1i64 << d.shift) >> 1;
-        Q16::saturate((p + half) >> d.shift)
+        Q16::saturate((p + d.half) >> d.shift)
     }
     #[inline(always)]
     fn from_f64(x: f64) -> Self {
