@@ -51,6 +51,11 @@ pub trait Real:
     const ONE: Self;
     /// Short name for reports and benchmark labels.
     const NAME: &'static str;
+    /// Whether a division costs about what a product does: the floats (one FPU instruction on
+    /// the target, and f64 on the host). Models keep their divisions there, and so the exact
+    /// operations of their f64 results; where it is false (fixed point: a long division of
+    /// about a hundred instructions) they may take forms with fewer divisions.
+    const CHEAP_DIV: bool;
 
     /// Converts a constant (parameters, table values). Out-of-range values saturate.
     fn from_f64(x: f64) -> Self;
@@ -141,6 +146,7 @@ impl Real for f32 {
     const ZERO: Self = 0.0;
     const ONE: Self = 1.0;
     const NAME: &'static str = "f32";
+    const CHEAP_DIV: bool = true;
     type Divisor = f32;
     #[inline(always)]
     fn divisor(d: Self) -> Self {
@@ -204,6 +210,7 @@ impl Real for f64 {
     const ZERO: Self = 0.0;
     const ONE: Self = 1.0;
     const NAME: &'static str = "f64";
+    const CHEAP_DIV: bool = true;
     type Divisor = f64;
     #[inline(always)]
     fn divisor(d: Self) -> Self {
@@ -349,6 +356,7 @@ impl Real for Q32 {
     const ZERO: Self = Q32(I32F32::ZERO);
     const ONE: Self = Q32(I32F32::ONE);
     const NAME: &'static str = "Q32.32";
+    const CHEAP_DIV: bool = false;
     type Divisor = Q32;
     fn divisor(d: Self) -> Self {
         d
@@ -576,6 +584,7 @@ impl Real for Q16 {
     const ZERO: Self = Q16(0);
     const ONE: Self = Q16(1 << 16);
     const NAME: &'static str = "Q16.16";
+    const CHEAP_DIV: bool = false;
     type Divisor = Q16Divisor;
     /// `m = round(2^(30+p) / |d|)` with p the index of |d|'s leading one, so m is in
     /// [2^29, 2^30] (carrying d's sign) and `x / d = x · m / 2^(14+p)`: relative error below
