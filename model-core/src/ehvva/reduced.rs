@@ -21,7 +21,7 @@
 use super::event::EhvvaPlant;
 use super::params::{EhvvaError, EhvvaInputs, EhvvaParams};
 use super::piston::{Moving, Piston};
-use super::tables::EhvvaTables;
+use super::tables::{EhvvaTables, EhvvaTablesAt};
 use crate::delay::DelayLine;
 use crate::real::Real;
 
@@ -73,6 +73,8 @@ pub(crate) fn directional<R: Real>(via_open: R, via_close: R, open_is_longer: bo
 pub struct EhvvaReduced<R: Real, const N: usize = DEFAULT_DELAY_SAMPLES> {
     piston: Piston<R>,
     tables: EhvvaTables<R>,
+    /// `tables` at the last step's oil temperature.
+    at: EhvvaTablesAt<R>,
     dt: R,
     inv_dt: R,
     h: R,
@@ -94,6 +96,7 @@ impl<R: Real, const N: usize> EhvvaReduced<R, N> {
         let tables = EhvvaTables::new(params)?;
         Ok(Self {
             piston,
+            at: tables.at_temperature(inputs.temp_c),
             tables,
             dt: R::from_f64(dt_ms),
             inv_dt: R::from_f64(1.0 / dt_ms),
@@ -133,9 +136,12 @@ impl<R: Real, const N: usize> EhvvaReduced<R, N> {
 impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaReduced<R, N> {
     fn step(&mut self, u_pilot: bool, inputs: &EhvvaInputs<R>) -> R {
         let stroke = self.piston.stroke(inputs.lift_high);
-        let cd = self.tables.cd(inputs.temp_c);
-        let tau = self.tables.tau_p_ms(self.m.p_high, inputs.temp_c);
-        let (td_open, td_close) = self.tables.t_delay_pair_ms(self.m.p_high, inputs.temp_c);
+        if inputs.temp_c != self.at.temp_c() {
+            self.at = self.tables.at_temperature(inputs.temp_c);
+        }
+        let cd = self.at.cd();
+        let tau = self.at.tau_p_ms(self.m.p_high);
+        let (td_open, td_close) = self.at.t_delay_pair_ms(self.m.p_high);
         let open_is_longer = td_open >= td_close;
         let d_open = td_open * self.inv_dt;
         let d_close = td_close * self.inv_dt;

@@ -137,6 +137,66 @@ impl<R: Real> EhvvaTables<R> {
     pub fn tau_p_ms(&self, p_supply_mpa: R, temp_c: R) -> R {
         self.tau.eval(p_supply_mpa, temp_c).max(R::from_f64(TAU_MIN_MS))
     }
+
+    /// The tables at the oil temperature `temp_c`, for models that look them up every step
+    /// at a temperature that rarely changes: the same values, bit for bit, at a fraction of
+    /// the cost (no look-up along the temperature axis, one along Ph for both delays).
+    pub fn at_temperature(&self, temp_c: R) -> EhvvaTablesAt<R> {
+        EhvvaTablesAt {
+            temp_c,
+            td_open: self.td_open.slice_y(temp_c),
+            td_close: self.td_close.slice_y(temp_c),
+            tau: self.tau.slice_y(temp_c),
+            cd: self.cd(temp_c),
+            p_nominal: self.p_nominal,
+            gain_pressure_delay: self.gain_pressure_delay,
+            gain_direction_delay: self.gain_direction_delay,
+        }
+    }
+}
+
+/// [`EhvvaTables`] at one oil temperature ([`EhvvaTables::at_temperature`]): Cd, and τp and
+/// td as functions of the supply pressure alone, with the same results as the full tables.
+#[derive(Clone, Copy, Debug)]
+pub struct EhvvaTablesAt<R: Real> {
+    temp_c: R,
+    td_open: Lut1<R, 4>,
+    td_close: Lut1<R, 4>,
+    tau: Lut1<R, 2>,
+    cd: R,
+    p_nominal: R,
+    gain_pressure_delay: R,
+    gain_direction_delay: R,
+}
+
+impl<R: Real> EhvvaTablesAt<R> {
+    /// The oil temperature these tables are at, °C.
+    pub fn temp_c(&self) -> R {
+        self.temp_c
+    }
+
+    /// [`EhvvaTables::cd`] at this temperature.
+    pub fn cd(&self) -> R {
+        self.cd
+    }
+
+    /// [`EhvvaTables::t_delay_pair_ms`] at this temperature.
+    pub fn t_delay_pair_ms(&self, p_supply_mpa: R) -> (R, R) {
+        let p_eff = self.p_nominal + self.gain_pressure_delay * (p_supply_mpa - self.p_nominal);
+        // Both delay tables are on the same Ph breakpoints.
+        let at = self.td_open.locate(p_eff);
+        let vo = self.td_open.eval_at(at);
+        let vc = self.td_close.eval_at(at);
+        let half = R::from_f64(0.5);
+        let mean = half * (vo + vc);
+        let half_split = self.gain_direction_delay * half * (vo - vc);
+        ((mean + half_split).max(R::ZERO), (mean - half_split).max(R::ZERO))
+    }
+
+    /// [`EhvvaTables::tau_p_ms`] at this temperature.
+    pub fn tau_p_ms(&self, p_supply_mpa: R) -> R {
+        self.tau.eval(p_supply_mpa).max(R::from_f64(TAU_MIN_MS))
+    }
 }
 
 /// The valve's own motion after td to the paper's timing thresholds on the td grid (Ph × T),
