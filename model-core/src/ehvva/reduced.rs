@@ -131,6 +131,41 @@ impl<R: Real, const N: usize> EhvvaReduced<R, N> {
     pub fn tables(&self) -> &EhvvaTables<R> {
         &self.tables
     }
+
+    /// One sub-step with the delayed Pmo `p_top` and the step's constants. Not inlined: in
+    /// the step the compiler hoisted every parameter out of the (two-pass) sub-step loop and
+    /// spilled them to the stack, on the target some 60 instructions a step.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(never)]
+    fn substep(
+        &mut self,
+        u_pilot: bool,
+        inputs: &EhvvaInputs<R>,
+        p_top: R,
+        lag: R,
+        inv_1_plus_lag: R,
+        inv_cd2: R,
+        stroke: R,
+    ) {
+        // Eq. (10): τp dPmo/dt = −Pmo + u(Ph − Pl) + Pl.
+        let p_in = if u_pilot { self.m.p_high } else { self.m.p_low };
+        self.p_mo = (self.p_mo + lag * p_in) * inv_1_plus_lag;
+        // Eq. (12) first line, with eqs. (5)-(6) as damping.
+        let k = self
+            .piston
+            .quadratic_gain_inv_cd2(inv_cd2, self.m.lift, self.m.vel, stroke, inputs.snubber_on);
+        let force = self.piston.static_force(p_top, self.m.p_low, self.m.lift);
+        // Piston, end stops and eqs. (7)-(8).
+        self.piston.advance(
+            &mut self.m,
+            force,
+            k,
+            self.h,
+            stroke,
+            inputs.p_supply_mpa,
+            inputs.p_back_mpa,
+        );
+    }
 }
 
 impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaReduced<R, N> {
@@ -160,24 +195,7 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaReduced<R, N> {
                 open_is_longer,
             );
             back += inv_n;
-            // Eq. (10): τp dPmo/dt = −Pmo + u(Ph − Pl) + Pl.
-            let p_in = if u_pilot { self.m.p_high } else { self.m.p_low };
-            self.p_mo = (self.p_mo + lag * p_in) * inv_1_plus_lag;
-            // Eq. (12) first line, with eqs. (5)-(6) as damping.
-            let k = self
-                .piston
-                .quadratic_gain_inv_cd2(inv_cd2, self.m.lift, self.m.vel, stroke, inputs.snubber_on);
-            let force = self.piston.static_force(p_top, self.m.p_low, self.m.lift);
-            // Piston, end stops and eqs. (7)-(8).
-            self.piston.advance(
-                &mut self.m,
-                force,
-                k,
-                self.h,
-                stroke,
-                inputs.p_supply_mpa,
-                inputs.p_back_mpa,
-            );
+            self.substep(u_pilot, inputs, p_top, lag, inv_1_plus_lag, inv_cd2, stroke);
         }
         self.m.lift
     }
