@@ -58,10 +58,11 @@ impl<R: Real, const N: usize> DelayLine<R, N> {
             delay_samples
         };
         // d is in [0, N-1]: its integer part indexes the line (no f64 on the way: that is
-        // soft-float on the target); the `min` only keeps an impossible value in range.
-        let whole = (d.floor_i32() as usize).min(N - 1);
+        // soft-float on the target). The ring index wraps rather than checks: it stays in
+        // range whatever `whole` is (no clamp on the target's path, no panic).
+        let whole = d.floor_nonneg_i32() as usize;
         let frac = d - R::from_i32(whole as i32);
-        let at = (self.head + N - whole) % N;
+        let at = (self.head + N).wrapping_sub(whole) % N;
         let newer = self.buf[at];
         if whole >= N - 1 || frac <= R::ZERO {
             return newer;

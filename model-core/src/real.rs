@@ -72,6 +72,12 @@ pub trait Real:
     fn floor_i32(self) -> i32 {
         libm::floor(self.to_f64()) as i32
     }
+    /// [`Real::floor_i32`] of a value known not to be negative (an index): the floats truncate,
+    /// one instruction, where `floor_i32` must also step down for negative non-integers. A
+    /// negative value gives some integer, no panic.
+    fn floor_nonneg_i32(self) -> i32 {
+        self.floor_i32()
+    }
     /// An integer as `Self` (exact where the type holds it; saturating).
     fn from_i32(n: i32) -> Self {
         Self::from_f64(f64::from(n))
@@ -172,6 +178,9 @@ impl Real for f32 {
             t
         }
     }
+    fn floor_nonneg_i32(self) -> i32 {
+        self as i32
+    }
     fn from_i32(n: i32) -> Self {
         n as f32
     }
@@ -225,6 +234,9 @@ impl Real for f64 {
     }
     fn to_f64(self) -> f64 {
         self
+    }
+    fn floor_nonneg_i32(self) -> i32 {
+        self as i32
     }
     fn sqrt(self) -> Self {
         if self > 0.0 {
@@ -1136,6 +1148,11 @@ mod tests {
             let want = libm::floor(x) as i32;
             prop_assert_eq!((x as f32).floor_i32(), libm::floor(f64::from(x as f32)) as i32);
             prop_assert_eq!(x.floor_i32(), want);
+            let a = x.abs();
+            prop_assert_eq!(a.floor_nonneg_i32(), a.floor_i32());
+            prop_assert_eq!((a as f32).floor_nonneg_i32(), (a as f32).floor_i32());
+            prop_assert_eq!(Q16::from_f64(a).floor_nonneg_i32(), Q16::from_f64(a).floor_i32());
+            prop_assert_eq!(Q32::from_f64(a).floor_nonneg_i32(), Q32::from_f64(a).floor_i32());
             let q = Q16::from_f64(x);
             prop_assert_eq!(q.floor_i32(), libm::floor(q.to_f64()) as i32);
             let q = Q32::from_f64(x);

@@ -174,7 +174,6 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaReduced<R, N> {
         if inputs.temp_c != self.at.temp_c() {
             self.at = self.tables.at_temperature(inputs.temp_c);
         }
-        let cd = self.at.cd();
         let tau = self.at.tau_p_ms(self.m.p_high);
         let (td_open, td_close) = self.at.t_delay_pair_ms(self.m.p_high);
         let open_is_longer = td_open >= td_close;
@@ -183,7 +182,7 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaReduced<R, N> {
         let lag = self.h / tau;
         // Per-step constants of the sub-step loop: its implicit Pmo update and 1/Cd².
         let inv_1_plus_lag = R::ONE / (R::ONE + lag);
-        let inv_cd2 = R::ONE / (cd * cd);
+        let inv_cd2 = self.at.inv_cd2();
         let inv_n = self.inv_substeps;
         self.pmo_history.push(self.p_mo);
         let mut back = R::ZERO;

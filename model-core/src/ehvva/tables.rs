@@ -148,6 +148,10 @@ impl<R: Real> EhvvaTables<R> {
             td_close: self.td_close.slice_y(temp_c),
             tau: self.tau.slice_y(temp_c),
             cd: self.cd(temp_c),
+            inv_cd2: {
+                let cd = self.cd(temp_c);
+                R::ONE / (cd * cd)
+            },
             p_nominal: self.p_nominal,
             gain_pressure_delay: self.gain_pressure_delay,
             gain_direction_delay: self.gain_direction_delay,
@@ -164,6 +168,7 @@ pub struct EhvvaTablesAt<R: Real> {
     td_close: Lut1<R, 4>,
     tau: Lut1<R, 2>,
     cd: R,
+    inv_cd2: R,
     p_nominal: R,
     gain_pressure_delay: R,
     gain_direction_delay: R,
@@ -178,6 +183,11 @@ impl<R: Real> EhvvaTablesAt<R> {
     /// [`EhvvaTables::cd`] at this temperature.
     pub fn cd(&self) -> R {
         self.cd
+    }
+
+    /// 1/Cd² at this temperature (the orifice damping's factor).
+    pub fn inv_cd2(&self) -> R {
+        self.inv_cd2
     }
 
     /// [`EhvvaTables::t_delay_pair_ms`] at this temperature.
