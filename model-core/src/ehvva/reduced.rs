@@ -147,9 +147,14 @@ impl<R: Real, const N: usize> EhvvaReduced<R, N> {
         inv_cd2: R,
         stroke: R,
     ) {
-        // Eq. (10): τp dPmo/dt = −Pmo + u(Ph − Pl) + Pl.
+        // Eq. (10): τp dPmo/dt = −Pmo + u(Ph − Pl) + Pl, implicit: (Pmo + lag·Pin)/(1 + lag);
+        // in fixed point `lag` is already lag/(1 + lag).
         let p_in = if u_pilot { self.m.p_high } else { self.m.p_low };
-        self.p_mo = (self.p_mo + lag * p_in) * inv_1_plus_lag;
+        self.p_mo = if R::CHEAP_DIV {
+            (self.p_mo + lag * p_in) * inv_1_plus_lag
+        } else {
+            self.p_mo * inv_1_plus_lag + lag * p_in
+        };
         // Eq. (12) first line, with eqs. (5)-(6) as damping.
         let k = self
             .piston
@@ -179,9 +184,15 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaReduced<R, N> {
         let open_is_longer = td_open >= td_close;
         let d_open = td_open * self.inv_dt;
         let d_close = td_close * self.inv_dt;
-        let lag = self.h / tau;
-        // Per-step constants of the sub-step loop: its implicit Pmo update and 1/Cd².
-        let inv_1_plus_lag = R::ONE / (R::ONE + lag);
+        // Per-step constants of the sub-step loop: its implicit Pmo update (lag = h/τ and
+        // 1/(1 + lag); in fixed point τ/(τ + h) and 1 − that, one long division, not two).
+        let (lag, inv_1_plus_lag) = if R::CHEAP_DIV {
+            let lag = self.h / tau;
+            (lag, R::ONE / (R::ONE + lag))
+        } else {
+            let keep = tau / (tau + self.h);
+            (R::ONE - keep, keep)
+        };
         let inv_cd2 = self.at.inv_cd2();
         let inv_n = self.inv_substeps;
         self.pmo_history.push(self.p_mo);
