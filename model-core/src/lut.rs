@@ -102,6 +102,16 @@ pub struct LutPoint<R, const N: usize> {
     w: R,
 }
 
+/// A point located on the grid of an `NX` × `NY` [`Lut2`]: the cells (below NX − 1, NY − 1)
+/// and the weights in them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LutPoint2<R, const NX: usize, const NY: usize> {
+    i: usize,
+    wx: R,
+    j: usize,
+    wy: R,
+}
+
 /// z = f(x, y) by bilinear interpolation on an `NX` × `NY` grid, clamped at the edges.
 /// `z[i][j]` is the value at `(x[i], y[j])`.
 #[derive(Clone, Copy, Debug)]
@@ -126,8 +136,19 @@ impl<R: Real, const NX: usize, const NY: usize> Lut2<R, NX, NY> {
         })
     }
     pub fn eval(&self, x: R, y: R) -> R {
+        self.eval_at(self.locate(x, y))
+    }
+    /// Where `(x, y)` lies on the grid, for [`Self::eval_at`]: tables on the same breakpoints
+    /// then share one look-up.
+    pub fn locate(&self, x: R, y: R) -> LutPoint2<R, NX, NY> {
         let (i, wx) = locate(&self.x, &self.inv_dx, x);
         let (j, wy) = locate(&self.y, &self.inv_dy, y);
+        LutPoint2 { i, wx, j, wy }
+    }
+    /// The value at a point located on this table's grid (or on an equal one):
+    /// `t.eval_at(t.locate(x, y)) == t.eval(x, y)`.
+    pub fn eval_at(&self, p: LutPoint2<R, NX, NY>) -> R {
+        let LutPoint2 { i, wx, j, wy } = p;
         let z0 = self.z[i][j] + wy * (self.z[i][j + 1] - self.z[i][j]);
         let z1 = self.z[i + 1][j] + wy * (self.z[i + 1][j + 1] - self.z[i + 1][j]);
         z0 + wx * (z1 - z0)
@@ -195,7 +216,9 @@ mod tests {
             prop_assert_eq!(s.eval(x).to_bits(), t.eval(x, y).to_bits());
             let u = Lut2::<f32, 4, 4>::new(xs, ys, z).unwrap();
             prop_assert_eq!(u.slice_y(y as f32).eval(x as f32).to_bits(), u.eval(x as f32, y as f32).to_bits());
-            let w = Lut2::<f64, 4, 4>::new(xs, ys, z.map(|r| r.map(|v| 2.0 - v))).unwrap().slice_y(y);
+            let w2 = Lut2::<f64, 4, 4>::new(xs, ys, z.map(|r| r.map(|v| 2.0 - v))).unwrap();
+            prop_assert_eq!(w2.eval_at(t.locate(x, y)).to_bits(), w2.eval(x, y).to_bits());
+            let w = w2.slice_y(y);
             prop_assert_eq!(w.eval_at(s.locate(x)).to_bits(), w.eval(x).to_bits());
         }
 
