@@ -51,11 +51,12 @@ pub trait Real:
     const ONE: Self;
     /// Short name for reports and benchmark labels.
     const NAME: &'static str;
-    /// Whether a division costs about what a product does: the floats (one FPU instruction on
-    /// the target, and f64 on the host). Models keep their divisions there, and so the exact
-    /// operations of their f64 results; where it is false (fixed point: a long division of
-    /// about a hundred instructions) they may take forms with fewer divisions.
-    const CHEAP_DIV: bool;
+    /// The floats (f32, f64): IEEE arithmetic, where a division is one FPU instruction and
+    /// `x·0` is not always 0 (signed zeros, NaN). Models keep their float code exactly as it
+    /// is, and with it the operations of their f64 results; where this is false (fixed point:
+    /// a long division of about a hundred instructions, a product of ten, `x·0 + y == y`
+    /// exactly) they may take forms with fewer divisions, or skip products with zero.
+    const IS_FLOAT: bool;
 
     /// Converts a constant (parameters, table values). Out-of-range values saturate.
     fn from_f64(x: f64) -> Self;
@@ -152,7 +153,7 @@ impl Real for f32 {
     const ZERO: Self = 0.0;
     const ONE: Self = 1.0;
     const NAME: &'static str = "f32";
-    const CHEAP_DIV: bool = true;
+    const IS_FLOAT: bool = true;
     type Divisor = f32;
     #[inline(always)]
     fn divisor(d: Self) -> Self {
@@ -219,7 +220,7 @@ impl Real for f64 {
     const ZERO: Self = 0.0;
     const ONE: Self = 1.0;
     const NAME: &'static str = "f64";
-    const CHEAP_DIV: bool = true;
+    const IS_FLOAT: bool = true;
     type Divisor = f64;
     #[inline(always)]
     fn divisor(d: Self) -> Self {
@@ -368,7 +369,7 @@ impl Real for Q32 {
     const ZERO: Self = Q32(I32F32::ZERO);
     const ONE: Self = Q32(I32F32::ONE);
     const NAME: &'static str = "Q32.32";
-    const CHEAP_DIV: bool = false;
+    const IS_FLOAT: bool = false;
     type Divisor = Q32;
     fn divisor(d: Self) -> Self {
         d
@@ -596,7 +597,7 @@ impl Real for Q16 {
     const ZERO: Self = Q16(0);
     const ONE: Self = Q16(1 << 16);
     const NAME: &'static str = "Q16.16";
-    const CHEAP_DIV: bool = false;
+    const IS_FLOAT: bool = false;
     type Divisor = Q16Divisor;
     /// `m = round(2^(30+p) / |d|)` with p the index of |d|'s leading one, so m is in
     /// [2^29, 2^30] (carrying d's sign) and `x / d = x · m / 2^(14+p)`: relative error below

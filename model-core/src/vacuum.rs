@@ -571,7 +571,7 @@ fn tan_series<R: Real>(theta: R) -> R {
     let s = horner!(R, z2; 1.0, 1.0 / 3.0, 2.0 / 15.0, 17.0 / 315.0, 62.0 / 2835.0, 1382.0 / 155925.0,
         21844.0 / 6081075.0, 929569.0 / 638512875.0);
     let t = z * s;
-    if R::CHEAP_DIV {
+    if R::IS_FLOAT {
         let mut t = t;
         for _ in 0..2 {
             t = (t + t) / (R::ONE - t * t);

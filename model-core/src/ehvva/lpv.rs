@@ -75,26 +75,32 @@ impl<R: Real> LpvAffine<R> {
         })
     }
 
-    /// A(θ) = A0 + Σ Ai θi.
+    /// A(θ) = A0 + Σ Ai θi. In fixed point the zero entries of the Ai (all but two of 45)
+    /// are skipped, which there changes nothing; the floats add every product (`0·θ` can be
+    /// −0 or NaN there).
     pub fn a_matrix(&self, theta: &[R; N_THETA]) -> [[R; 3]; 3] {
         let mut m = self.a0;
         for (ai, &t) in self.a.iter().zip(theta) {
             for (row, ai_row) in m.iter_mut().zip(ai) {
                 for (e, &aij) in row.iter_mut().zip(ai_row) {
-                    *e += aij * t;
+                    if R::IS_FLOAT || aij != R::ZERO {
+                        *e += aij * t;
+                    }
                 }
             }
         }
         m
     }
 
-    /// B(θ) = Σ Bi θi.
+    /// B(θ) = Σ Bi θi (zero entries skipped in fixed point, as in [`Self::a_matrix`]).
     pub fn b_matrix(&self, theta: &[R; N_THETA]) -> [[R; 2]; 3] {
         let mut m = [[R::ZERO; 2]; 3];
         for (bi, &t) in self.b.iter().zip(theta) {
             for (row, bi_row) in m.iter_mut().zip(bi) {
                 for (e, &bij) in row.iter_mut().zip(bi_row) {
-                    *e += bij * t;
+                    if R::IS_FLOAT || bij != R::ZERO {
+                        *e += bij * t;
+                    }
                 }
             }
         }
@@ -190,7 +196,14 @@ impl<R: Real, const N: usize> EhvvaLpv<R, N> {
         let cd = at.cd();
         let lift = self.x[1] - self.preload;
         let vel = self.x[2];
-        let quad = self.piston.quadratic_gain(cd, lift, vel, stroke, snubber_on);
+        // Fixed point multiplies by the tables' 1/Cd² instead of dividing by Cd² (a long
+        // division); the floats keep their division.
+        let quad = if R::IS_FLOAT {
+            self.piston.quadratic_gain(cd, lift, vel, stroke, snubber_on)
+        } else {
+            self.piston
+                .quadratic_gain_inv_cd2(at.inv_cd2(), lift, vel, stroke, snubber_on)
+        };
         let k = -(self.piston.friction + quad * vel.abs()) * self.piston.accel_per_newton;
         [inv_tau, k, p_high_delayed * inv_tau, p_low_delayed * inv_tau, p_low]
     }
@@ -239,7 +252,11 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaLpv<R, N> {
                         rate += a_rc * x_c;
                     }
                 }
-                self.x[row] = (self.x[row] + self.h * rate) / (R::ONE - self.h * a[row][row]);
+                let num = self.x[row] + self.h * rate;
+                let den = R::ONE - self.h * a[row][row];
+                // The position row's denominator is 1 (A has no diagonal there): fixed point
+                // skips that long division, exactly.
+                self.x[row] = if !R::IS_FLOAT && den == R::ONE { num } else { num / den };
             }
             let lift = self.x[1] - self.preload;
             let lift_before = lift - self.h * self.x[2];

@@ -150,7 +150,7 @@ impl<R: Real, const N: usize> EhvvaReduced<R, N> {
         // Eq. (10): τp dPmo/dt = −Pmo + u(Ph − Pl) + Pl, implicit: (Pmo + lag·Pin)/(1 + lag);
         // in fixed point `lag` is already lag/(1 + lag).
         let p_in = if u_pilot { self.m.p_high } else { self.m.p_low };
-        self.p_mo = if R::CHEAP_DIV {
+        self.p_mo = if R::IS_FLOAT {
             (self.p_mo + lag * p_in) * inv_1_plus_lag
         } else {
             self.p_mo * inv_1_plus_lag + lag * p_in
@@ -186,7 +186,7 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaReduced<R, N> {
         let d_close = td_close * self.inv_dt;
         // Per-step constants of the sub-step loop: its implicit Pmo update (lag = h/τ and
         // 1/(1 + lag); in fixed point τ/(τ + h) and 1 − that, one long division, not two).
-        let (lag, inv_1_plus_lag) = if R::CHEAP_DIV {
+        let (lag, inv_1_plus_lag) = if R::IS_FLOAT {
             let lag = self.h / tau;
             (lag, R::ONE / (R::ONE + lag))
         } else {
