@@ -72,16 +72,19 @@ impl<R: Real, const N: usize> Lut1<R, N> {
         })
     }
     pub fn eval(&self, x: R) -> R {
-        self.eval_at(self.locate(x))
+        let (i, w) = locate(&self.x, &self.inv_dx, x);
+        self.y[i] + w * (self.y[i + 1] - self.y[i])
     }
     /// Where `x` lies on the breakpoints, for [`Self::eval_at`]: tables on the same
     /// breakpoints then share one look-up.
+    #[inline]
     pub fn locate(&self, x: R) -> LutPoint<R, N> {
         let (i, w) = locate(&self.x, &self.inv_dx, x);
         LutPoint { i, w }
     }
     /// The value at a point located on this table's breakpoints (or on equal ones):
     /// `t.eval_at(t.locate(x)) == t.eval(x)`.
+    #[inline]
     pub fn eval_at(&self, p: LutPoint<R, N>) -> R {
         let LutPoint { i, w } = p;
         self.y[i] + w * (self.y[i + 1] - self.y[i])
@@ -136,10 +139,15 @@ impl<R: Real, const NX: usize, const NY: usize> Lut2<R, NX, NY> {
         })
     }
     pub fn eval(&self, x: R, y: R) -> R {
-        self.eval_at(self.locate(x, y))
+        let (i, wx) = locate(&self.x, &self.inv_dx, x);
+        let (j, wy) = locate(&self.y, &self.inv_dy, y);
+        let z0 = self.z[i][j] + wy * (self.z[i][j + 1] - self.z[i][j]);
+        let z1 = self.z[i + 1][j] + wy * (self.z[i + 1][j + 1] - self.z[i + 1][j]);
+        z0 + wx * (z1 - z0)
     }
     /// Where `(x, y)` lies on the grid, for [`Self::eval_at`]: tables on the same breakpoints
     /// then share one look-up.
+    #[inline]
     pub fn locate(&self, x: R, y: R) -> LutPoint2<R, NX, NY> {
         let (i, wx) = locate(&self.x, &self.inv_dx, x);
         let (j, wy) = locate(&self.y, &self.inv_dy, y);
@@ -147,6 +155,7 @@ impl<R: Real, const NX: usize, const NY: usize> Lut2<R, NX, NY> {
     }
     /// The value at a point located on this table's grid (or on an equal one):
     /// `t.eval_at(t.locate(x, y)) == t.eval(x, y)`.
+    #[inline]
     pub fn eval_at(&self, p: LutPoint2<R, NX, NY>) -> R {
         let LutPoint2 { i, wx, j, wy } = p;
         let z0 = self.z[i][j] + wy * (self.z[i][j + 1] - self.z[i][j]);

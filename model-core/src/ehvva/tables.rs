@@ -87,9 +87,11 @@ impl<R: Real> EhvvaTables<R> {
     /// paper's timing thresholds, Sec. 2), at supply pressure, oil temperature and lift state.
     pub fn t_motion_pair_ms(&self, p_supply_mpa: R, temp_c: R, lift_high: bool) -> (R, R) {
         let k = usize::from(!lift_high);
+        // Both motion tables are on the calibration's one grid: one look-up.
+        let at = self.motion_open[k].locate(p_supply_mpa, temp_c);
         (
-            self.motion_open[k].eval(p_supply_mpa, temp_c).max(R::ZERO),
-            self.motion_close[k].eval(p_supply_mpa, temp_c).max(R::ZERO),
+            self.motion_open[k].eval_at(at).max(R::ZERO),
+            self.motion_close[k].eval_at(at).max(R::ZERO),
         )
     }
 
@@ -125,8 +127,10 @@ impl<R: Real> EhvvaTables<R> {
     /// `(VO, VC)` delays at once (both are needed every step by the models).
     pub fn t_delay_pair_ms(&self, p_supply_mpa: R, temp_c: R) -> (R, R) {
         let p_eff = self.p_nominal + self.gain_pressure_delay * (p_supply_mpa - self.p_nominal);
-        let vo = self.td_open.eval(p_eff, temp_c);
-        let vc = self.td_close.eval(p_eff, temp_c);
+        // Both delay tables are on the same grid: one look-up.
+        let at = self.td_open.locate(p_eff, temp_c);
+        let vo = self.td_open.eval_at(at);
+        let vc = self.td_close.eval_at(at);
         let half = R::from_f64(0.5);
         let mean = half * (vo + vc);
         let half_split = self.gain_direction_delay * half * (vo - vc);
