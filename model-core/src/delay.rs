@@ -46,6 +46,7 @@ impl<R: Real, const N: usize> DelayLine<R, N> {
     }
 
     /// The sample `delay_samples` steps ago, linearly interpolated; clamped to `0..=N-1`.
+    #[inline]
     pub fn get(&self, delay_samples: R) -> R {
         let max = R::from_f64((N - 1) as f64);
         // `!(d > 0)` also catches a NaN delay from a float caller.
@@ -57,24 +58,23 @@ impl<R: Real, const N: usize> DelayLine<R, N> {
             delay_samples
         };
         // d is in [0, N-1]: its integer part indexes the line (no f64 on the way: that is
-        // soft-float on the target).
-        let whole = (d.floor_i32().max(0) as usize).min(N - 1);
+        // soft-float on the target). The ring index wraps rather than checks: it stays in
+        // range whatever `whole` is (no clamp on the target's path, no panic).
+        let whole = d.floor_nonneg_i32() as usize;
         let frac = d - R::from_i32(whole as i32);
-        let newer = self.at(whole);
-        if whole + 1 > N - 1 || frac <= R::ZERO {
+        let at = (self.head + N).wrapping_sub(whole) % N;
+        let newer = self.buf[at];
+        if whole >= N - 1 || frac <= R::ZERO {
             return newer;
         }
-        let older = self.at(whole + 1);
+        // The sample before, one place back in the ring.
+        let older = self.buf[(at + N - 1) % N];
         newer + frac * (older - newer)
     }
 
     /// The sample `delay_s` seconds ago for a line pushed every `dt_s` seconds.
     pub fn get_time(&self, delay_s: R, dt_s: R) -> R {
         self.get(delay_s / dt_s)
-    }
-
-    fn at(&self, back: usize) -> R {
-        self.buf[(self.head + N - back) % N]
     }
 }
 

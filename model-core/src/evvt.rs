@@ -487,7 +487,9 @@ impl<R: Real> EvvtPlant<R> {
     pub fn alpha_beta(&self, engine_rpm: R, u_batt_v: R) -> (R, R) {
         let v = self.nominal_voltage_v + self.voltage_effect_scale * (u_batt_v - self.nominal_voltage_v);
         let n = self.nominal_engine_rpm + self.engine_speed_effect_scale * (engine_rpm - self.nominal_engine_rpm);
-        (self.alpha.eval(n, v), self.beta.eval(n, v))
+        // Both tables are on the same grid: one look-up.
+        let at = self.alpha.locate(n, v);
+        (self.alpha.eval_at(at), self.beta.eval_at(at))
     }
 
     /// Advances the plant by `dt_s` with the motor speed command `motor_cmd_rpm` (motor speed

@@ -75,12 +75,44 @@ impl<R: Real, const N: usize> Lut1<R, N> {
         let (i, w) = locate(&self.x, &self.inv_dx, x);
         self.y[i] + w * (self.y[i + 1] - self.y[i])
     }
+    /// Where `x` lies on the breakpoints, for [`Self::eval_at`]: tables on the same
+    /// breakpoints then share one look-up.
+    #[inline]
+    pub fn locate(&self, x: R) -> LutPoint<R, N> {
+        let (i, w) = locate(&self.x, &self.inv_dx, x);
+        LutPoint { i, w }
+    }
+    /// The value at a point located on this table's breakpoints (or on equal ones):
+    /// `t.eval_at(t.locate(x)) == t.eval(x)`.
+    #[inline]
+    pub fn eval_at(&self, p: LutPoint<R, N>) -> R {
+        let LutPoint { i, w } = p;
+        self.y[i] + w * (self.y[i + 1] - self.y[i])
+    }
     pub fn breakpoints(&self) -> &[R; N] {
         &self.x
     }
     pub fn values(&self) -> &[R; N] {
         &self.y
     }
+}
+
+/// A point located on the breakpoints of an `N`-point [`Lut1`]: the interval (below N − 1) and
+/// the weight in it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LutPoint<R, const N: usize> {
+    i: usize,
+    w: R,
+}
+
+/// A point located on the grid of an `NX` × `NY` [`Lut2`]: the cells (below NX − 1, NY − 1)
+/// and the weights in them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LutPoint2<R, const NX: usize, const NY: usize> {
+    i: usize,
+    wx: R,
+    j: usize,
+    wy: R,
 }
 
 /// z = f(x, y) by bilinear interpolation on an `NX` × `NY` grid, clamped at the edges.
@@ -112,6 +144,34 @@ impl<R: Real, const NX: usize, const NY: usize> Lut2<R, NX, NY> {
         let z0 = self.z[i][j] + wy * (self.z[i][j + 1] - self.z[i][j]);
         let z1 = self.z[i + 1][j] + wy * (self.z[i + 1][j + 1] - self.z[i + 1][j]);
         z0 + wx * (z1 - z0)
+    }
+    /// Where `(x, y)` lies on the grid, for [`Self::eval_at`]: tables on the same breakpoints
+    /// then share one look-up.
+    #[inline]
+    pub fn locate(&self, x: R, y: R) -> LutPoint2<R, NX, NY> {
+        let (i, wx) = locate(&self.x, &self.inv_dx, x);
+        let (j, wy) = locate(&self.y, &self.inv_dy, y);
+        LutPoint2 { i, wx, j, wy }
+    }
+    /// The value at a point located on this table's grid (or on an equal one):
+    /// `t.eval_at(t.locate(x, y)) == t.eval(x, y)`.
+    #[inline]
+    pub fn eval_at(&self, p: LutPoint2<R, NX, NY>) -> R {
+        let LutPoint2 { i, wx, j, wy } = p;
+        let z0 = self.z[i][j] + wy * (self.z[i][j + 1] - self.z[i][j]);
+        let z1 = self.z[i + 1][j] + wy * (self.z[i + 1][j + 1] - self.z[i + 1][j]);
+        z0 + wx * (z1 - z0)
+    }
+    /// The table along x at a fixed `y`: `slice_y(y).eval(x) == eval(x, y)` bit for bit (the
+    /// same operations: the slice holds the values interpolated along y), for a model whose y
+    /// (an oil temperature) stays put while x changes every step.
+    pub fn slice_y(&self, y: R) -> Lut1<R, NX> {
+        let (j, wy) = locate(&self.y, &self.inv_dy, y);
+        Lut1 {
+            x: self.x,
+            inv_dx: self.inv_dx,
+            y: core::array::from_fn(|i| self.z[i][j] + wy * (self.z[i][j + 1] - self.z[i][j])),
+        }
     }
     pub fn x_breakpoints(&self) -> &[R; NX] {
         &self.x
@@ -154,6 +214,23 @@ mod tests {
     }
 
     proptest! {
+        /// A slice at fixed y gives the 2-D table's bits, also when tables share a located point.
+        #[test]
+        fn slices_and_shared_points_give_the_same_bits(x in -1.0f64..5.0, y in -2.0f64..2.0, a in -5.0f64..5.0) {
+            let xs = [0.0, 1.0, 2.5, 4.0];
+            let ys = [-1.0, 0.0, 0.3, 1.0];
+            let z = xs.map(|x| ys.map(|y| libm::sin(a * x + y) + x * y));
+            let t = Lut2::<f64, 4, 4>::new(xs, ys, z).unwrap();
+            let s = t.slice_y(y);
+            prop_assert_eq!(s.eval(x).to_bits(), t.eval(x, y).to_bits());
+            let u = Lut2::<f32, 4, 4>::new(xs, ys, z).unwrap();
+            prop_assert_eq!(u.slice_y(y as f32).eval(x as f32).to_bits(), u.eval(x as f32, y as f32).to_bits());
+            let w2 = Lut2::<f64, 4, 4>::new(xs, ys, z.map(|r| r.map(|v| 2.0 - v))).unwrap();
+            prop_assert_eq!(w2.eval_at(t.locate(x, y)).to_bits(), w2.eval(x, y).to_bits());
+            let w = w2.slice_y(y);
+            prop_assert_eq!(w.eval_at(s.locate(x)).to_bits(), w.eval(x).to_bits());
+        }
+
         /// A bilinear function is reproduced exactly inside the grid.
         #[test]
         fn lut2_reproduces_bilinear_functions(x in 0.0f64..4.0, y in -1.0f64..1.0,

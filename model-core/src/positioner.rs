@@ -170,6 +170,10 @@ pub struct Positioner<R: Real> {
     /// The nominal step in `R` and 1024 times it converted from f64 (see [`Self::slide`]).
     nominal_dt_s: R,
     nominal_dt_x1024_s: R,
+    /// The relaxation weights (φ, ψ) of a nominal step sliding forward and backward: they
+    /// depend on the direction and the step alone, so a step at the nominal length looks
+    /// them up instead of summing two series (the same values, computed the same way).
+    nominal_weights: [(R, R); 2],
 }
 
 /// The positioner's default nominal step (the EMPS logs' 1 kHz), s: see
@@ -191,7 +195,7 @@ impl<R: Real> Positioner<R> {
             (0.0, 0.0)
         };
         let f = R::from_f64;
-        Ok(Self {
+        let mut positioner = Self {
             inv_mass_x1024: f(1024.0 / p.mass_kg),
             offset_n: f(p.offset_n),
             fv_pos: f(fv_pos),
@@ -203,7 +207,23 @@ impl<R: Real> Positioner<R> {
             vel_x1024_m_s: R::ZERO,
             nominal_dt_s: f(NOMINAL_STEP_S),
             nominal_dt_x1024_s: f(1024.0 * NOMINAL_STEP_S),
-        })
+            nominal_weights: [(R::ZERO, R::ZERO); 2],
+        };
+        positioner.set_nominal_weights();
+        Ok(positioner)
+    }
+
+    fn set_nominal_weights(&mut self) {
+        let h = self.nominal_dt_x1024_s;
+        self.nominal_weights = [self.weights(R::ONE, h), self.weights(-R::ONE, h)];
+    }
+
+    /// (φ, ψ) of [`relaxation_weights`] for sliding `h_x1024` in direction `dir`.
+    fn weights(&self, dir: R, h_x1024: R) -> (R, R) {
+        let k = R::from_f64(1.0 / 1024.0);
+        let (fv, _) = self.friction(dir);
+        let a = (fv * self.inv_mass_x1024) * k;
+        relaxation_weights((a * h_x1024) * k)
     }
 
     /// Sets the state (e.g. to a log's first sample).
@@ -241,7 +261,11 @@ impl<R: Real> Positioner<R> {
         // Acceleration in 1/1024 m/s², rate a = Fv/M in 1/s.
         let acc = (drive - dir * fc) * self.inv_mass_x1024;
         let a = (fv * self.inv_mass_x1024) * k;
-        let (phi, psi) = relaxation_weights((a * h_x1024) * k);
+        let (phi, psi) = if h_x1024 == self.nominal_dt_x1024_s {
+            self.nominal_weights[usize::from(!(dir > R::ZERO))]
+        } else {
+            relaxation_weights((a * h_x1024) * k)
+        };
         // v(h) = v + (acc − a·v)·h·φ(ah), x(h) = h·(v·φ(ah) + acc·h·ψ(ah)).
         let v_end = v + ((acc - a * v) * h_x1024 * phi) * k;
         let distance = (h_x1024 * (v * phi + (acc * h_x1024 * psi) * k)) * k;
@@ -254,6 +278,7 @@ impl<R: Real> Positioner<R> {
     pub fn set_nominal_step_s(&mut self, dt_s: f64) {
         self.nominal_dt_s = R::from_f64(dt_s);
         self.nominal_dt_x1024_s = R::from_f64(1024.0 * dt_s);
+        self.set_nominal_weights();
     }
 
     /// Advances by `dt_s` under the applied force `force_n` (held over the step) and returns

@@ -310,8 +310,10 @@ impl<R: Real> EvvtPhaseController<R> {
                 integral_rate,
                 ..
             } => {
-                let alpha = self.alpha.eval(engine_rpm, u_batt_v);
-                let beta = self.beta.eval(engine_rpm, u_batt_v);
+                // α and β share their grid: one look-up.
+                let at = self.alpha.locate(engine_rpm, u_batt_v);
+                let alpha = self.alpha.eval_at(at);
+                let beta = self.beta.eval_at(at);
                 let wc = crossover.min(max_crossover_per_beta * beta);
                 let kp = wc * (wc * wc + beta * beta).sqrt() / alpha;
                 (kp.clamp(self.kp_min, self.kp_max), integral_rate)

@@ -27,7 +27,7 @@ use super::event::EhvvaPlant;
 use super::params::{EhvvaError, EhvvaInputs, EhvvaParams};
 use super::piston::Piston;
 use super::reduced::{check_step, directional, DEFAULT_DELAY_SAMPLES};
-use super::tables::EhvvaTables;
+use super::tables::{EhvvaTables, EhvvaTablesAt};
 use crate::delay::DelayLine;
 use crate::real::Real;
 
@@ -75,26 +75,32 @@ impl<R: Real> LpvAffine<R> {
         })
     }
 
-    /// A(θ) = A0 + Σ Ai θi.
+    /// A(θ) = A0 + Σ Ai θi. In fixed point the zero entries of the Ai (all but two of 45)
+    /// are skipped, which there changes nothing; the floats add every product (`0·θ` can be
+    /// −0 or NaN there).
     pub fn a_matrix(&self, theta: &[R; N_THETA]) -> [[R; 3]; 3] {
         let mut m = self.a0;
         for (ai, &t) in self.a.iter().zip(theta) {
             for (row, ai_row) in m.iter_mut().zip(ai) {
                 for (e, &aij) in row.iter_mut().zip(ai_row) {
-                    *e += aij * t;
+                    if R::IS_FLOAT || aij != R::ZERO {
+                        *e += aij * t;
+                    }
                 }
             }
         }
         m
     }
 
-    /// B(θ) = Σ Bi θi.
+    /// B(θ) = Σ Bi θi (zero entries skipped in fixed point, as in [`Self::a_matrix`]).
     pub fn b_matrix(&self, theta: &[R; N_THETA]) -> [[R; 2]; 3] {
         let mut m = [[R::ZERO; 2]; 3];
         for (bi, &t) in self.b.iter().zip(theta) {
             for (row, bi_row) in m.iter_mut().zip(bi) {
                 for (e, &bij) in row.iter_mut().zip(bi_row) {
-                    *e += bij * t;
+                    if R::IS_FLOAT || bij != R::ZERO {
+                        *e += bij * t;
+                    }
                 }
             }
         }
@@ -108,11 +114,15 @@ pub struct EhvvaLpv<R: Real, const N: usize = DEFAULT_DELAY_SAMPLES> {
     affine: LpvAffine<R>,
     piston: Piston<R>,
     tables: EhvvaTables<R>,
+    /// `tables` at the last step's oil temperature.
+    at: EhvvaTablesAt<R>,
     preload: R,
     dt: R,
     inv_dt: R,
     h: R,
     substeps: usize,
+    /// 1/substeps, converted once (a run-time `from_f64` is soft-float on the target).
+    inv_substeps: R,
     x: [R; 3],
     theta: [R; N_THETA],
     u_history: DelayLine<R, N>,
@@ -127,15 +137,18 @@ impl<R: Real, const N: usize> EhvvaLpv<R, N> {
     pub fn new(params: &EhvvaParams, inputs: &EhvvaInputs<R>, dt_ms: f64) -> Result<Self, EhvvaError> {
         let substeps = check_step(params, dt_ms, N)?;
         let preload = R::from_f64(params.spring_preload_mm);
+        let tables = EhvvaTables::new(params)?;
         Ok(Self {
             affine: LpvAffine::from_params(params)?,
             piston: Piston::new(params)?,
-            tables: EhvvaTables::new(params)?,
+            at: tables.at_temperature(inputs.temp_c),
+            tables,
             preload,
             dt: R::from_f64(dt_ms),
             inv_dt: R::from_f64(1.0 / dt_ms),
             h: R::from_f64(dt_ms / substeps as f64),
             substeps,
+            inv_substeps: R::ONE / R::from_f64(substeps as f64),
             x: [inputs.p_back_mpa, preload, R::ZERO],
             theta: [R::ZERO; N_THETA],
             u_history: DelayLine::new(R::ZERO),
@@ -170,12 +183,27 @@ impl<R: Real, const N: usize> EhvvaLpv<R, N> {
         stroke: R,
         snubber_on: bool,
     ) -> [R; N_THETA] {
-        let tau = self.tables.tau_p_ms(p_high_delayed, temp_c);
+        // The tables at temp_c: the step's (kept in `at`) or computed afresh.
+        let fresh;
+        let at = if temp_c == self.at.temp_c() {
+            &self.at
+        } else {
+            fresh = self.tables.at_temperature(temp_c);
+            &fresh
+        };
+        let tau = at.tau_p_ms(p_high_delayed);
         let inv_tau = R::ONE / tau;
-        let cd = self.tables.cd(temp_c);
+        let cd = at.cd();
         let lift = self.x[1] - self.preload;
         let vel = self.x[2];
-        let quad = self.piston.quadratic_gain(cd, lift, vel, stroke, snubber_on);
+        // Fixed point multiplies by the tables' 1/Cd² instead of dividing by Cd² (a long
+        // division); the floats keep their division.
+        let quad = if R::IS_FLOAT {
+            self.piston.quadratic_gain(cd, lift, vel, stroke, snubber_on)
+        } else {
+            self.piston
+                .quadratic_gain_inv_cd2(at.inv_cd2(), lift, vel, stroke, snubber_on)
+        };
         let k = -(self.piston.friction + quad * vel.abs()) * self.piston.accel_per_newton;
         [inv_tau, k, p_high_delayed * inv_tau, p_low_delayed * inv_tau, p_low]
     }
@@ -184,14 +212,17 @@ impl<R: Real, const N: usize> EhvvaLpv<R, N> {
 impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaLpv<R, N> {
     fn step(&mut self, u_pilot: bool, inputs: &EhvvaInputs<R>) -> R {
         let stroke = self.piston.stroke(inputs.lift_high);
-        let (td_open, td_close) = self.tables.t_delay_pair_ms(inputs.p_supply_mpa, inputs.temp_c);
+        if inputs.temp_c != self.at.temp_c() {
+            self.at = self.tables.at_temperature(inputs.temp_c);
+        }
+        let (td_open, td_close) = self.at.t_delay_pair_ms(inputs.p_supply_mpa);
         let open_is_longer = td_open >= td_close;
         let d_open = td_open * self.inv_dt;
         let d_close = td_close * self.inv_dt;
         self.u_history.push(if u_pilot { R::ONE } else { R::ZERO });
         self.p_high_history.push(inputs.p_supply_mpa);
         self.p_low_history.push(inputs.p_back_mpa);
-        let inv_n = R::ONE / R::from_f64(self.substeps as f64);
+        let inv_n = self.inv_substeps;
         let mut back = R::ZERO;
         for _ in 0..self.substeps {
             let u_delayed = directional(
@@ -227,7 +258,11 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaLpv<R, N> {
                         rate += a_rc * x_c;
                     }
                 }
-                self.x[row] = (self.x[row] + self.h * rate) / (R::ONE - self.h * a[row][row]);
+                let num = self.x[row] + self.h * rate;
+                let den = R::ONE - self.h * a[row][row];
+                // The position row's denominator is 1 (A has no diagonal there): fixed point
+                // skips that long division, exactly.
+                self.x[row] = if !R::IS_FLOAT && den == R::ONE { num } else { num / den };
             }
             let lift = self.x[1] - self.preload;
             let (lift, vel, impact) = Piston::stops(lift, self.x[2], stroke);

@@ -109,4 +109,4 @@ pub use full::EhvvaFull;
 pub use lpv::{EhvvaLpv, LpvAffine, N_THETA};
 pub use params::{EhvvaError, EhvvaInputs, EhvvaParams, EhvvaTableData, EhvvaValveParams, PaperTest, PAPER_TESTS};
 pub use reduced::EhvvaReduced;
-pub use tables::{t_delay_ms, EhvvaTables, ValveMotionData, VALVE_MOTION_P_BACK_MPA};
+pub use tables::{t_delay_ms, EhvvaTables, EhvvaTablesAt, ValveMotionData, VALVE_MOTION_P_BACK_MPA};

@@ -36,6 +36,14 @@ pub(crate) struct Piston<R: Real> {
     area_bottom_notch: R,
     area_bottom_min: R,
     snub_bottom_len: R,
+    /// `snub_top_len`, `snub_bottom_len` as divisors.
+    snub_top_len_div: R::Divisor,
+    snub_bottom_len_div: R::Divisor,
+    /// 1/A² of the top snubber with its notch uncovered ([switch off, on]) and of the bottom
+    /// orifice with its notch uncovered: the values outside the snubbing zones, computed once
+    /// by the same operations (no division per sub-step).
+    inv_a2_top_snubber_open: [R; 2],
+    inv_a2_bottom_open: R,
     inv_cap_high: R,
     inv_cap_low: R,
     pump: R,
@@ -52,7 +60,7 @@ impl<R: Real> Piston<R> {
         p.validate()?;
         let r = R::from_f64;
         let half_rho = 0.5 * p.density_kg_m3 * 1e-6;
-        Ok(Self {
+        let mut piston = Self {
             area_top: r(p.area_top_mm2),
             area_bottom: r(p.area_bottom_mm2),
             accel_per_newton: r(1.0 / (1000.0 * p.mass_kg)),
@@ -72,13 +80,23 @@ impl<R: Real> Piston<R> {
             area_bottom_notch: r(p.area_bottom_notch_mm2),
             area_bottom_min: r(p.area_bottom_min_mm2),
             snub_bottom_len: r(p.snub_bottom_len_mm),
+            snub_top_len_div: R::divisor(r(p.snub_top_len_mm * p.effect_snubber)),
+            snub_bottom_len_div: R::divisor(r(p.snub_bottom_len_mm)),
+            inv_a2_top_snubber_open: [R::ZERO; 2],
+            inv_a2_bottom_open: R::ZERO,
             inv_cap_high: r(1.0 / p.cap_high_mm3_per_mpa),
             inv_cap_low: r(1.0 / p.cap_low_mm3_per_mpa),
             pump: r(p.pump_flow_mm3_per_ms),
             relief_high: r(p.relief_high_mm3_per_ms_mpa),
             pump_over_relief_high: r(p.pump_flow_mm3_per_ms / p.relief_high_mm3_per_ms_mpa),
             relief_low: r(p.relief_low_mm3_per_ms_mpa),
-        })
+        };
+        piston.inv_a2_top_snubber_open = [
+            piston.inv_a2_top_snubber_at(R::ONE, false),
+            piston.inv_a2_top_snubber_at(R::ONE, true),
+        ];
+        piston.inv_a2_bottom_open = piston.inv_a2_bottom_at(R::ONE);
+        Ok(piston)
     }
 
     /// Full stroke S: S1 (high lift) or S2 (low lift).
@@ -104,16 +122,20 @@ impl<R: Real> Piston<R> {
         if !closing {
             return R::ZERO;
         }
+        if lift >= self.snub_top_len {
+            return self.inv_a2_top_snubber_open[usize::from(switch_on)];
+        }
+        // snub_top_len > lift >= 0 here, so the division is safe.
+        let uncovered = lift.div_by(self.snub_top_len_div).clamp(R::ZERO, R::ONE);
+        self.inv_a2_top_snubber_at(uncovered, switch_on)
+    }
+
+    /// 1/A² of the closing top snubber with the fraction `uncovered` of its notch open.
+    fn inv_a2_top_snubber_at(&self, uncovered: R, switch_on: bool) -> R {
         let fixed = if switch_on {
             self.area_top_orifice
         } else {
             self.area_top_orifice + self.area_top_switch
-        };
-        let uncovered = if lift >= self.snub_top_len {
-            R::ONE
-        } else {
-            // snub_top_len > lift >= 0 here, so the division is safe.
-            (lift / self.snub_top_len).clamp(R::ZERO, R::ONE)
         };
         let area = fixed + self.area_top_notch * uncovered;
         R::ONE / (area * area)
@@ -123,11 +145,14 @@ impl<R: Real> Piston<R> {
     /// bottom notch, which closes linearly over the last Ls2 before full lift.
     pub fn inv_a2_bottom(&self, lift: R, stroke: R) -> R {
         let to_go = stroke - lift;
-        let uncovered = if to_go >= self.snub_bottom_len {
-            R::ONE
-        } else {
-            (to_go / self.snub_bottom_len).clamp(R::ZERO, R::ONE)
-        };
+        if to_go >= self.snub_bottom_len {
+            return self.inv_a2_bottom_open;
+        }
+        self.inv_a2_bottom_at(to_go.div_by(self.snub_bottom_len_div).clamp(R::ZERO, R::ONE))
+    }
+
+    /// 1/Aorib² with the fraction `uncovered` of the bottom notch open.
+    fn inv_a2_bottom_at(&self, uncovered: R) -> R {
         let area = self.area_bottom_min + self.area_bottom_notch * uncovered;
         self.inv_a2_bottom_port + R::ONE / (area * area)
     }

@@ -21,7 +21,7 @@
 use super::event::EhvvaPlant;
 use super::params::{EhvvaError, EhvvaInputs, EhvvaParams};
 use super::piston::{Moving, Piston};
-use super::tables::EhvvaTables;
+use super::tables::{EhvvaTables, EhvvaTablesAt};
 use crate::delay::DelayLine;
 use crate::real::Real;
 
@@ -73,6 +73,8 @@ pub(crate) fn directional<R: Real>(via_open: R, via_close: R, open_is_longer: bo
 pub struct EhvvaReduced<R: Real, const N: usize = DEFAULT_DELAY_SAMPLES> {
     piston: Piston<R>,
     tables: EhvvaTables<R>,
+    /// `tables` at the last step's oil temperature.
+    at: EhvvaTablesAt<R>,
     dt: R,
     inv_dt: R,
     h: R,
@@ -94,6 +96,7 @@ impl<R: Real, const N: usize> EhvvaReduced<R, N> {
         let tables = EhvvaTables::new(params)?;
         Ok(Self {
             piston,
+            at: tables.at_temperature(inputs.temp_c),
             tables,
             dt: R::from_f64(dt_ms),
             inv_dt: R::from_f64(1.0 / dt_ms),
@@ -128,21 +131,69 @@ impl<R: Real, const N: usize> EhvvaReduced<R, N> {
     pub fn tables(&self) -> &EhvvaTables<R> {
         &self.tables
     }
+
+    /// One sub-step with the delayed Pmo `p_top` and the step's constants. Not inlined: in
+    /// the step the compiler hoisted every parameter out of the (two-pass) sub-step loop and
+    /// spilled them to the stack, on the target some 60 instructions a step.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(never)]
+    fn substep(
+        &mut self,
+        u_pilot: bool,
+        inputs: &EhvvaInputs<R>,
+        p_top: R,
+        lag: R,
+        inv_1_plus_lag: R,
+        inv_cd2: R,
+        stroke: R,
+    ) {
+        // Eq. (10): τp dPmo/dt = −Pmo + u(Ph − Pl) + Pl, implicit: (Pmo + lag·Pin)/(1 + lag);
+        // in fixed point `lag` is already lag/(1 + lag).
+        let p_in = if u_pilot { self.m.p_high } else { self.m.p_low };
+        self.p_mo = if R::IS_FLOAT {
+            (self.p_mo + lag * p_in) * inv_1_plus_lag
+        } else {
+            self.p_mo * inv_1_plus_lag + lag * p_in
+        };
+        // Eq. (12) first line, with eqs. (5)-(6) as damping.
+        let k = self
+            .piston
+            .quadratic_gain_inv_cd2(inv_cd2, self.m.lift, self.m.vel, stroke, inputs.snubber_on);
+        let force = self.piston.static_force(p_top, self.m.p_low, self.m.lift);
+        // Piston, end stops and eqs. (7)-(8).
+        self.piston.advance(
+            &mut self.m,
+            force,
+            k,
+            self.h,
+            stroke,
+            inputs.p_supply_mpa,
+            inputs.p_back_mpa,
+        );
+    }
 }
 
 impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaReduced<R, N> {
     fn step(&mut self, u_pilot: bool, inputs: &EhvvaInputs<R>) -> R {
         let stroke = self.piston.stroke(inputs.lift_high);
-        let cd = self.tables.cd(inputs.temp_c);
-        let tau = self.tables.tau_p_ms(self.m.p_high, inputs.temp_c);
-        let (td_open, td_close) = self.tables.t_delay_pair_ms(self.m.p_high, inputs.temp_c);
+        if inputs.temp_c != self.at.temp_c() {
+            self.at = self.tables.at_temperature(inputs.temp_c);
+        }
+        let tau = self.at.tau_p_ms(self.m.p_high);
+        let (td_open, td_close) = self.at.t_delay_pair_ms(self.m.p_high);
         let open_is_longer = td_open >= td_close;
         let d_open = td_open * self.inv_dt;
         let d_close = td_close * self.inv_dt;
-        let lag = self.h / tau;
-        // Per-step constants of the sub-step loop: its implicit Pmo update and 1/Cd².
-        let inv_1_plus_lag = R::ONE / (R::ONE + lag);
-        let inv_cd2 = R::ONE / (cd * cd);
+        // Per-step constants of the sub-step loop: its implicit Pmo update (lag = h/τ and
+        // 1/(1 + lag); in fixed point τ/(τ + h) and 1 − that, one long division, not two).
+        let (lag, inv_1_plus_lag) = if R::IS_FLOAT {
+            let lag = self.h / tau;
+            (lag, R::ONE / (R::ONE + lag))
+        } else {
+            let keep = tau / (tau + self.h);
+            (R::ONE - keep, keep)
+        };
+        let inv_cd2 = self.at.inv_cd2();
         let inv_n = self.inv_substeps;
         self.pmo_history.push(self.p_mo);
         let mut back = R::ZERO;
@@ -154,24 +205,7 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaReduced<R, N> {
                 open_is_longer,
             );
             back += inv_n;
-            // Eq. (10): τp dPmo/dt = −Pmo + u(Ph − Pl) + Pl.
-            let p_in = if u_pilot { self.m.p_high } else { self.m.p_low };
-            self.p_mo = (self.p_mo + lag * p_in) * inv_1_plus_lag;
-            // Eq. (12) first line, with eqs. (5)-(6) as damping.
-            let k = self
-                .piston
-                .quadratic_gain_inv_cd2(inv_cd2, self.m.lift, self.m.vel, stroke, inputs.snubber_on);
-            let force = self.piston.static_force(p_top, self.m.p_low, self.m.lift);
-            // Piston, end stops and eqs. (7)-(8).
-            self.piston.advance(
-                &mut self.m,
-                force,
-                k,
-                self.h,
-                stroke,
-                inputs.p_supply_mpa,
-                inputs.p_back_mpa,
-            );
+            self.substep(u_pilot, inputs, p_top, lag, inv_1_plus_lag, inv_cd2, stroke);
         }
         self.m.lift
     }

@@ -87,9 +87,11 @@ impl<R: Real> EhvvaTables<R> {
     /// paper's timing thresholds, Sec. 2), at supply pressure, oil temperature and lift state.
     pub fn t_motion_pair_ms(&self, p_supply_mpa: R, temp_c: R, lift_high: bool) -> (R, R) {
         let k = usize::from(!lift_high);
+        // Both motion tables are on the calibration's one grid: one look-up.
+        let at = self.motion_open[k].locate(p_supply_mpa, temp_c);
         (
-            self.motion_open[k].eval(p_supply_mpa, temp_c).max(R::ZERO),
-            self.motion_close[k].eval(p_supply_mpa, temp_c).max(R::ZERO),
+            self.motion_open[k].eval_at(at).max(R::ZERO),
+            self.motion_close[k].eval_at(at).max(R::ZERO),
         )
     }
 
@@ -125,8 +127,10 @@ impl<R: Real> EhvvaTables<R> {
     /// `(VO, VC)` delays at once (both are needed every step by the models).
     pub fn t_delay_pair_ms(&self, p_supply_mpa: R, temp_c: R) -> (R, R) {
         let p_eff = self.p_nominal + self.gain_pressure_delay * (p_supply_mpa - self.p_nominal);
-        let vo = self.td_open.eval(p_eff, temp_c);
-        let vc = self.td_close.eval(p_eff, temp_c);
+        // Both delay tables are on the same grid: one look-up.
+        let at = self.td_open.locate(p_eff, temp_c);
+        let vo = self.td_open.eval_at(at);
+        let vc = self.td_close.eval_at(at);
         let half = R::from_f64(0.5);
         let mean = half * (vo + vc);
         let half_split = self.gain_direction_delay * half * (vo - vc);
@@ -136,6 +140,76 @@ impl<R: Real> EhvvaTables<R> {
     /// Main-valve outlet pressure time constant τp(Ph, T) in ms (eq. (10), Fig. 5 top).
     pub fn tau_p_ms(&self, p_supply_mpa: R, temp_c: R) -> R {
         self.tau.eval(p_supply_mpa, temp_c).max(R::from_f64(TAU_MIN_MS))
+    }
+
+    /// The tables at the oil temperature `temp_c`, for models that look them up every step
+    /// at a temperature that rarely changes: the same values, bit for bit, at a fraction of
+    /// the cost (no look-up along the temperature axis, one along Ph for both delays).
+    pub fn at_temperature(&self, temp_c: R) -> EhvvaTablesAt<R> {
+        EhvvaTablesAt {
+            temp_c,
+            td_open: self.td_open.slice_y(temp_c),
+            td_close: self.td_close.slice_y(temp_c),
+            tau: self.tau.slice_y(temp_c),
+            cd: self.cd(temp_c),
+            inv_cd2: {
+                let cd = self.cd(temp_c);
+                R::ONE / (cd * cd)
+            },
+            p_nominal: self.p_nominal,
+            gain_pressure_delay: self.gain_pressure_delay,
+            gain_direction_delay: self.gain_direction_delay,
+        }
+    }
+}
+
+/// [`EhvvaTables`] at one oil temperature ([`EhvvaTables::at_temperature`]): Cd, and τp and
+/// td as functions of the supply pressure alone, with the same results as the full tables.
+#[derive(Clone, Copy, Debug)]
+pub struct EhvvaTablesAt<R: Real> {
+    temp_c: R,
+    td_open: Lut1<R, 4>,
+    td_close: Lut1<R, 4>,
+    tau: Lut1<R, 2>,
+    cd: R,
+    inv_cd2: R,
+    p_nominal: R,
+    gain_pressure_delay: R,
+    gain_direction_delay: R,
+}
+
+impl<R: Real> EhvvaTablesAt<R> {
+    /// The oil temperature these tables are at, °C.
+    pub fn temp_c(&self) -> R {
+        self.temp_c
+    }
+
+    /// [`EhvvaTables::cd`] at this temperature.
+    pub fn cd(&self) -> R {
+        self.cd
+    }
+
+    /// 1/Cd² at this temperature (the orifice damping's factor).
+    pub fn inv_cd2(&self) -> R {
+        self.inv_cd2
+    }
+
+    /// [`EhvvaTables::t_delay_pair_ms`] at this temperature.
+    pub fn t_delay_pair_ms(&self, p_supply_mpa: R) -> (R, R) {
+        let p_eff = self.p_nominal + self.gain_pressure_delay * (p_supply_mpa - self.p_nominal);
+        // Both delay tables are on the same Ph breakpoints.
+        let at = self.td_open.locate(p_eff);
+        let vo = self.td_open.eval_at(at);
+        let vc = self.td_close.eval_at(at);
+        let half = R::from_f64(0.5);
+        let mean = half * (vo + vc);
+        let half_split = self.gain_direction_delay * half * (vo - vc);
+        ((mean + half_split).max(R::ZERO), (mean - half_split).max(R::ZERO))
+    }
+
+    /// [`EhvvaTables::tau_p_ms`] at this temperature.
+    pub fn tau_p_ms(&self, p_supply_mpa: R) -> R {
+        self.tau.eval(p_supply_mpa).max(R::from_f64(TAU_MIN_MS))
     }
 }
 
