@@ -289,15 +289,22 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaLpv<R, N> {
             // real seating velocity (issue #14).
             let lift_before = self.x[1] - self.preload;
             // Semi-implicit Gauss-Seidel sweep: velocity, position, pressure.
+            // Fixed point skips the products with a zero entry (6 of the 12 off the diagonal,
+            // and the position row's diagonal): `x + 0·y` is `x` there.
+            let times = |c: R, x: R| if !R::IS_FLOAT && c == R::ZERO { R::ZERO } else { c * x };
             for row in [2usize, 1, 0] {
-                let mut rate = b[row][0] * u[0] + b[row][1] * u[1];
+                let mut rate = times(b[row][0], u[0]) + times(b[row][1], u[1]);
                 for (col, (&a_rc, &x_c)) in a[row].iter().zip(self.x.iter()).enumerate() {
                     if col != row {
-                        rate += a_rc * x_c;
+                        rate += times(a_rc, x_c);
                     }
                 }
                 let num = self.x[row] + self.h * rate;
-                let den = R::ONE - self.h * a[row][row];
+                let den = if !R::IS_FLOAT && a[row][row] == R::ZERO {
+                    R::ONE
+                } else {
+                    R::ONE - self.h * a[row][row]
+                };
                 // The position row's denominator is 1 (A has no diagonal there): fixed point
                 // skips that long division, exactly.
                 self.x[row] = if !R::IS_FLOAT && den == R::ONE { num } else { num / den };
