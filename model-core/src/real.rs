@@ -993,21 +993,17 @@ fn q16_tan(x: i32) -> i32 {
     // z = a/4 in Q2.30: a · 2^14 / 4.
     let z = (a << 12) as i32;
     let z2 = mul30(z, z);
-    // The series' coefficients in Q2.30, from z¹⁴'s to 1 (the exact fractions, rounded).
-    const C: [i32; 8] = [
-        1_563_190,
-        3_857_018,
-        9_516_827,
-        23_482_185,
-        57_947_971,
-        143_165_577,
-        357_913_941,
-        1_073_741_824,
-    ];
-    let mut s = C[0];
-    for &c in &C[1..] {
-        s = c + mul30(z2, s);
-    }
+    // The series' coefficients in Q2.30, from z¹⁴'s to 1 (the exact fractions, rounded), in
+    // Horner's scheme written out (as a loop it is not unrolled in the size-optimised
+    // firmware: ~5 instructions an iteration).
+    let mut s = 1_563_190;
+    s = 3_857_018 + mul30(z2, s);
+    s = 9_516_827 + mul30(z2, s);
+    s = 23_482_185 + mul30(z2, s);
+    s = 57_947_971 + mul30(z2, s);
+    s = 143_165_577 + mul30(z2, s);
+    s = 357_913_941 + mul30(z2, s);
+    s = 1_073_741_824 + mul30(z2, s);
     let t = mul30(z, s);
     let t2 = mul30(t, t);
     // num <= 1.33 and den in [0.09, 1], both Q2.30.
