@@ -673,6 +673,17 @@ impl Real for Q16 {
     }
 }
 
+/// Horner's scheme on integer coefficients `$c` (highest degree first) with the product
+/// `$mul`: `s = c[0]`, then `s = c[k] + mul(x, s)` for the listed k, written out (a loop is
+/// not unrolled in the size-optimised firmware: ~5 instructions an iteration).
+macro_rules! horner_int {
+    ($mul:expr, $x:expr, $c:expr; $($k:literal),+) => {{
+        let mut s = $c[0];
+        $(s = $c[$k] + $mul($x, s);)+
+        s
+    }};
+}
+
 /// `a·b` of two Q2.30 numbers, rounded.
 #[inline(always)]
 fn mul30(a: i32, b: i32) -> i32 {
@@ -749,10 +760,7 @@ fn q16_exp(x: i32) -> i32 {
         1_073_741_824,
         1_073_741_824,
     ];
-    let mut y = C[0];
-    for &c in &C[1..] {
-        y = c + mul30(r, y);
-    }
+    let y = horner_int!(mul30, r, C; 1, 2, 3, 4, 5, 6, 7);
     // y in Q2.30 → Q16.16 · 2^k
     shift_round(i64::from(y), k - 14)
 }
@@ -779,10 +787,7 @@ fn q16_ln(x: i32) -> i32 {
         -536_870_912,
         1_073_741_824,
     ];
-    let mut s = C[0];
-    for &ck in &C[1..] {
-        s = ck + mul30(t, s);
-    }
+    let s = horner_int!(mul30, t, C; 1, 2, 3, 4, 5);
     let ln_m = i64::from(mul30(t, s)) + i64::from(LN_1_PLUS_I16_Q30[i]);
     // ln x = ln m + (top − 16)·ln2, back to Q16.16 (rounded).
     const LN2_Q30: i64 = 744_261_118;
@@ -869,10 +874,7 @@ fn q16_atan(x: i32) -> i32 {
     };
     const C: [i32; 5] = [22_371_518, -91_410_863, 193_424_926, -354_656_388, 1_073_597_943];
     let a2 = mul30(a30, a30);
-    let mut s = C[0];
-    for &c in &C[1..] {
-        s = c + mul30(a2, s);
-    }
+    let s = horner_int!(mul30, a2, C; 1, 2, 3, 4);
     let mut y = mul30(a30, s);
     if inverted {
         const HALF_PI_Q30: i32 = 1_686_629_713;
