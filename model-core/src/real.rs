@@ -101,6 +101,12 @@ pub trait Real:
     fn sin(self) -> Self;
     /// Natural logarithm; the most negative finite value for arguments <= 0 (never NaN).
     fn ln(self) -> Self;
+    /// Tangent of an angle in radians for |θ| <= 1.5 (callers keep it there: beyond, the
+    /// result is finite but not promised to be accurate). By default the odd series at θ/4 and
+    /// two double-angle steps in `Self`; Q16.16 computes the same in Q2.30 integers.
+    fn tan(self) -> Self {
+        tan_series(self)
+    }
 
     fn abs(self) -> Self {
         if self < Self::ZERO {
@@ -662,6 +668,20 @@ impl Real for Q16 {
     fn ln(self) -> Self {
         Q16(q16_ln(self.0))
     }
+    fn tan(self) -> Self {
+        Q16(q16_tan(self.0))
+    }
+}
+
+/// Horner's scheme on integer coefficients `$c` (highest degree first) with the product
+/// `$mul`: `s = c[0]`, then `s = c[k] + mul(x, s)` for the listed k, written out (a loop is
+/// not unrolled in the size-optimised firmware: ~5 instructions an iteration).
+macro_rules! horner_int {
+    ($mul:expr, $x:expr, $c:expr; $($k:literal),+) => {{
+        let mut s = $c[0];
+        $(s = $c[$k] + $mul($x, s);)+
+        s
+    }};
 }
 
 /// `a·b` of two Q2.30 numbers, rounded.
@@ -740,10 +760,7 @@ fn q16_exp(x: i32) -> i32 {
         1_073_741_824,
         1_073_741_824,
     ];
-    let mut y = C[0];
-    for &c in &C[1..] {
-        y = c + mul30(r, y);
-    }
+    let y = horner_int!(mul30, r, C; 1, 2, 3, 4, 5, 6, 7);
     // y in Q2.30 → Q16.16 · 2^k
     shift_round(i64::from(y), k - 14)
 }
@@ -770,10 +787,7 @@ fn q16_ln(x: i32) -> i32 {
         -536_870_912,
         1_073_741_824,
     ];
-    let mut s = C[0];
-    for &ck in &C[1..] {
-        s = ck + mul30(t, s);
-    }
+    let s = horner_int!(mul30, t, C; 1, 2, 3, 4, 5);
     let ln_m = i64::from(mul30(t, s)) + i64::from(LN_1_PLUS_I16_Q30[i]);
     // ln x = ln m + (top − 16)·ln2, back to Q16.16 (rounded).
     const LN2_Q30: i64 = 744_261_118;
@@ -860,10 +874,7 @@ fn q16_atan(x: i32) -> i32 {
     };
     const C: [i32; 5] = [22_371_518, -91_410_863, 193_424_926, -354_656_388, 1_073_597_943];
     let a2 = mul30(a30, a30);
-    let mut s = C[0];
-    for &c in &C[1..] {
-        s = c + mul30(a2, s);
-    }
+    let s = horner_int!(mul30, a2, C; 1, 2, 3, 4);
     let mut y = mul30(a30, s);
     if inverted {
         const HALF_PI_Q30: i32 = 1_686_629_713;
@@ -941,6 +952,71 @@ fn q32_exp(x: Q32) -> Q32 {
         Q32(y.0.saturating_mul_int(1i64 << k))
     } else {
         Q32(y.0 >> (-k) as u32)
+    }
+}
+
+/// tan θ for |θ| <= 1.5 without relying on the target's sin/cos: the odd Taylor series to
+/// z¹⁵ at z = θ/4 and two double-angle steps (f64: < 1e-10 relative over the range).
+///
+/// θ/4 as θ·0.25 (the same bits in floating point; no division in fixed point) and the
+/// coefficients through `horner!` (converted at compile time, not in a run-time loop).
+pub(crate) fn tan_series<R: Real>(theta: R) -> R {
+    let z = theta * R::from_f64(0.25);
+    let z2 = z * z;
+    // tan z = z(1 + z²/3 + 2z⁴/15 + 17z⁶/315 + 62z⁸/2835 + 1382z¹⁰/155925 + 21844z¹²/6081075
+    //          + 929569z¹⁴/638512875)
+    let s = horner!(R, z2; 1.0, 1.0 / 3.0, 2.0 / 15.0, 17.0 / 315.0, 62.0 / 2835.0, 1382.0 / 155925.0,
+        21844.0 / 6081075.0, 929569.0 / 638512875.0);
+    let t = z * s;
+    if R::IS_FLOAT {
+        let mut t = t;
+        for _ in 0..2 {
+            t = (t + t) / (R::ONE - t * t);
+        }
+        t
+    } else {
+        // Both double-angle steps at once, one division: tan 4z = 4t(1 − t²)/(1 − 6t² + t⁴).
+        let t2 = t * t;
+        let four_t = t * R::from_f64(4.0);
+        (four_t * (R::ONE - t2)) / (R::ONE - R::from_f64(6.0) * t2 + t2 * t2)
+    }
+}
+
+/// tan of a raw Q16.16 for |x| <= 1.5 rad (larger |x| is taken as 1.5 rad): [`tan_series`]'s
+/// steps in Q2.30 (products of a few instructions, without Q16.16's saturation checks, and 14
+/// more bits), the odd function on |x|. z = |x|/4 <= 0.375, t = tan z <= 0.394 by the series to
+/// z¹⁵, then tan 4z = 4t(1 − t²)/(1 − 6t² + t⁴), whose denominator is cos 4z / cos⁴ z, at
+/// least 0.09 here, in one 48-by-32-bit division rounded to nearest (error well under the
+/// result's LSB; the series in Q16.16 had up to 8.2e-4 relative, see vacuum.rs's
+/// `series_helpers_match_libm`).
+fn q16_tan(x: i32) -> i32 {
+    const LIM: u32 = 98_304; // 1.5 · 2^16
+    let a = x.unsigned_abs().min(LIM);
+    // z = a/4 in Q2.30: a · 2^14 / 4.
+    let z = (a << 12) as i32;
+    let z2 = mul30(z, z);
+    // The series' coefficients in Q2.30, from z¹⁴'s to 1 (the exact fractions, rounded), in
+    // Horner's scheme written out (as a loop it is not unrolled in the size-optimised
+    // firmware: ~5 instructions an iteration).
+    let mut s = 1_563_190;
+    s = 3_857_018 + mul30(z2, s);
+    s = 9_516_827 + mul30(z2, s);
+    s = 23_482_185 + mul30(z2, s);
+    s = 57_947_971 + mul30(z2, s);
+    s = 143_165_577 + mul30(z2, s);
+    s = 357_913_941 + mul30(z2, s);
+    s = 1_073_741_824 + mul30(z2, s);
+    let t = mul30(z, s);
+    let t2 = mul30(t, t);
+    // num <= 1.33 and den in [0.09, 1], both Q2.30.
+    let num = mul30(t, (1 << 30) - t2) << 2;
+    let den = (1 << 30) - 6 * t2 + mul30(t2, t2);
+    // num / den in Q16.16: (num · 2^16 + den/2) / den, num · 2^16 < 2^47.
+    let q = div_48_by_32((u64::from(num as u32) << 16) + u64::from(den as u32 / 2), den as u32) as i32;
+    if x < 0 {
+        -q
+    } else {
+        q
     }
 }
 

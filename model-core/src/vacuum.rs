@@ -558,33 +558,6 @@ fn one_minus_exp_neg<R: Real>(x: R) -> R {
     }
 }
 
-/// tan θ for |θ| <= 1.5 without relying on the target's sin/cos: the odd Taylor series to
-/// z¹⁵ at z = θ/4 and two double-angle steps (f64: < 1e-10 relative over the range).
-///
-/// θ/4 as θ·0.25 (the same bits in floating point; no division in fixed point) and the
-/// coefficients through `horner!` (converted at compile time, not in a run-time loop).
-fn tan_series<R: Real>(theta: R) -> R {
-    let z = theta * R::from_f64(0.25);
-    let z2 = z * z;
-    // tan z = z(1 + z²/3 + 2z⁴/15 + 17z⁶/315 + 62z⁸/2835 + 1382z¹⁰/155925 + 21844z¹²/6081075
-    //          + 929569z¹⁴/638512875)
-    let s = horner!(R, z2; 1.0, 1.0 / 3.0, 2.0 / 15.0, 17.0 / 315.0, 62.0 / 2835.0, 1382.0 / 155925.0,
-        21844.0 / 6081075.0, 929569.0 / 638512875.0);
-    let t = z * s;
-    if R::IS_FLOAT {
-        let mut t = t;
-        for _ in 0..2 {
-            t = (t + t) / (R::ONE - t * t);
-        }
-        t
-    } else {
-        // Both double-angle steps at once, one division: tan 4z = 4t(1 − t²)/(1 − 6t² + t⁴).
-        let t2 = t * t;
-        let four_t = t * R::from_f64(4.0);
-        (four_t * (R::ONE - t2)) / (R::ONE - R::from_f64(6.0) * t2 + t2 * t2)
-    }
-}
-
 /// The static relations of one valve + actuator, converted once to `R`.
 #[derive(Clone, Copy, Debug)]
 struct Maps<R: Real> {
@@ -693,7 +666,7 @@ impl<R: Real> Maps<R> {
             PositionMapR::Arctan { a1, a3, a4, a2_div, .. } => {
                 let lim = R::from_f64(THETA_MAX_RAD);
                 let theta = (x - a1).div_by(a2_div).clamp(-lim, lim);
-                a3 - a4 * tan_series(theta)
+                a3 - a4 * theta.tan()
             }
         }
     }
@@ -1313,14 +1286,19 @@ mod tests {
         // Error of tan relative to max(1, |tan|): the double-angle steps amplify rounding
         // near 1.5 rad (tan = 14), where the arctan spring is steepest.
         let mut tan_err = [0.0f64; 4];
-        for i in -30..=30 {
-            let th = 1.5 * i as f64 / 30.0;
-            let want = libm::tan(th);
-            let rel = |got: f64| (got - want).abs() / want.abs().max(1.0);
-            tan_err[0] = tan_err[0].max(rel(tan_series(th)));
-            tan_err[1] = tan_err[1].max(rel(tan_series(th as f32) as f64));
-            tan_err[2] = tan_err[2].max(rel(tan_series(Q32::from_f64(th)).to_f64()));
-            tan_err[3] = tan_err[3].max(rel(tan_series(Q16::from_f64(th)).to_f64()));
+        for i in -300..=300 {
+            let th = 1.5 * i as f64 / 300.0;
+            // Against tan of the angle as the type holds it (Q16.16's 2^-16 rad alone moves
+            // tan(1.5) by 1e-4 relative).
+            let rel = |th_held: f64, got: f64| {
+                let want = libm::tan(th_held);
+                (got - want).abs() / want.abs().max(1.0)
+            };
+            let (t32, q32, q16) = (th as f32, Q32::from_f64(th), Q16::from_f64(th));
+            tan_err[0] = tan_err[0].max(rel(th, Real::tan(th)));
+            tan_err[1] = tan_err[1].max(rel(t32 as f64, Real::tan(t32) as f64));
+            tan_err[2] = tan_err[2].max(rel(q32.to_f64(), q32.tan().to_f64()));
+            tan_err[3] = tan_err[3].max(rel(q16.to_f64(), q16.tan().to_f64()));
         }
         let mut exp_err = [0.0f64; 4];
         for x in [0.0, 1e-4, 0.025, 0.3, 0.49, 0.5, 2.0, 10.0] {
@@ -1332,10 +1310,11 @@ mod tests {
         }
         extern crate std;
         std::println!("tan error f64/f32/Q32/Q16 {tan_err:?}, 1 - exp(-x) error {exp_err:?}");
-        // Measured: tan 1.8e-9 / 1.1e-6 / 1.7e-8 / 3.4e-4 (Q16.16: one division for both
-        // double-angle steps; 2.5e-4 with two), 1 − e^(−x) 1e-20 / 1.9e-8 / 3.2e-10 / 9.1e-6.
+        // Measured: tan 1.8e-9 / 1.1e-6 / 2.6e-8 / 7.6e-6 (Q16.16's own Q2.30 tan, half an
+        // LSB; the generic series in Q16.16 had 8.2e-4), 1 − e^(−x) 1e-20 / 1.9e-8 / 3.2e-10 /
+        // 9.1e-6.
         assert!(
-            tan_err[0] < 5e-9 && tan_err[1] < 3e-6 && tan_err[2] < 5e-8 && tan_err[3] < 5e-4,
+            tan_err[0] < 5e-9 && tan_err[1] < 3e-6 && tan_err[2] < 5e-8 && tan_err[3] < 2e-5,
             "{tan_err:?}"
         );
         assert!(

@@ -108,6 +108,35 @@ impl<R: Real> LpvAffine<R> {
     }
 }
 
+/// The entries of the Ai that [`LpvAffine::from_params`] can make nonzero, as (θ index, row,
+/// column), in the order [`LpvAffine::a_matrix`] adds them: A1 = −e11 and A2 = e33 of eq. (15).
+const A_TERMS: [(usize, usize, usize); 2] = [(0, 0, 0), (1, 2, 2)];
+/// The same for the Bi: B3 and B4 in the first row, B5 in the third.
+const B_TERMS: [(usize, usize, usize); 4] = [(2, 0, 0), (3, 0, 1), (4, 2, 0), (4, 2, 1)];
+
+/// A(θ) of an affine form from [`LpvAffine::from_params`], in fixed point: A0 plus the entries
+/// of [`A_TERMS`] times their θ, in θ order. The same sums as [`LpvAffine::a_matrix`] there (it
+/// skips the other entries, all zero), so the same bits, without testing all 45 entries every
+/// sub-step.
+#[inline(always)]
+fn fixed_a_matrix<R: Real>(affine: &LpvAffine<R>, theta: &[R; N_THETA]) -> [[R; 3]; 3] {
+    let mut a = affine.a0;
+    for (t, r, c) in A_TERMS {
+        a[r][c] += affine.a[t][r][c] * theta[t];
+    }
+    a
+}
+
+/// B(θ) likewise from [`B_TERMS`] (the sums of [`LpvAffine::b_matrix`] in fixed point).
+#[inline(always)]
+fn fixed_b_matrix<R: Real>(affine: &LpvAffine<R>, theta: &[R; N_THETA]) -> [[R; 2]; 3] {
+    let mut b = [[R::ZERO; 2]; 3];
+    for (t, r, c) in B_TERMS {
+        b[r][c] += affine.b[t][r][c] * theta[t];
+    }
+    b
+}
+
 /// The LPV time-delay model of eq. (15) as a simulation. `N` is the delay-line length.
 #[derive(Clone, Debug)]
 pub struct EhvvaLpv<R: Real, const N: usize = DEFAULT_DELAY_SAMPLES> {
@@ -241,8 +270,17 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaLpv<R, N> {
                 stroke,
                 inputs.snubber_on,
             );
-            let a = self.affine.a_matrix(&self.theta);
-            let b = self.affine.b_matrix(&self.theta);
+            // Fixed point sums only the nonzero entries (the same sums: x + 0·θ is x there).
+            let a = if R::IS_FLOAT {
+                self.affine.a_matrix(&self.theta)
+            } else {
+                fixed_a_matrix(&self.affine, &self.theta)
+            };
+            let b = if R::IS_FLOAT {
+                self.affine.b_matrix(&self.theta)
+            } else {
+                fixed_b_matrix(&self.affine, &self.theta)
+            };
             let u = [u_delayed, R::ONE - u_delayed];
             // The lift before this sub-step, read from the state as stored (after the last
             // clamp, exactly 0 on the seat): reconstructing it from the new state as
@@ -251,15 +289,22 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaLpv<R, N> {
             // real seating velocity (issue #14).
             let lift_before = self.x[1] - self.preload;
             // Semi-implicit Gauss-Seidel sweep: velocity, position, pressure.
+            // Fixed point skips the products with a zero entry (6 of the 12 off the diagonal,
+            // and the position row's diagonal): `x + 0·y` is `x` there.
+            let times = |c: R, x: R| if !R::IS_FLOAT && c == R::ZERO { R::ZERO } else { c * x };
             for row in [2usize, 1, 0] {
-                let mut rate = b[row][0] * u[0] + b[row][1] * u[1];
+                let mut rate = times(b[row][0], u[0]) + times(b[row][1], u[1]);
                 for (col, (&a_rc, &x_c)) in a[row].iter().zip(self.x.iter()).enumerate() {
                     if col != row {
-                        rate += a_rc * x_c;
+                        rate += times(a_rc, x_c);
                     }
                 }
                 let num = self.x[row] + self.h * rate;
-                let den = R::ONE - self.h * a[row][row];
+                let den = if !R::IS_FLOAT && a[row][row] == R::ZERO {
+                    R::ONE
+                } else {
+                    R::ONE - self.h * a[row][row]
+                };
                 // The position row's denominator is 1 (A has no diagonal there): fixed point
                 // skips that long division, exactly.
                 self.x[row] = if !R::IS_FLOAT && den == R::ONE { num } else { num / den };
@@ -316,6 +361,29 @@ mod tests {
             }
         }
         assert_eq!(lpv.c, [0.0, 1.0, 0.0]);
+    }
+
+    #[test]
+    fn fixed_matrices_give_the_dense_sums() {
+        use crate::Q16;
+        let p = EhvvaParams::paper_default();
+        let lpv = LpvAffine::<Q16>::from_params(&p).unwrap();
+        // Every nonzero entry of the Ai and Bi is listed.
+        for t in 0..N_THETA {
+            for r in 0..3 {
+                for c in 0..3 {
+                    assert!(lpv.a[t][r][c] == Q16::ZERO || A_TERMS.contains(&(t, r, c)));
+                }
+                for c in 0..2 {
+                    assert!(lpv.b[t][r][c] == Q16::ZERO || B_TERMS.contains(&(t, r, c)));
+                }
+            }
+        }
+        for theta in [[8.0, -3.0, 60.0, 9.0, 1.5], [0.1, -700.0, 30_000.0, -2.0, 0.0]] {
+            let theta = theta.map(Q16::from_f64);
+            assert_eq!(fixed_a_matrix(&lpv, &theta), lpv.a_matrix(&theta));
+            assert_eq!(fixed_b_matrix(&lpv, &theta), lpv.b_matrix(&theta));
+        }
     }
 
     #[test]
