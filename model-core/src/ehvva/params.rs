@@ -249,7 +249,8 @@ pub struct EhvvaParams {
     /// VO and VC, for both edges), 1 = Fig. 4. Range 0..=2.
     pub effect_direction_delay: f64,
     /// Effect `snubber`: the top snubbing zone is g·Ls1 long; 0 = off (no snubbing zone: the
-    /// top orifice stays fully open down to the seat), 1 = paper. Range 0..=2.
+    /// top orifice stays fully open down to the seat), 1 = paper. Range 0..=6 (a zone up to
+    /// 2.9 mm, inside the low lift's stroke).
     pub effect_snubber: f64,
     /// Supply pressure at which td is read when `effect_pressure_delay` is 0.
     pub delay_nominal_p_supply_mpa: f64,
@@ -353,7 +354,10 @@ impl EhvvaParams {
             (self.effect_snubber, "effect_snubber"),
         ];
         for (v, name) in gains {
-            if !(v.is_finite() && (0.0..=2.0).contains(&v)) {
+            // The snubbing zone may be up to 6·Ls1 (2.9 mm, inside the low lift's 4 mm stroke):
+            // a unit's undercut may be several times the paper's.
+            let max = if name == "effect_snubber" { 6.0 } else { 2.0 };
+            if !(v.is_finite() && (0.0..=max).contains(&v)) {
                 return Err(EhvvaError::InvalidParameter(name));
             }
         }

@@ -571,6 +571,24 @@ mod tests {
         assert!(fit.rmse < 0.008, "validation rmse {} mm", fit.rmse);
     }
 
+    /// Every fitted knob's bounds are a model that model-core accepts: a bound beyond what the
+    /// model validates cuts the range where the solver's trial steps fail, and a Jacobian column
+    /// stepped across it reads zero (the snubber gain's bound 6 had been cut at 2 that way).
+    #[test]
+    fn every_knob_bound_is_a_valid_model() {
+        let knobs = BASELINE_KNOBS
+            .iter()
+            .chain(&UNIT_KNOBS)
+            .copied()
+            .chain(EFFECTS.iter().map(|e| effect_knob(e).unwrap()));
+        for k in knobs {
+            for v in [k.lo, k.hi] {
+                let p = apply_knobs(&EhvvaParams::baseline(), &[k], &[v]);
+                assert!(p.validate().is_ok(), "{} = {v}: {:?}", k.name, p.validate());
+            }
+        }
+    }
+
     /// The baseline and an extension recover the generator's parameters from the estimation
     /// log alone.
     #[test]
