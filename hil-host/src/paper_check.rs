@@ -137,21 +137,13 @@ pub fn run(json: Option<&Path>) -> Result<bool, String> {
 /// Model step of the EHVVA experiments (as tests/ehvva_paper.rs).
 const EHVVA_DT_MS: f64 = 0.02;
 
-fn stroke_mm(p: &EhvvaParams, lift_high: bool) -> f64 {
-    if lift_high {
-        p.lift_high_mm
-    } else {
-        p.lift_low_mm
-    }
-}
-
 fn ehvva_event<P: EhvvaPlant<f64>>(plant: &mut P, p: &EhvvaParams, t: &PaperTest) -> EventMetrics {
     let inputs = EhvvaInputs::<f64>::from_test(t);
     run_event(
         plant,
         &ValveEvent::with_dwell(t.dwell_ms),
         &inputs,
-        stroke_mm(p, t.lift_high),
+        p.stroke_mm(t.lift_high),
         |_, _| {},
     )
 }
@@ -182,7 +174,7 @@ fn lift_trace<P: EhvvaPlant<f64>>(plant: &mut P, p: &EhvvaParams, t: &PaperTest)
         plant,
         &ValveEvent::with_dwell(t.dwell_ms),
         &inputs,
-        stroke_mm(p, t.lift_high),
+        p.stroke_mm(t.lift_high),
         |t, y| {
             ts.push(t);
             ys.push(y);
@@ -222,7 +214,7 @@ pub fn ehvva_rows(p: &EhvvaParams, with_table2: bool) -> Result<Vec<Row>, String
             &b,
             ev.t_open_ms,
             ev.t_open_ms + ev.dwell_ms + 12.0,
-            stroke_mm(&p, t.lift_high),
+            p.stroke_mm(t.lift_high),
         );
         out.push(row(
             &format!("ehvva.table2.mre_pct.test{n}"),

@@ -1073,11 +1073,7 @@ pub fn run_with_unit(
         });
         coil.step(pilot_duty * u_batt, f64::from(STEP_US));
         let inp = ehvva_inputs(t, act.lift_valve_on, act.snubber_on);
-        let stroke = if act.lift_valve_on {
-            ehvva_params.lift_high_mm
-        } else {
-            ehvva_params.lift_low_mm
-        };
+        let stroke = ehvva_params.stroke_mm(act.lift_valve_on);
         let deg_per_substep = rpm * 6.0 * EHVVA_DT_MS * 1e-3;
         for j in 0..EHVVA_SUBSTEPS {
             let lift = f64::from(valve.step(u_pilot, &inp));

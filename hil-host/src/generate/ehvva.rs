@@ -154,11 +154,7 @@ const STOP_MARGIN_N: f64 = 25.0;
 fn reaching_the_stop(mut t: Test) -> Test {
     let p = EhvvaParams::baseline();
     let margin = |t: &Test| {
-        let s = if t.inputs.lift_high {
-            p.lift_high_mm
-        } else {
-            p.lift_low_mm
-        };
+        let s = p.stroke_mm(t.inputs.lift_high);
         p.area_top_mm2 * t.inputs.p_supply_mpa
             - p.area_bottom_mm2 * t.inputs.p_back_mpa
             - p.spring_n_per_mm * (p.spring_preload_mm + s)

@@ -293,6 +293,15 @@ impl EhvvaParams {
         }
     }
 
+    /// The full stroke S: S1 (`lift_high`) or S2, mm.
+    pub const fn stroke_mm(&self, lift_high: bool) -> f64 {
+        if lift_high {
+            self.lift_high_mm
+        } else {
+            self.lift_low_mm
+        }
+    }
+
     /// The same calibration with all four catalogue effects off (the diagnosis baseline).
     pub const fn baseline() -> Self {
         let mut p = Self::paper_default();

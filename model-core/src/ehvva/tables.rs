@@ -256,11 +256,7 @@ impl ValveMotionData {
         let mut out = Self::zero_like(params);
         out.p_back_mpa = p_back_mpa;
         for (k, lift_high) in [true, false].into_iter().enumerate() {
-            let stroke_mm = if lift_high {
-                params.lift_high_mm
-            } else {
-                params.lift_low_mm
-            };
+            let stroke_mm = params.stroke_mm(lift_high);
             for (i, &p) in out.p_supply_mpa.clone().iter().enumerate() {
                 for (j, &temp) in out.temp_c.clone().iter().enumerate() {
                     let inputs = EhvvaInputs::<f64> {

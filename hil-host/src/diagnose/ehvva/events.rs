@@ -38,11 +38,7 @@ pub struct Event {
 
 impl Event {
     pub fn stroke_mm(&self, p: &EhvvaParams) -> f64 {
-        if self.inputs.lift_high {
-            p.lift_high_mm
-        } else {
-            p.lift_low_mm
-        }
+        p.stroke_mm(self.inputs.lift_high)
     }
 }
 
