@@ -674,6 +674,9 @@ pub struct Summary {
     pub vacuum_rms_error_pct_each: [f64; 3],
     pub vacuum_position_error_pct_rms: f64,
     pub ehvva_events: usize,
+    /// Pilot cycles whose valve was below 99 % of its stroke at the closing command (no
+    /// closing time; [`LIFT_FRACTION`]).
+    pub ehvva_stop_not_held_events: usize,
     /// RMS of every opening and closing timing error, crank degrees.
     pub ehvva_timing_error_deg_rms: f64,
     /// An actuator frame carried the calibration fault bit (the ECU refused its image).
@@ -726,6 +729,12 @@ impl Summary {
                 "EHVVA  {} valve events: opening error mean {:+.2} / max |{:.2}| crank deg, closing error mean {:+.2} / max |{:.2}| crank deg\n",
                 self.ehvva_events, self.ehvva_open_error_deg.0, self.ehvva_open_error_deg.1, self.ehvva_close_error_deg.0, self.ehvva_close_error_deg.1
             );
+            if self.ehvva_stop_not_held_events > 0 {
+                s += &format!(
+                    "       {} of them below 99 % of the stroke at the closing command (the stop not reached or not held): no closing time\n",
+                    self.ehvva_stop_not_held_events
+                );
+            }
         }
         if let Some(v) = self.ehvva_seating_velocity_m_s {
             s += &format!("       seating velocity {:.2} m/s (largest)\n", v);
@@ -765,6 +774,7 @@ impl Summary {
             "ehvva": {
                 "timing_error_deg_rms": num(self.ehvva_timing_error_deg_rms),
                 "events": self.ehvva_events,
+                "stop_not_held_events": self.ehvva_stop_not_held_events,
                 "open_error_deg_mean": num(self.ehvva_open_error_deg.0),
                 "open_error_deg_max_abs": num(self.ehvva_open_error_deg.1),
                 "close_error_deg_mean": num(self.ehvva_close_error_deg.0),
@@ -826,7 +836,11 @@ const SAG_RAMP_S: f64 = 0.1;
 /// measured actuation delay td of the valve model.
 const PILOT_DROPOUT_A: f64 = 0.7;
 /// Valve timing is measured where the lift passes 1 % of the stroke (opening) and 99 %
-/// (closing), the paper's thresholds.
+/// (closing), the paper's thresholds, once per pilot command: the opening after its rising
+/// edge, the closing after its falling edge. A valve below 99 % at the falling edge (it never
+/// reached its stop, or fell back from it while the pilot was on: a unit near force balance,
+/// the supply dipping) has no closing time at that threshold; such cycles are counted apart
+/// (`stop_not_held_events`), not scored as a timing error against another cycle's edge.
 const LIFT_FRACTION: f64 = 0.01;
 
 /// Runs `scenario` against `link` and returns the logs and the summary (nothing is written).
@@ -889,6 +903,8 @@ pub fn run_with_unit(
     let mut faults_before = FaultSet::default();
     let (mut open_err, mut close_err) = (Vec::new(), Vec::new());
     let (mut opened, mut prev_lift, mut worst_seat) = (false, 0.0f64, None::<f64>);
+    // The pilot command of the step before, and whether this cycle's closing is being timed.
+    let (mut prev_pilot, mut closing, mut stop_not_held) = (false, false, 0usize);
     let (mut evvt_se, mut evvt_n, mut wg_n, mut pump_steps) = (0.0, 0usize, 0usize, 0u64);
     let mut x_se = [0.0f64; 3];
 
@@ -1058,6 +1074,17 @@ pub fn run_with_unit(
             pilot_dropped = true;
         }
         let u_pilot = pilot_duty > 0.0 && !pilot_dropped;
+        let stroke = ehvva_params.stroke_mm(act.lift_valve_on);
+        if u_pilot && !prev_pilot {
+            (opened, closing) = (false, false);
+        } else if !u_pilot && prev_pilot && opened {
+            if prev_lift > (1.0 - LIFT_FRACTION) * stroke {
+                closing = true;
+            } else {
+                stop_not_held += 1;
+            }
+        }
+        prev_pilot = u_pilot;
         out.ehvva.push(EhvvaRow {
             t_s: t,
             u_pilot,
@@ -1073,7 +1100,6 @@ pub fn run_with_unit(
         });
         coil.step(pilot_duty * u_batt, f64::from(STEP_US));
         let inp = ehvva_inputs(t, act.lift_valve_on, act.snubber_on);
-        let stroke = ehvva_params.stroke_mm(act.lift_valve_on);
         let deg_per_substep = rpm * 6.0 * EHVVA_DT_MS * 1e-3;
         for j in 0..EHVVA_SUBSTEPS {
             let lift = f64::from(valve.step(u_pilot, &inp));
@@ -1082,8 +1108,8 @@ pub fn run_with_unit(
                 opened = true;
                 open_err.push(wrap_deg(angle - sc.valve_open_deg.at(t)));
             }
-            if opened && prev_lift > (1.0 - LIFT_FRACTION) * stroke && lift <= (1.0 - LIFT_FRACTION) * stroke {
-                opened = false;
+            if closing && prev_lift > (1.0 - LIFT_FRACTION) * stroke && lift <= (1.0 - LIFT_FRACTION) * stroke {
+                closing = false;
                 close_err.push(wrap_deg(angle - sc.valve_close_deg.at(t)));
             }
             if let Some(v) = valve.take_seat_velocity() {
@@ -1143,6 +1169,7 @@ pub fn run_with_unit(
     );
     s.vacuum_pump_on_fraction = pump_steps as f64 / (n_steps / SLOW_EVERY).max(1) as f64;
     s.ehvva_events = open_err.len();
+    s.ehvva_stop_not_held_events = stop_not_held;
     s.ehvva_open_error_deg = stats(&open_err);
     s.ehvva_close_error_deg = stats(&close_err);
     s.ehvva_seating_velocity_m_s = worst_seat;

@@ -314,24 +314,70 @@ fn pressure_delay_unit(seed: u64, dir: &Path) -> (PathBuf, PathBuf) {
     (est, truth)
 }
 
+/// Calibrates `est`, runs the sweep on the unit before and after, asserts the 30 % and returns
+/// (before, after) and the image's JSON.
+fn ehvva_gain(label: &str, est: PathBuf, truth: &Path, out: &Path) -> (f64, f64, serde_json::Value) {
+    let outcome = calibrate::calibrate(&[est], &mut |_| {}).unwrap();
+    calibrate::write_outputs(&outcome, out, FLASH_BASE).unwrap();
+    let (before, after) = runs(truth, &out.join("calibration.bin"));
+    let (b, a) = (before.ehvva_timing_error_deg_rms, after.ehvva_timing_error_deg_rms);
+    eprintln!(
+        "{label}: EHVVA timing error RMS {b:.2} -> {a:.2} crank deg ({} / {} events, {} / {} without a held stop)",
+        before.ehvva_events, after.ehvva_events, before.ehvva_stop_not_held_events, after.ehvva_stop_not_held_events
+    );
+    // A smaller advance may move the run's last opening past its end: one event either way.
+    assert!(before.ehvva_events > 30 && after.ehvva_events.abs_diff(before.ehvva_events) <= 1);
+    assert!(a <= 0.7 * b, "{label}: {a:.2} deg is not 30 % below {b:.2} deg");
+    // Each closing is timed against its own pilot cycle's closing edge: a cycle whose valve
+    // did not reach or hold its stop (a unit near force balance at 5 MPa) is counted apart,
+    // not scored against the next cycle's fall from the stop (that read -104 crank degrees).
+    for s in [&before, &after] {
+        assert!(
+            s.ehvva_close_error_deg.1 < 30.0,
+            "{label}: closing error {:?}",
+            s.ehvva_close_error_deg
+        );
+    }
+    // The JSON the `run --json` option writes carries the figure by name.
+    let j = after.json("calibration-sweep");
+    assert_eq!(j["ehvva"]["timing_error_deg_rms"].as_f64(), Some(a));
+    assert!(j["evvt"]["phase_error_deg_rms"].as_f64().is_some());
+    assert!(j["vacuum"]["position_error_pct_rms"].as_f64().is_some());
+    let json = serde_json::from_str(&std::fs::read_to_string(out.join("calibration.json")).unwrap()).unwrap();
+    (b, a, json)
+}
+
 #[test]
 fn the_units_own_calibration_beats_the_paper_defaults_on_supply_pressure_dependent_delay() {
     let dir = workdir("ehvva-gain");
+    // The paper's valve but for td, Cd, tau_p, mass and the delay's pressure gain.
+    let (est, truth) = pressure_delay_unit(7, &dir.join("paper-valve"));
+    ehvva_gain("paper valve, seed 7", est, &truth, &dir.join("cal-paper-valve"));
+    // Units as `generate` draws them: spring, preload, friction, areas and orifices differ
+    // from the paper's too. Identified on the paper's valve, their other spring and areas
+    // went into td, and the image put the valve events ~10 crank degrees late (seed 7: 3.2 ->
+    // 10.0 deg RMS); identified on the unit's valve as diagnosed, td is the unit's.
     for seed in [7, 21] {
-        let (est, truth) = pressure_delay_unit(seed, &dir.join(format!("unit{seed}")));
-        let outcome = calibrate::calibrate(&[est], &mut |_| {}).unwrap();
-        let out = dir.join(format!("cal{seed}"));
-        calibrate::write_outputs(&outcome, &out, FLASH_BASE).unwrap();
-        let (before, after) = runs(&truth, &out.join("calibration.bin"));
-        let (b, a) = (before.ehvva_timing_error_deg_rms, after.ehvva_timing_error_deg_rms);
-        eprintln!("seed {seed}: EHVVA timing error RMS {b:.2} -> {a:.2} crank deg");
-        assert!(before.ehvva_events > 30 && after.ehvva_events == before.ehvva_events);
-        assert!(a <= 0.7 * b, "seed {seed}: {a:.2} deg is not 30 % below {b:.2} deg");
-        // The JSON the `run --json` option writes carries the figure by name.
-        let j = after.json("calibration-sweep");
-        assert_eq!(j["ehvva"]["timing_error_deg_rms"].as_f64(), Some(a));
-        assert!(j["evvt"]["phase_error_deg_rms"].as_f64().is_some());
-        assert!(j["vacuum"]["position_error_pct_rms"].as_f64().is_some());
+        let case = generate::generate(Plant::Ehvva, "pressure-delay", seed).unwrap();
+        let (est, truth) = write_case(&case, &dir.join(format!("unit{seed}")));
+        let (_, _, json) = ehvva_gain(
+            &format!("generated unit, seed {seed}"),
+            est,
+            &truth,
+            &dir.join(format!("cal{seed}")),
+        );
+        // td at 7 MPa, 22 °C (the ECU's grid point [2][2]; the pressure-dependent delay is read
+        // at its nominal 7 MPa there), VO and VC alike, is the unit's within 10 %.
+        let td_true = case.truth.iter().find(|(k, _)| k == "td_ms_at_7MPa_22C").unwrap().1;
+        for table in ["ehvva.td_open_ms", "ehvva.td_close_ms"] {
+            let td = json["characteristics"][table]["value"][2][2].as_f64().unwrap();
+            assert!(
+                (td / td_true - 1.0).abs() < 0.1,
+                "seed {seed}: {table} {td:.3} ms at 7 MPa / 22 °C, truth {td_true:.3} ms"
+            );
+        }
+        let motion = &json["characteristics"]["ehvva.motion_open_low_ms"]["source"];
+        assert_eq!(motion["from"], "log", "{motion}");
     }
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -2,10 +2,14 @@
 //! image (model-core's [`model_core::ecu::calibration`]).
 //!
 //! Each log is read strictly and goes to its plant's tool:
-//! - `ehvva` valve-bench logs: `identify ehvva` (Li 2018 Sec. 5.2, per test condition td VO/VC,
-//!   τp and Cd) gives the td, τp and Cd tables on the ECU's grid; the effect gains are set to 1
-//!   (the tables hold the measured dependence on supply pressure, direction and temperature);
-//!   the valve-motion tables are recomputed from the reduced model with those tables;
+//! - `ehvva` valve-bench logs: `diagnose` first (its extended model is the unit's own valve:
+//!   spring, mass, areas, flow paths, and names the extension), then `identify ehvva` on that
+//!   valve (Li 2018 Sec. 5.2, per test condition td VO/VC, τp and Cd) gives the td, τp and Cd
+//!   tables on the ECU's grid; the effect gains are set to 1 (the tables hold the measured
+//!   dependence on supply pressure, direction and temperature); the valve-motion tables are
+//!   computed from the unit's valve with those tables. (On the paper's valve a unit's other
+//!   spring and areas went into td: an image that put its valve events 10 crank degrees off,
+//!   worse than the paper defaults, docs/calibration.md);
 //! - `evvt` closed-loop PRBS logs: `identify evvt` (Yang 2015) per operating point, the 3×3
 //!   α/β tables; the scheduled PI gains they imply are recomputed and stored;
 //! - `vacuum` logs: `diagnose` (baseline and the catalogue's extensions, its last 30 % held
@@ -121,8 +125,12 @@ fn ehvva(logs: &[Log], out: &mut Outcome, progress: &mut dyn FnMut(&str)) -> Res
         .map(Events::from_log)
         .collect::<Result<Vec<_>, _>>()
         .map_err(|e| format!("EHVVA logs: {e}"))?;
+    // The diagnosis first: its baseline is the unit's own valve (spring, mass, areas, flow
+    // paths), and it names the extension the tables carry (e.g. td against supply pressure).
+    progress("diagnose ehvva");
+    let (extension, unit) = ehvva_extension(logs)?;
     progress("identify ehvva");
-    let found = id::identify(&sets, &id::default_options(), &mut |k, n| {
+    let found = id::identify_on(&unit, &sets, &id::default_options(), &mut |k, n| {
         progress(&format!("identify ehvva: condition {k}/{n}"))
     })?;
     let tables = found.table_data();
@@ -134,9 +142,12 @@ fn ehvva(logs: &[Log], out: &mut Outcome, progress: &mut dyn FnMut(&str)) -> Res
     cal.check()
         .map_err(|e| format!("refused: {e} (identify ehvva on {})", files.join(", ")))?;
     progress("EHVVA valve motion from the identified tables");
-    // The reduced model's motion with the identified tables; where it cannot run them (a td
-    // longer than its delay line holds), the paper valve's motion stays, said in the sources.
-    let motion = ValveMotionData::from_model(&cal.ehvva_model(), VALVE_MOTION_P_BACK_MPA);
+    // The unit valve's motion with the identified tables; where the reduced model cannot run
+    // them (a td longer than its delay line holds), the paper valve's motion stays, said in
+    // the sources.
+    let mut unit_with_tables = unit;
+    unit_with_tables.tables = cal.ehvva_tables;
+    let motion = ValveMotionData::from_model(&unit_with_tables, VALVE_MOTION_P_BACK_MPA);
     if let Ok(m) = motion {
         cal.valve_motion = m;
     }
@@ -145,16 +156,13 @@ fn ehvva(logs: &[Log], out: &mut Outcome, progress: &mut dyn FnMut(&str)) -> Res
         found.conditions.len(),
         files.join(", ")
     ));
-    // The diagnosis names the extension the tables carry (e.g. td against supply pressure).
-    progress("diagnose ehvva");
-    let extension = ehvva_extension(logs)?;
     out.notes
         .push(format!("EHVVA: diagnose on {}: {extension}", logs[0].file));
     out.set_source(
         "ehvva.",
         &files,
         &format!(
-            "identify ehvva: per test condition td VO/VC (joint fit), tau_p, Cd; tables on the ECU's grid (diagnose: {extension})"
+            "identify ehvva on the unit's valve (diagnose's fit): per test condition td VO/VC (joint fit), tau_p, Cd; tables on the ECU's grid (diagnose: {extension})"
         ),
     );
     for gain in [
@@ -180,7 +188,7 @@ fn ehvva(logs: &[Log], out: &mut Outcome, progress: &mut dyn FnMut(&str)) -> Res
                 out,
                 name,
                 &files,
-                "derived: the reduced model's valve motion after td with the identified tables",
+                "derived: the reduced model's valve motion after td on the unit's valve (diagnose's fit) with the identified tables",
             ),
             Err(e) => set_source_exact(
                 out,
@@ -194,8 +202,9 @@ fn ehvva(logs: &[Log], out: &mut Outcome, progress: &mut dyn FnMut(&str)) -> Res
 }
 
 /// `diagnose` on the EHVVA logs (the second log as validation data, else the first one's last
-/// 30 %): the named cause and its fitted gain, as a phrase for the sources.
-fn ehvva_extension(logs: &[Log]) -> Result<String, String> {
+/// 30 %): the named cause and its fitted gain, as a phrase for the sources, and the unit's
+/// valve from the extended fit (the delay and Cd effects at gain 1: tables as they are).
+fn ehvva_extension(logs: &[Log]) -> Result<(String, EhvvaParams), String> {
     use crate::diagnose::{self, Rules};
     let family = diagnose::family_for(Plant::Ehvva)?;
     let (est, val, tail) = match logs {
@@ -208,8 +217,18 @@ fn ehvva_extension(logs: &[Log]) -> Result<String, String> {
     };
     let d = diagnose::diagnose(family.as_ref(), &est, &val, tail, &Rules::default(), &mut |_| {})
         .map_err(|e| format!("diagnose ehvva ({}): {e}", est.file))?;
+    // The extended model's valve: a baseline without the named effect absorbs it into wrong
+    // unit values (a pressure-dependent delay into τp and the main valve's area). The delay and
+    // Cd effects at gain 1 read the tables as they are: the per-condition tables identified
+    // on this valve carry them (td VO and VC apart, td and Cd per pressure and temperature);
+    // the snubbing zone stays the fit's (none unless named).
+    let mut unit = crate::diagnose::ehvva::params_from_fit(&d.extended.internal)
+        .map_err(|e| format!("diagnose ehvva ({}): {e}", est.file))?;
+    unit.effect_viscosity = 1.0;
+    unit.effect_pressure_delay = 1.0;
+    unit.effect_direction_delay = 1.0;
     if d.cause == "none" {
-        return Ok("no extension named: the tables as identified".into());
+        return Ok(("no extension named: the tables as identified".into(), unit));
     }
     let gains: Vec<String> = d
         .extended
@@ -224,7 +243,7 @@ fn ehvva_extension(logs: &[Log]) -> Result<String, String> {
         "viscosity" => "Cd against temperature, measured per condition",
         _ => "no ECU table for it",
     };
-    Ok(format!("cause `{}` ({}): {carried}", d.cause, gains.join(", ")))
+    Ok((format!("cause `{}` ({}): {carried}", d.cause, gains.join(", ")), unit))
 }
 
 fn set_source_exact(out: &mut Outcome, name: &str, logs: &[String], method: &str) {

@@ -62,7 +62,18 @@ fn set_td(p: &mut EhvvaParams, td_open_ms: f64, td_close_ms: f64) {
 
 /// The model for one condition: the paper's geometry with uniform tables.
 pub fn condition_params(td_open_ms: f64, td_close_ms: f64, tau_p_ms: f64, cd: f64) -> EhvvaParams {
-    let mut p = EhvvaParams::paper_default();
+    condition_params_on(&EhvvaParams::paper_default(), td_open_ms, td_close_ms, tau_p_ms, cd)
+}
+
+/// As [`condition_params`] on the valve `base` (its geometry, mass, spring and flow paths).
+pub fn condition_params_on(
+    base: &EhvvaParams,
+    td_open_ms: f64,
+    td_close_ms: f64,
+    tau_p_ms: f64,
+    cd: f64,
+) -> EhvvaParams {
+    let mut p = *base;
     set_td(&mut p, td_open_ms, td_close_ms);
     apply_knobs(&p, &CONDITION_KNOBS, &[tau_p_ms, cd])
 }
@@ -264,10 +275,15 @@ fn condition_point(set: &Events) -> (f64, f64) {
 /// every (τp, Cd) tried ([`td_from_onset`]), from a coarse Cd scan at τp = 0.1 ms. Its td is
 /// the onset estimate; it starts [`fit_joint`].
 pub fn fit_onset(set: &Events, opts: &LsqOptions) -> Result<ConditionFit, String> {
+    fit_onset_on(&EhvvaParams::paper_default(), set, opts)
+}
+
+/// As [`fit_onset`] on the valve `base` (its geometry; its tables are replaced).
+pub fn fit_onset_on(base: &EhvvaParams, set: &Events, opts: &LsqOptions) -> Result<ConditionFit, String> {
     if set.events.is_empty() {
         return Err(format!("{}: a condition without events", set.file));
     }
-    let base = EhvvaParams::paper_default();
+    let base = *base;
     // Start: Cd from a coarse scan at τp = 0.1 ms (from a Cd far off, the first steps can
     // drive τp onto its bound, where the solver holds it).
     let measured = set.measured();
@@ -324,7 +340,18 @@ pub fn fit_joint(
     shape: Option<&EhvvaTableData>,
     opts: &LsqOptions,
 ) -> Result<ConditionFit, String> {
-    let base = EhvvaParams::paper_default();
+    fit_joint_on(&EhvvaParams::paper_default(), set, start, shape, opts)
+}
+
+/// As [`fit_joint`] on the valve `base` (its geometry; its tables are replaced).
+pub fn fit_joint_on(
+    base: &EhvvaParams,
+    set: &Events,
+    start: &ConditionFit,
+    shape: Option<&EhvvaTableData>,
+    opts: &LsqOptions,
+) -> Result<ConditionFit, String> {
+    let base = *base;
     let has_close = set.events.iter().any(|e| e.off_index.is_some());
     let (p_c, t_c) = condition_point(set);
     let (knobs, x0): (&[Knob], Vec<f64>) = if has_close {
@@ -762,6 +789,19 @@ pub fn identify(
     opts: &LsqOptions,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Identified, String> {
+    identify_on(&EhvvaParams::paper_default(), sets, opts, progress)
+}
+
+/// As [`identify`] on the valve `base` instead of the paper's: a unit whose spring, mass,
+/// areas and flow paths differ from the paper's (`calibrate` takes them from the diagnosis's
+/// baseline fit) moves and lags otherwise, and with the paper's valve the per-condition fits
+/// would put that difference into td, τp and Cd.
+pub fn identify_on(
+    base: &EhvvaParams,
+    sets: &[Events],
+    opts: &LsqOptions,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<Identified, String> {
     let groups = conditions(sets);
     if groups.is_empty() {
         return Err("no valve events in the logs".into());
@@ -771,7 +811,7 @@ pub fn identify(
     let mut first = Vec::with_capacity(groups.len());
     for (k, g) in groups.iter().enumerate() {
         progress(k + 1, 2 * groups.len());
-        first.push(fit_onset(g, opts)?);
+        first.push(fit_onset_on(base, g, opts)?);
     }
     let shape = Identified {
         conditions: first.clone(),
@@ -780,7 +820,7 @@ pub fn identify(
     let mut out = Vec::with_capacity(groups.len());
     for (k, (g, start)) in groups.iter().zip(&first).enumerate() {
         progress(groups.len() + k + 1, 2 * groups.len());
-        out.push(fit_joint(g, start, Some(&shape), opts)?);
+        out.push(fit_joint_on(base, g, start, Some(&shape), opts)?);
     }
     Ok(Identified { conditions: out })
 }

@@ -233,3 +233,28 @@ pub fn apply_knobs(base: &EhvvaParams, knobs: &[Knob], x: &[f64]) -> EhvvaParams
     }
     p
 }
+
+/// The valve a fit describes, from its parameter vector ([`super::Fit::internal`]: knob names
+/// and values in the order the fit applied them) on [`EhvvaParams::baseline`] (catalogue
+/// effects the fit did not add stay off). An unknown name is refused.
+pub fn params_from_fit(internal: &[(String, f64)]) -> Result<EhvvaParams, String> {
+    let mut p = EhvvaParams::baseline();
+    for (name, v) in internal {
+        let knob = match BASELINE_KNOBS
+            .iter()
+            .chain(&UNIT_KNOBS)
+            .find(|k| k.name == name.as_str())
+        {
+            Some(k) => *k,
+            None => {
+                let effect = EhvvaEffect::NAMES
+                    .iter()
+                    .find(|e| EhvvaEffect::from_name(e).is_ok_and(|x| x.params()[0].0 == name.as_str()))
+                    .ok_or_else(|| format!("EHVVA fit: no parameter named `{name}`"))?;
+                effect_knob(effect)?
+            }
+        };
+        (knob.apply)(&mut p, *v);
+    }
+    Ok(p)
+}
