@@ -201,49 +201,24 @@ fn ehvva(logs: &[Log], out: &mut Outcome, progress: &mut dyn FnMut(&str)) -> Res
     Ok(())
 }
 
-/// `diagnose` on the EHVVA logs (the second log as validation data, else the first one's last
-/// 30 %): the named cause and its fitted gain, as a phrase for the sources, and the unit's
-/// valve from the extended fit (the delay and Cd effects at gain 1: tables as they are).
+/// The unit's valve from `diagnose` ([`crate::identify::ehvva::unit_valve`]) and the named
+/// cause with its fitted gain, as a phrase for the sources.
 fn ehvva_extension(logs: &[Log]) -> Result<(String, EhvvaParams), String> {
-    use crate::diagnose::{self, Rules};
-    let family = diagnose::family_for(Plant::Ehvva)?;
-    let (est, val, tail) = match logs {
-        [a, b, ..] => (a.clone(), b.clone(), false),
-        [a] => {
-            let (e, v) = diagnose::split_tail(a, 0.3);
-            (e, v, true)
-        }
-        [] => return Err("no EHVVA log".into()),
-    };
-    let d = diagnose::diagnose(family.as_ref(), &est, &val, tail, &Rules::default(), &mut |_| {})
-        .map_err(|e| format!("diagnose ehvva ({}): {e}", est.file))?;
-    // The extended model's valve: a baseline without the named effect absorbs it into wrong
-    // unit values (a pressure-dependent delay into τp and the main valve's area). The delay and
-    // Cd effects at gain 1 read the tables as they are: the per-condition tables identified
-    // on this valve carry them (td VO and VC apart, td and Cd per pressure and temperature);
-    // the snubbing zone stays the fit's (none unless named).
-    let mut unit = crate::diagnose::ehvva::params_from_fit(&d.extended.internal)
-        .map_err(|e| format!("diagnose ehvva ({}): {e}", est.file))?;
-    unit.effect_viscosity = 1.0;
-    unit.effect_pressure_delay = 1.0;
-    unit.effect_direction_delay = 1.0;
-    if d.cause == "none" {
-        return Ok(("no extension named: the tables as identified".into(), unit));
+    let u = crate::identify::ehvva::unit_valve(logs)?;
+    if u.cause == "none" {
+        return Ok(("no extension named: the tables as identified".into(), u.params));
     }
-    let gains: Vec<String> = d
-        .extended
-        .params
-        .iter()
-        .filter(|(k, _)| k.ends_with("_gain"))
-        .map(|(k, v)| format!("{k} {v:.3}"))
-        .collect();
-    let carried = match d.cause.as_str() {
+    let gains: Vec<String> = u.gains.iter().map(|(k, v)| format!("{k} {v:.3}")).collect();
+    let carried = match u.cause.as_str() {
         "pressure-delay" => "the td tables' fall with supply pressure, measured per condition",
         "direction-delay" => "td VO and VC, measured apart",
         "viscosity" => "Cd against temperature, measured per condition",
         _ => "no ECU table for it",
     };
-    Ok((format!("cause `{}` ({}): {carried}", d.cause, gains.join(", ")), unit))
+    Ok((
+        format!("cause `{}` ({}): {carried}", u.cause, gains.join(", ")),
+        u.params,
+    ))
 }
 
 fn set_source_exact(out: &mut Outcome, name: &str, logs: &[String], method: &str) {

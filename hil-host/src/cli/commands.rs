@@ -9,11 +9,12 @@ use hil_host::mf4::ChannelMap;
 use hil_host::numbers::{sig, tidy_json};
 use hil_host::output::{self, Claim, OutputDir};
 use hil_host::run::Scenario;
+use model_core::ehvva::EhvvaParams;
 
 use super::progress::{self, Counter, Spinner};
 use super::{
     CalibrateArgs, CalibrationArgs, CheckArgs, Cli, Command, DiagnoseArgs, GenerateArgs, IdentifyArgs, IdentifyCommand,
-    PaperCheckArgs, PilArgs, RunArgs, TargetBenchArgs,
+    IdentifyEhvvaArgs, PaperCheckArgs, PilArgs, RunArgs, TargetBenchArgs,
 };
 
 /// A failed command (exit status 1); usage errors are clap's (exit status 2).
@@ -338,32 +339,54 @@ fn identify_evvt(a: IdentifyArgs) -> Result<()> {
     Ok(())
 }
 
-fn identify_ehvva(a: IdentifyArgs) -> Result<()> {
+fn identify_ehvva(args: IdentifyEhvvaArgs) -> Result<()> {
     use hil_host::diagnose::ehvva::Events;
     use hil_host::identify::ehvva;
+    let a = args.common;
     output::protect_inputs(&a.logs);
     if let Some(json) = &a.json {
         output::check_not_input(json)?;
     }
     let map = channel_map(a.channel_map.as_deref())?;
-    let mut sets = Vec::new();
+    let mut logs = Vec::new();
     for path in &a.logs {
         let log = read(path, Some(Plant::Ehvva), map.as_ref())?;
         for n in &log.notices {
             eprintln!("notice: {}: {n}", log.file);
         }
-        sets.push(Events::from_log(&log).map_err(fail)?);
+        logs.push(log);
     }
+    let sets = logs
+        .iter()
+        .map(Events::from_log)
+        .collect::<std::result::Result<Vec<_>, String>>()
+        .map_err(fail)?;
+    let (valve, unit) = if args.paper_valve {
+        (EhvvaParams::paper_default(), None)
+    } else {
+        let u = {
+            let _s = Spinner::start("diagnose ehvva: the unit's valve", true);
+            ehvva::unit_valve(&logs).map_err(fail)?
+        };
+        (u.params, Some(u))
+    };
+    drop(logs);
     let id = {
         let counter = Counter::new("condition", 1);
-        ehvva::identify(&sets, &ehvva::default_options(), &mut |k, n| {
+        ehvva::identify_on(&valve, &sets, &ehvva::default_options(), &mut |k, n| {
             counter.step(k as u64, n as u64)
         })
         .map_err(fail)?
     };
+    match &unit {
+        Some(u) => println!("{}", u.text()),
+        None => println!("valve: the paper's (--paper-valve)"),
+    }
     print!("{}", id.text());
     if let Some(out) = &a.json {
-        write_json(out, id.json())?;
+        let mut j = id.json();
+        j["valve"] = unit.as_ref().map_or(serde_json::json!("paper"), |u| u.json());
+        write_json(out, j)?;
         eprintln!("tables written to {}", out.display());
     }
     Ok(())

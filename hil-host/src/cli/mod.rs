@@ -285,11 +285,26 @@ Examples:
   hil-host identify evvt prbs/*.csv --json evvt.json")]
     Evvt(IdentifyArgs),
     /// EHVVA calibration (Li 2018 Sec. 5.2): td(Ph, T), τp(Ph, T), Cd(T) from a test matrix of
-    /// valve events
+    /// valve events, on the unit's own valve as `diagnose` fits it (or the paper's)
     #[command(after_help = "\
+The per-condition fits run on the unit's valve: `diagnose` first fits its spring, preload,
+friction, mass, areas and flow paths with the named extension (the second log as validation,
+else the first one's last 30 %). With --paper-valve they run on the paper's valve, the paper's
+method; on a unit whose valve is not the paper's, its other valve then goes into td, tau_p and Cd.
+
 Examples:
-  hil-host identify ehvva bench-*.csv --json ehvva.json")]
-    Ehvva(IdentifyArgs),
+  hil-host identify ehvva bench-*.csv --json ehvva.json
+  hil-host identify ehvva bench.csv --paper-valve")]
+    Ehvva(IdentifyEhvvaArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct IdentifyEhvvaArgs {
+    #[command(flatten)]
+    pub common: IdentifyArgs,
+    /// Fit the conditions on the paper's valve (geometry, spring, mass) instead of the unit's
+    #[arg(long)]
+    pub paper_valve: bool,
 }
 
 #[derive(Debug, Args)]
