@@ -677,6 +677,8 @@ pub struct Summary {
     /// Pilot cycles whose valve was below 99 % of its stroke at the closing command (no
     /// closing time; [`LIFT_FRACTION`]).
     pub ehvva_stop_not_held_events: usize,
+    /// Closings timed (the rest of the events: no held stop, or the run ended first).
+    pub ehvva_closings: usize,
     /// RMS of every opening and closing timing error, crank degrees.
     pub ehvva_timing_error_deg_rms: f64,
     /// An actuator frame carried the calibration fault bit (the ECU refused its image).
@@ -725,9 +727,17 @@ impl Summary {
             // No event, no timing error to average (a stopped engine, or a run shorter than a cycle).
             s += "EHVVA  no valve events\n";
         } else {
+            let closing = if self.ehvva_closings == 0 {
+                "no closing timed".to_string()
+            } else {
+                format!(
+                    "closing error mean {:+.2} / max |{:.2}| crank deg",
+                    self.ehvva_close_error_deg.0, self.ehvva_close_error_deg.1
+                )
+            };
             s += &format!(
-                "EHVVA  {} valve events: opening error mean {:+.2} / max |{:.2}| crank deg, closing error mean {:+.2} / max |{:.2}| crank deg\n",
-                self.ehvva_events, self.ehvva_open_error_deg.0, self.ehvva_open_error_deg.1, self.ehvva_close_error_deg.0, self.ehvva_close_error_deg.1
+                "EHVVA  {} valve events: opening error mean {:+.2} / max |{:.2}| crank deg, {closing}\n",
+                self.ehvva_events, self.ehvva_open_error_deg.0, self.ehvva_open_error_deg.1
             );
             if self.ehvva_stop_not_held_events > 0 {
                 s += &format!(
@@ -775,6 +785,7 @@ impl Summary {
                 "timing_error_deg_rms": num(self.ehvva_timing_error_deg_rms),
                 "events": self.ehvva_events,
                 "stop_not_held_events": self.ehvva_stop_not_held_events,
+                "closings": self.ehvva_closings,
                 "open_error_deg_mean": num(self.ehvva_open_error_deg.0),
                 "open_error_deg_max_abs": num(self.ehvva_open_error_deg.1),
                 "close_error_deg_mean": num(self.ehvva_close_error_deg.0),
@@ -1170,6 +1181,7 @@ pub fn run_with_unit(
     s.vacuum_pump_on_fraction = pump_steps as f64 / (n_steps / SLOW_EVERY).max(1) as f64;
     s.ehvva_events = open_err.len();
     s.ehvva_stop_not_held_events = stop_not_held;
+    s.ehvva_closings = close_err.len();
     s.ehvva_open_error_deg = stats(&open_err);
     s.ehvva_close_error_deg = stats(&close_err);
     s.ehvva_seating_velocity_m_s = worst_seat;
