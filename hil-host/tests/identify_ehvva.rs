@@ -372,6 +372,16 @@ fn a_real_units_tables_are_identified_on_its_own_valve() {
     assert!(text.starts_with("valve: the unit's, as diagnose fitted it"), "{text}");
     let j: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     assert_eq!(j["valve"]["from"], "diagnose");
+    // Both valves were tried; the unit's reproduces the lift far better and is kept.
+    assert_eq!(j["valve"]["kept"], "unit");
+    let (on_unit, on_paper) = (
+        j["valve"]["cost_unit"].as_f64().unwrap(),
+        j["valve"]["cost_paper"].as_f64().unwrap(),
+    );
+    assert!(
+        on_unit < 0.5 * on_paper,
+        "cost on the unit's valve {on_unit}, on the paper's {on_paper}"
+    );
     // The lift cannot see the common scale of mass, areas, spring and friction (the top area
     // is held at the paper's): the spring per top area is the unit's.
     let fitted = j["valve"]["params"]["spring_N_per_mm"].as_f64().unwrap() / EhvvaParams::paper_default().area_top_mm2;
@@ -391,4 +401,21 @@ fn a_real_units_tables_are_identified_on_its_own_valve() {
     let paper = run(&["identify", "ehvva", est.to_str().unwrap(), "--paper-valve"]);
     assert!(paper.starts_with("valve: the paper's (--paper-valve)"), "{paper}");
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The fallback: when the valve handed in as the unit's is wrong (here a spring three times
+/// the paper's and twice its mass), the paper's valve reproduces the lift better and its tables
+/// are the ones kept.
+#[test]
+fn a_wrong_unit_valve_loses_to_the_papers() {
+    use hil_host::identify::ehvva::identify_unit_or_paper;
+    let case = hil_host::generate::generate(hil_host::log::Plant::Ehvva, "none", 4).unwrap();
+    let log = parse_log("estimation.csv", &case.estimation_csv, None).unwrap();
+    let sets = vec![Events::from_log(&log).unwrap()];
+    let mut wrong = EhvvaParams::paper_default();
+    wrong.spring_n_per_mm *= 3.0;
+    wrong.mass_kg *= 2.0;
+    let (_, choice) = identify_unit_or_paper(&wrong, &sets, &default_options(), &mut |_, _| {}).unwrap();
+    assert!(!choice.kept_unit, "{}", choice.text());
+    assert!(choice.paper_cost < choice.unit_cost);
 }

@@ -130,9 +130,15 @@ fn ehvva(logs: &[Log], out: &mut Outcome, progress: &mut dyn FnMut(&str)) -> Res
     progress("diagnose ehvva");
     let (extension, unit) = ehvva_extension(logs)?;
     progress("identify ehvva");
-    let found = id::identify_on(&unit, &sets, &id::default_options(), &mut |k, n| {
+    let (found, choice) = id::identify_unit_or_paper(&unit, &sets, &id::default_options(), &mut |k, n| {
         progress(&format!("identify ehvva: condition {k}/{n}"))
     })?;
+    // The valve the kept tables were identified on is the one their motion is computed on.
+    let unit = if choice.kept_unit {
+        unit
+    } else {
+        EhvvaParams::paper_default()
+    };
     let tables = found.table_data();
     let cal = &mut out.calibration;
     cal.ehvva_tables = tables;
@@ -158,11 +164,17 @@ fn ehvva(logs: &[Log], out: &mut Outcome, progress: &mut dyn FnMut(&str)) -> Res
     ));
     out.notes
         .push(format!("EHVVA: diagnose on {}: {extension}", logs[0].file));
+    out.notes.push(format!("EHVVA: {}", choice.text()));
+    let valve = if choice.kept_unit {
+        "the unit's valve (diagnose's fit)"
+    } else {
+        "the paper's valve (its fits reproduced the lift better than the unit's valve as diagnosed)"
+    };
     out.set_source(
         "ehvva.",
         &files,
         &format!(
-            "identify ehvva on the unit's valve (diagnose's fit): per test condition td VO/VC (joint fit), tau_p, Cd; tables on the ECU's grid (diagnose: {extension})"
+            "identify ehvva on {valve}: per test condition td VO/VC (joint fit), tau_p, Cd; tables on the ECU's grid (diagnose: {extension})"
         ),
     );
     for gain in [
@@ -188,7 +200,7 @@ fn ehvva(logs: &[Log], out: &mut Outcome, progress: &mut dyn FnMut(&str)) -> Res
                 out,
                 name,
                 &files,
-                "derived: the reduced model's valve motion after td on the unit's valve (diagnose's fit) with the identified tables",
+                &format!("derived: the reduced model's valve motion after td on {valve} with the identified tables"),
             ),
             Err(e) => set_source_exact(
                 out,

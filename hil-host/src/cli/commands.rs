@@ -9,7 +9,6 @@ use hil_host::mf4::ChannelMap;
 use hil_host::numbers::{sig, tidy_json};
 use hil_host::output::{self, Claim, OutputDir};
 use hil_host::run::Scenario;
-use model_core::ehvva::EhvvaParams;
 
 use super::progress::{self, Counter, Spinner};
 use super::{
@@ -361,31 +360,44 @@ fn identify_ehvva(args: IdentifyEhvvaArgs) -> Result<()> {
         .map(Events::from_log)
         .collect::<std::result::Result<Vec<_>, String>>()
         .map_err(fail)?;
-    let (valve, unit) = if args.paper_valve {
-        (EhvvaParams::paper_default(), None)
+    let unit = if args.paper_valve {
+        None
     } else {
-        let u = {
-            let _s = Spinner::start("diagnose ehvva: the unit's valve", true);
-            ehvva::unit_valve(&logs).map_err(fail)?
-        };
-        (u.params, Some(u))
+        let _s = Spinner::start("diagnose ehvva: the unit's valve", true);
+        Some(ehvva::unit_valve(&logs).map_err(fail)?)
     };
     drop(logs);
-    let id = {
-        let counter = Counter::new("condition", 1);
-        ehvva::identify_on(&valve, &sets, &ehvva::default_options(), &mut |k, n| {
-            counter.step(k as u64, n as u64)
-        })
-        .map_err(fail)?
+    let counter = Counter::new("condition", 1);
+    let mut tick = |k: usize, n: usize| counter.step(k as u64, n as u64);
+    let (id, choice) = match &unit {
+        None => {
+            let id = ehvva::identify(&sets, &ehvva::default_options(), &mut tick).map_err(fail)?;
+            (id, None)
+        }
+        Some(u) => {
+            let (id, c) =
+                ehvva::identify_unit_or_paper(&u.params, &sets, &ehvva::default_options(), &mut tick).map_err(fail)?;
+            (id, Some(c))
+        }
     };
-    match &unit {
-        Some(u) => println!("{}", u.text()),
-        None => println!("valve: the paper's (--paper-valve)"),
+    drop(counter);
+    match (&unit, &choice) {
+        (Some(u), Some(c)) => println!("{}{}\n", u.text(), c.text()),
+        _ => println!("valve: the paper's (--paper-valve)"),
     }
     print!("{}", id.text());
     if let Some(out) = &a.json {
         let mut j = id.json();
-        j["valve"] = unit.as_ref().map_or(serde_json::json!("paper"), |u| u.json());
+        j["valve"] = match (&unit, &choice) {
+            (Some(u), Some(c)) => {
+                let mut v = u.json();
+                v["kept"] = serde_json::json!(if c.kept_unit { "unit" } else { "paper" });
+                v["cost_unit"] = ehvva::ValveChoice::cost_json(c.unit_cost);
+                v["cost_paper"] = ehvva::ValveChoice::cost_json(c.paper_cost);
+                v
+            }
+            _ => serde_json::json!("paper"),
+        };
         write_json(out, j)?;
         eprintln!("tables written to {}", out.display());
     }

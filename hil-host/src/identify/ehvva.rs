@@ -778,6 +778,75 @@ impl Identified {
     }
 }
 
+/// Which valve [`identify_unit_or_paper`] kept, and why: the summed cost (lift residual) of
+/// the conditions' joint fits on each (infinite where a condition could not be fitted).
+#[derive(Clone, Copy, Debug)]
+pub struct ValveChoice {
+    pub unit_cost: f64,
+    pub paper_cost: f64,
+    pub kept_unit: bool,
+}
+
+impl ValveChoice {
+    /// One line for the report.
+    pub fn text(&self) -> String {
+        let cost = |c: f64| {
+            if c.is_finite() {
+                crate::numbers::sig(c, 4)
+            } else {
+                "none (a condition could not be fitted)".to_string()
+            }
+        };
+        format!(
+            "lift residual of the conditions' fits (sum of costs): {} on the unit's valve, {} on the paper's: the {} valve's tables kept",
+            cost(self.unit_cost),
+            cost(self.paper_cost),
+            if self.kept_unit { "unit's" } else { "paper's" }
+        )
+    }
+
+    /// A cost for JSON: the number, or why there is none.
+    pub fn cost_json(c: f64) -> Value {
+        if c.is_finite() {
+            json!(c)
+        } else {
+            json!("not computable: a condition could not be fitted on this valve")
+        }
+    }
+}
+
+impl Identified {
+    /// The conditions' summed cost (their joint fits' lift residual).
+    pub fn total_cost(&self) -> f64 {
+        self.conditions.iter().map(|c| c.cost).sum()
+    }
+}
+
+/// [`identify_on`] the unit's valve and [`identify`] on the paper's; the tables whose fits
+/// reproduce the measured lift better (smaller summed cost) are kept. The unit's valve wins
+/// wherever the diagnosis found it (10-2 600x smaller on generated units); the paper's is the
+/// fallback when that fit went wrong (a unit knob on a bound, a valve unlike the model).
+pub fn identify_unit_or_paper(
+    unit: &EhvvaParams,
+    sets: &[Events],
+    opts: &LsqOptions,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<(Identified, ValveChoice), String> {
+    // A valve on which a condition cannot be fitted at all (it never opens there) loses.
+    let on_unit = identify_on(unit, sets, opts, &mut |k, n| progress(k, 2 * n));
+    let on_paper = identify(sets, opts, &mut |k, n| progress(n + k, 2 * n));
+    let cost = |r: &Result<Identified, String>| r.as_ref().map_or(f64::INFINITY, Identified::total_cost);
+    let (unit_cost, paper_cost) = (cost(&on_unit), cost(&on_paper));
+    let kept_unit = on_unit.is_ok() && !(paper_cost < unit_cost);
+    let choice = ValveChoice {
+        unit_cost,
+        paper_cost,
+        kept_unit,
+    };
+    let kept = if kept_unit { on_unit } else { on_paper };
+    Ok((kept?, choice))
+}
+
 /// The unit's own valve, as `diagnose` fitted it, for [`identify_on`].
 #[derive(Clone, Debug)]
 pub struct UnitValve {
