@@ -419,3 +419,27 @@ fn a_wrong_unit_valve_loses_to_the_papers() {
     assert!(!choice.kept_unit, "{}", choice.text());
     assert!(choice.paper_cost < choice.unit_cost);
 }
+
+/// A test condition whose valve never opens (its lift stays at the seat: a unit near force
+/// balance, as generated pressure-delay unit 37 at 6 MPa / 100 °C was) has no delay to read:
+/// it is left out and named, and the other conditions are identified (before: the whole
+/// identification failed with "the valve never opens").
+#[test]
+fn a_condition_whose_valve_never_opens_is_left_out_and_named() {
+    let case = hil_host::generate::generate(hil_host::log::Plant::Ehvva, "none", 4).unwrap();
+    let log = parse_log("estimation.csv", &case.estimation_csv, None).unwrap();
+    let mut set = Events::from_log(&log).unwrap();
+    let shut = &mut set.events[0];
+    let (p, t) = (shut.inputs.p_supply_mpa, shut.inputs.temp_c);
+    shut.lift_mm.iter_mut().for_each(|y| *y = 0.001);
+    let n = set.events.len();
+    let id = identify(&[set], &default_options(), &mut |_, _| {}).unwrap();
+    assert_eq!(id.not_opening.len(), 1, "{:?}", id.not_opening);
+    assert!(
+        id.not_opening[0].starts_with(&format!("{p:.2} MPa / {t:.1} °C")),
+        "{:?}",
+        id.not_opening
+    );
+    assert_eq!(id.conditions.len(), n - 1);
+    assert!(id.text().contains("not identified (the valve never opened"));
+}

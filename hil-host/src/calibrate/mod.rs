@@ -162,6 +162,12 @@ fn ehvva(logs: &[Log], out: &mut Outcome, progress: &mut dyn FnMut(&str)) -> Res
         found.conditions.len(),
         files.join(", ")
     ));
+    if !found.not_opening.is_empty() {
+        out.notes.push(format!(
+            "EHVVA: not identified, the valve never opened to 1 % of its stroke there (the tables interpolate the other conditions): {}",
+            found.not_opening.join(", ")
+        ));
+    }
     out.notes
         .push(format!("EHVVA: diagnose on {}: {extension}", logs[0].file));
     out.notes.push(format!("EHVVA: {}", choice.text()));

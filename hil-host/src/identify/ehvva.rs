@@ -465,9 +465,13 @@ pub fn conditions(sets: &[Events]) -> Vec<Events> {
 }
 
 /// The identified tables.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Default)]
 pub struct Identified {
     pub conditions: Vec<ConditionFit>,
+    /// Conditions where the valve never opened to 1 % of its stroke after a command (a unit
+    /// near force balance, a raised back pressure): no td to read, left out and reported, as
+    /// "Ph MPa / T °C (n events)".
+    pub not_opening: Vec<String>,
 }
 
 /// Interpolates per-condition values at (p, t): bilinear on the grid of the conditions' distinct
@@ -681,6 +685,12 @@ impl Identified {
             g
         };
         let o = self.table_data_onset_td();
+        if !self.not_opening.is_empty() {
+            s.push_str(&format!(
+                "\nnot identified (the valve never opened to 1 % of its stroke after a command there: no delay to read): {}\n",
+                self.not_opening.join(", ")
+            ));
+        }
         let left = self.left_out();
         if !left.is_empty() {
             s.push_str(&format!(
@@ -735,6 +745,7 @@ impl Identified {
         json!({
             "td_definitions": "pass 1 (the paper's method), td_*_onset_ms and td_onset_tables: command edge to the lift onset (1 % rising, 99 % falling of the stroke) less the reduced model's own response time at pass 1's tau_p_onset_ms and cd_onset, which are fitted under that td; pass 2, td_*_ms and ehvva_table_data: td fitted jointly with tau_p and Cd from pass 1 (one consistent reduced-model calibration; td and tau_p correlate, corr_*). On reduced-model logs they agree; on another plant the onset td is its td",
             "left_out_of_tables": self.left_out(),
+            "not_opening": self.not_opening,
             "td_onset_tables": {
                 "td_p_supply_mpa": o.td_p_supply_mpa,
                 "td_temp_c": o.td_temp_c,
@@ -963,9 +974,31 @@ pub fn identify_on(
     opts: &LsqOptions,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Identified, String> {
-    let groups = conditions(sets);
-    if groups.is_empty() {
+    let all = conditions(sets);
+    if all.is_empty() {
         return Err("no valve events in the logs".into());
+    }
+    // A condition whose valve never opens has no delay to identify: left out, reported.
+    let opens = |g: &Events| {
+        g.events.iter().any(|ev| {
+            edge_delays_ms(&ev.lift_mm, ev.on_index, ev.off_index, ev.stroke_mm(base), g.dt_ms)
+                .0
+                .is_some()
+        })
+    };
+    let (groups, shut): (Vec<Events>, Vec<Events>) = all.into_iter().partition(|g| opens(g));
+    let not_opening: Vec<String> = shut
+        .iter()
+        .map(|g| {
+            let (p, t) = condition_point(g);
+            format!("{p:.2} MPa / {t:.1} °C ({} events)", g.events.len())
+        })
+        .collect();
+    if groups.is_empty() {
+        return Err(format!(
+            "the valve never opens to 1 % of its stroke after a command in any test condition ({})",
+            not_opening.join(", ")
+        ));
     }
     // Pass 1: onset td with τp and Cd per condition; its tables give the shape in Ph and T
     // that pass 2 keeps about each condition.
@@ -976,6 +1009,7 @@ pub fn identify_on(
     }
     let shape = Identified {
         conditions: first.clone(),
+        ..Identified::default()
     }
     .table_data();
     let mut out = Vec::with_capacity(groups.len());
@@ -983,7 +1017,10 @@ pub fn identify_on(
         progress(groups.len() + k + 1, 2 * groups.len());
         out.push(fit_joint_on(base, g, start, Some(&shape), opts)?);
     }
-    Ok(Identified { conditions: out })
+    Ok(Identified {
+        conditions: out,
+        not_opening,
+    })
 }
 
 #[cfg(test)]
@@ -1028,6 +1065,7 @@ mod tests {
                 condition(8.0, -20.0, 2.5, 0.1, 0.4),
                 condition(8.0, 100.0, 2.0, 0.1, 0.4),
             ],
+            ..Identified::default()
         };
         assert!(enters_tables(&id.conditions[0]));
         assert!(!enters_tables(&id.conditions[1]));
