@@ -14,10 +14,11 @@
 //! threads by events (the solver's default); the second function on 1 thread, as the Python
 //! peer runs.
 use criterion::{criterion_group, criterion_main, Criterion};
-use hil_host::diagnose::ehvva::EhvvaFamily;
+use hil_host::diagnose::ehvva::{apply_knobs, simulate_all_on, EhvvaFamily, Events, BASELINE_KNOBS};
 use hil_host::diagnose::Family;
 use hil_host::generate;
 use hil_host::log::Plant;
+use model_core::ehvva::EhvvaParams;
 
 fn family(threads: usize) -> EhvvaFamily {
     let mut f = EhvvaFamily::default();
@@ -40,6 +41,15 @@ fn bench(c: &mut Criterion) {
     for (n, v) in &once.params {
         eprintln!("  {n} = {v:.9e}");
     }
+    // One simulation of every estimation event at the optimum (the unit of the fit's cost,
+    // against the peer's `per_sim_ms`), on 1 thread.
+    let set = Events::from_log(&est).expect("events");
+    let x: Vec<f64> = once.params.iter().map(|(_, v)| *v).collect();
+    let p = apply_knobs(&EhvvaParams::baseline(), &BASELINE_KNOBS, &x);
+    let mut sim = vec![0.0; set.samples];
+    c.bench_function("ehvva one simulation of the 20 estimation events, 1 thread", |b| {
+        b.iter(|| simulate_all_on(&p, &set, &mut sim, 1).expect("simulation"))
+    });
     for threads in [2, 1] {
         let name = format!("ehvva four-knob baseline fit, 10 480 samples (seed 33), {threads} thread(s)");
         c.bench_function(&name, |b| {

@@ -14,7 +14,7 @@
 //! default), except the band's arctan fit (1 thread); the second function is the same fit on one
 //! thread throughout, as the Python peer runs.
 use criterion::{criterion_group, criterion_main, Criterion};
-use hil_host::diagnose::vacuum::VacuumFamily;
+use hil_host::diagnose::vacuum::{Inputs, RodMap, VacuumFamily, VacuumModel, ValveMap};
 use hil_host::diagnose::{family_for, Family};
 use hil_host::generate;
 use hil_host::log::Plant;
@@ -63,9 +63,34 @@ fn bench(c: &mut Criterion) {
     });
 }
 
+/// One simulation of the estimation log (valve and rod, 13 rod sub-steps a sample) at the fitted
+/// model: the unit of the fits' cost, against the peer's `per_rod_sim_ms`.
+fn bench_simulation(c: &mut Criterion) {
+    let case = generate::generate(Plant::Vacuum, "none", 33).expect("generated case");
+    let (est, val) = case.logs().expect("generated logs read back");
+    let fit = family_for(Plant::Vacuum)
+        .expect("vacuum family")
+        .fit(&[], None, &est, &val)
+        .expect("baseline fit");
+    let mut m = VacuumModel::baseline_guess(ValveMap::PiecewiseLinear, RodMap::Arctan);
+    for (n, v) in &fit.params {
+        m.set(n, *v).expect("a baseline parameter");
+    }
+    let io = Inputs::from_log(&est).expect("vacuum inputs");
+    let n = io.len();
+    let h_max_s = VacuumFamily::default().h_max_s;
+    let (mut x, mut p) = (vec![0.0; n], vec![0.0; n]);
+    c.bench_function("vacuum one simulation of the 9 180 samples (valve and rod)", |b| {
+        b.iter(|| {
+            m.simulate(&io, 0..n, h_max_s, true, &mut x, &mut p)
+                .expect("simulation")
+        })
+    });
+}
+
 criterion_group! {
     name = benches;
     config = Criterion::default().sample_size(10);
-    targets = bench
+    targets = bench, bench_simulation
 }
 criterion_main!(benches);
