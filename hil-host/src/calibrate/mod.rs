@@ -112,6 +112,10 @@ pub fn calibrate(paths: &[PathBuf], progress: &mut dyn FnMut(&str)) -> Result<Ou
     Ok(out)
 }
 
+/// Points per supply-pressure interval at which the valve motion is computed for the fit of
+/// the ECU's motion tables ([`ValveMotionData::fitted_from_model`]): every 0.125 MPa.
+const MOTION_POINTS_PER_INTERVAL: usize = 8;
+
 fn names(logs: &[Log]) -> Vec<String> {
     logs.iter().map(|l| l.file.clone()).collect()
 }
@@ -153,7 +157,8 @@ fn ehvva(logs: &[Log], out: &mut Outcome, progress: &mut dyn FnMut(&str)) -> Res
     // the sources.
     let mut unit_with_tables = unit;
     unit_with_tables.tables = cal.ehvva_tables;
-    let motion = ValveMotionData::from_model(&unit_with_tables, VALVE_MOTION_P_BACK_MPA);
+    let motion =
+        ValveMotionData::fitted_from_model(&unit_with_tables, VALVE_MOTION_P_BACK_MPA, MOTION_POINTS_PER_INTERVAL);
     if let Ok(m) = motion {
         cal.valve_motion = m;
     }
@@ -206,7 +211,7 @@ fn ehvva(logs: &[Log], out: &mut Outcome, progress: &mut dyn FnMut(&str)) -> Res
                 out,
                 name,
                 &files,
-                &format!("derived: the reduced model's valve motion after td on {valve} with the identified tables"),
+                &format!("derived: the reduced model's valve motion after td on {valve} with the identified tables, every 0.125 MPa, fitted for the ECU's linear interpolation between the breakpoints"),
             ),
             Err(e) => set_source_exact(
                 out,
