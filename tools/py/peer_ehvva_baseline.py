@@ -50,6 +50,8 @@ import time
 import numpy as np
 from scipy.optimize import least_squares
 
+from peer_log import read_log
+
 # The paper's parameters (model-core's EhvvaParams::paper_default, effects off).
 MASS_KG = 0.183
 AREA_TOP = 60.8
@@ -129,21 +131,6 @@ def reference_values():
 
 
 TD_REF, CD_REF, TAU_REF = reference_values()
-
-
-def read_log(path):
-    meta, header, rows = {}, None, []
-    with open(path) as f:
-        for line in f:
-            if line.startswith("#"):
-                key, _, value = line[1:].partition(":")
-                meta[key.strip()] = value.strip()
-            elif header is None:
-                header = line.strip().split(",")
-            elif line.strip():
-                rows.append([float(v) for v in line.split(",")])
-    data = np.array(rows)
-    return meta, {name: data[:, i] for i, name in enumerate(header)}
 
 
 def cut_events(cols):

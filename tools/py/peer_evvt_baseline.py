@@ -25,20 +25,7 @@ import time
 import numpy as np
 from scipy.optimize import least_squares
 
-
-def read_log(path):
-    meta, header, rows = {}, None, []
-    with open(path) as f:
-        for line in f:
-            if line.startswith("#"):
-                key, _, value = line[1:].partition(":")
-                meta[key.strip()] = value.strip()
-            elif header is None:
-                header = line.strip().split(",")
-            elif line.strip():
-                rows.append([float(v) for v in line.split(",")])
-    data = np.array(rows)
-    return meta, {name: data[:, i] for i, name in enumerate(header)}
+from peer_log import read_log
 
 
 def zoh(alpha, beta, t):

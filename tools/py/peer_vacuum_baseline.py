@@ -41,6 +41,8 @@ import time
 
 import numpy as np
 from scipy.optimize import least_squares
+
+from peer_log import read_log
 from scipy.signal import lfilter
 
 P_AMB_REF = 100.0
@@ -103,21 +105,6 @@ def rod_map_valid(m):
         return abs(m["lin_k_pct_per_kPa"]) > 1e-3
     a1, a2 = m["a1_pct"], m["a2_pct_per_rad"]
     return a2 > 0 and m["a4_kPa"] > 0 and abs(a1 / a2) <= THETA_MAX and abs((100 - a1) / a2) <= THETA_MAX
-
-
-def read_log(path):
-    meta, header, rows = {}, None, []
-    with open(path) as f:
-        for line in f:
-            if line.startswith("#"):
-                key, _, value = line[1:].partition(":")
-                meta[key.strip()] = value.strip()
-            elif header is None:
-                header = line.strip().split(",")
-            elif line.strip():
-                rows.append([float(v) for v in line.split(",")])
-    data = np.array(rows)
-    return meta, {name: data[:, i] for i, name in enumerate(header)}
 
 
 def moving_average(y, seconds, dt):
