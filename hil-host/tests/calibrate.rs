@@ -574,6 +574,19 @@ fn an_evvt_recording_calibrates_the_units_table() {
     let get = |k: &str| case.truth.iter().find(|(n, _)| n == k).unwrap().1;
     let outcome = calibrate::calibrate(std::slice::from_ref(&est), &mut |_| {}).unwrap();
     let t = outcome.calibration.evvt_lpv;
+    // The notes say which speeds and voltages the tables cover (the ECU holds the edges).
+    let range = format!(
+        "cover {:.0}-{:.0} rpm and {:.1}-{:.1} V",
+        t.engine_speed_rpm[0], t.engine_speed_rpm[2], t.battery_voltage_v[0], t.battery_voltage_v[2]
+    );
+    assert!(
+        outcome
+            .notes
+            .iter()
+            .any(|n| n.contains(&range) && n.contains("no extrapolation")),
+        "{:?}",
+        outcome.notes
+    );
     for i in 0..3 {
         for j in 0..3 {
             let (a, b) = (t.alpha_deg_per_s2_rpm[i][j], t.beta_per_s[i][j]);

@@ -272,6 +272,7 @@ fn evvt(logs: &[Log], out: &mut Outcome, progress: &mut dyn FnMut(&str)) -> Resu
         points.len(),
         files.join(", ")
     ));
+    out.notes.push(evvt_coverage(&table));
     for name in [
         "evvt.engine_speed_rpm",
         "evvt.battery_voltage_v",
@@ -291,6 +292,18 @@ fn evvt(logs: &[Log], out: &mut Outcome, progress: &mut dyn FnMut(&str)) -> Resu
         "derived: the scheduled kp the identified alpha/beta imply",
     );
     Ok(())
+}
+
+/// What the identified EVVT table covers: the ECU holds its edge values beyond the outer
+/// breakpoints (no extrapolation), so an engine speed or battery voltage outside the bench's
+/// operating points runs on the nearest point's alpha/beta (a unit whose beta keeps falling
+/// with speed gets a kp designed for more damping than it has there).
+fn evvt_coverage(t: &model_core::evvt::EvvtLpvTable) -> String {
+    let (n, v) = (t.engine_speed_rpm, t.battery_voltage_v);
+    format!(
+        "EVVT: the tables cover {:.0}-{:.0} rpm and {:.1}-{:.1} V (the recorded operating points); beyond them the ECU holds the edge values (no extrapolation): record the speeds and voltages the engine runs at",
+        n[0], n[2], v[0], v[2]
+    )
 }
 
 /// Which of the ECU's vacuum actuators a fitted model is, from its map shapes.
