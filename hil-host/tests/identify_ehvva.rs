@@ -443,3 +443,61 @@ fn a_condition_whose_valve_never_opens_is_left_out_and_named() {
     assert_eq!(id.conditions.len(), n - 1);
     assert!(id.text().contains("not identified (the valve never opened"));
 }
+
+/// A log too short for the diagnosis (one valve event: nothing to hold out for validation):
+/// `identify ehvva` fits the conditions on the paper's valve and says why, and `calibrate`
+/// still writes its image (before: both failed on the diagnosis's error).
+#[test]
+fn a_log_too_short_to_diagnose_is_identified_on_the_papers_valve() {
+    let dir = std::env::temp_dir().join(format!("hil-identify-short-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let case = hil_host::generate::generate(hil_host::log::Plant::Ehvva, "none", 4).unwrap();
+    // The metadata, the header and the first event's 40 ms (20 kHz).
+    let mut rows = 0;
+    let short: String = case
+        .estimation_csv
+        .lines()
+        .take_while(|l| {
+            if !l.starts_with('#') {
+                rows += 1;
+            }
+            rows <= 1 + 800
+        })
+        .map(|l| format!("{l}\n"))
+        .collect();
+    let log = dir.join("one-event.csv");
+    std::fs::write(&log, short).unwrap();
+    let bin = env!("CARGO_BIN_EXE_hil-host");
+    let json = dir.join("id.json");
+    let out = std::process::Command::new(bin)
+        .args([
+            "identify",
+            "ehvva",
+            log.to_str().unwrap(),
+            "--json",
+            json.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        text.starts_with("valve: the paper's (the diagnosis could not fit the unit's"),
+        "{text}"
+    );
+    let j: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(j["valve"]["from"], "paper");
+    let cal = std::process::Command::new(bin)
+        .args([
+            "calibrate",
+            log.to_str().unwrap(),
+            "--out",
+            dir.join("cal").to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(cal.status.success(), "{}", String::from_utf8_lossy(&cal.stderr));
+    assert!(dir.join("cal/calibration.bin").is_file());
+    let _ = std::fs::remove_dir_all(&dir);
+}

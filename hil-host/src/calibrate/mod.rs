@@ -131,18 +131,26 @@ fn ehvva(logs: &[Log], out: &mut Outcome, progress: &mut dyn FnMut(&str)) -> Res
         .map_err(|e| format!("EHVVA logs: {e}"))?;
     // The diagnosis first: its baseline is the unit's own valve (spring, mass, areas, flow
     // paths), and it names the extension the tables carry (e.g. td against supply pressure).
+    // Where the diagnosis cannot run (a log too short to hold out validation events), the
+    // tables are identified on the paper's valve, and the notes say why.
     progress("diagnose ehvva");
-    let (extension, unit) = ehvva_extension(logs)?;
+    let diagnosed = ehvva_extension(logs);
     progress("identify ehvva");
-    let (found, choice) = id::identify_unit_or_paper(&unit, &sets, &id::default_options(), &mut |k, n| {
-        progress(&format!("identify ehvva: condition {k}/{n}"))
-    })?;
-    // The valve the kept tables were identified on is the one their motion is computed on.
-    let unit = if choice.kept_unit {
-        unit
-    } else {
-        EhvvaParams::paper_default()
+    let mut tick = |k: usize, n: usize| progress(&format!("identify ehvva: condition {k}/{n}"));
+    let (found, kept_unit, valve_note, extension) = match diagnosed {
+        Ok((extension, unit)) => {
+            let (found, choice) = id::identify_unit_or_paper(&unit, &sets, &id::default_options(), &mut tick)?;
+            (found, choice.kept_unit.then_some(unit), choice.text(), extension)
+        }
+        Err(e) => (
+            id::identify(&sets, &id::default_options(), &mut tick)?,
+            None,
+            format!("the conditions fitted on the paper's valve: the diagnosis could not fit the unit's ({e})"),
+            format!("none ({e})"),
+        ),
     };
+    // The valve the kept tables were identified on is the one their motion is computed on.
+    let unit = kept_unit.unwrap_or_else(EhvvaParams::paper_default);
     let tables = found.table_data();
     let cal = &mut out.calibration;
     cal.ehvva_tables = tables;
@@ -175,11 +183,11 @@ fn ehvva(logs: &[Log], out: &mut Outcome, progress: &mut dyn FnMut(&str)) -> Res
     }
     out.notes
         .push(format!("EHVVA: diagnose on {}: {extension}", logs[0].file));
-    out.notes.push(format!("EHVVA: {}", choice.text()));
-    let valve = if choice.kept_unit {
+    out.notes.push(format!("EHVVA: {valve_note}"));
+    let valve = if kept_unit.is_some() {
         "the unit's valve (diagnose's fit)"
     } else {
-        "the paper's valve (its fits reproduced the lift better than the unit's valve as diagnosed)"
+        "the paper's valve (the unit's as diagnosed did not reproduce the lift better, or could not be fitted)"
     };
     out.set_source(
         "ehvva.",

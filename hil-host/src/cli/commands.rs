@@ -360,11 +360,16 @@ fn identify_ehvva(args: IdentifyEhvvaArgs) -> Result<()> {
         .map(Events::from_log)
         .collect::<std::result::Result<Vec<_>, String>>()
         .map_err(fail)?;
-    let unit = if args.paper_valve {
-        None
+    // Where the diagnosis cannot run (a log too short to hold out validation events), the
+    // conditions are fitted on the paper's valve and the report says why.
+    let (unit, no_unit) = if args.paper_valve {
+        (None, "--paper-valve".to_string())
     } else {
         let _s = Spinner::start("diagnose ehvva: the unit's valve", true);
-        Some(ehvva::unit_valve(&logs).map_err(fail)?)
+        match ehvva::unit_valve(&logs) {
+            Ok(u) => (Some(u), String::new()),
+            Err(e) => (None, format!("the diagnosis could not fit the unit's: {e}")),
+        }
     };
     drop(logs);
     let counter = Counter::new("condition", 1);
@@ -383,7 +388,7 @@ fn identify_ehvva(args: IdentifyEhvvaArgs) -> Result<()> {
     drop(counter);
     match (&unit, &choice) {
         (Some(u), Some(c)) => println!("{}{}\n", u.text(), c.text()),
-        _ => println!("valve: the paper's (--paper-valve)"),
+        _ => println!("valve: the paper's ({no_unit})"),
     }
     print!("{}", id.text());
     if let Some(out) = &a.json {
@@ -396,7 +401,7 @@ fn identify_ehvva(args: IdentifyEhvvaArgs) -> Result<()> {
                 v["cost_paper"] = ehvva::ValveChoice::cost_json(c.paper_cost);
                 v
             }
-            _ => serde_json::json!("paper"),
+            _ => serde_json::json!({"from": "paper", "why": no_unit}),
         };
         write_json(out, j)?;
         eprintln!("tables written to {}", out.display());
