@@ -239,17 +239,13 @@ fn ehvva_extension(logs: &[Log]) -> Result<(String, EhvvaParams), String> {
     if u.cause == "none" {
         return Ok(("no extension named: the tables as identified".into(), u.params));
     }
-    let gains: Vec<String> = u.gains.iter().map(|(k, v)| format!("{k} {v:.3}")).collect();
     let carried = match u.cause.as_str() {
         "pressure-delay" => "the td tables' fall with supply pressure, measured per condition",
         "direction-delay" => "td VO and VC, measured apart",
         "viscosity" => "Cd against temperature, measured per condition",
         _ => "no ECU table for it",
     };
-    Ok((
-        format!("cause `{}` ({}): {carried}", u.cause, gains.join(", ")),
-        u.params,
-    ))
+    Ok((format!("cause `{}` ({}): {carried}", u.cause, u.gains_text()), u.params))
 }
 
 fn set_source_exact(out: &mut Outcome, name: &str, logs: &[String], method: &str) {

@@ -240,20 +240,13 @@ pub fn apply_knobs(base: &EhvvaParams, knobs: &[Knob], x: &[f64]) -> EhvvaParams
 pub fn params_from_fit(internal: &[(String, f64)]) -> Result<EhvvaParams, String> {
     let mut p = EhvvaParams::baseline();
     for (name, v) in internal {
-        let knob = match BASELINE_KNOBS
+        let knob = BASELINE_KNOBS
             .iter()
             .chain(&UNIT_KNOBS)
+            .copied()
+            .chain(EhvvaEffect::NAMES.iter().filter_map(|e| effect_knob(e).ok()))
             .find(|k| k.name == name.as_str())
-        {
-            Some(k) => *k,
-            None => {
-                let effect = EhvvaEffect::NAMES
-                    .iter()
-                    .find(|e| EhvvaEffect::from_name(e).is_ok_and(|x| x.params()[0].0 == name.as_str()))
-                    .ok_or_else(|| format!("EHVVA fit: no parameter named `{name}`"))?;
-                effect_knob(effect)?
-            }
-        };
+            .ok_or_else(|| format!("EHVVA fit: no parameter named `{name}`"))?;
         (knob.apply)(&mut p, *v);
     }
     Ok(p)

@@ -94,6 +94,12 @@ pub struct UnitValve {
 }
 
 impl UnitValve {
+    /// The named effects' gains, `name value, ...` (3 decimals).
+    pub fn gains_text(&self) -> String {
+        let g: Vec<String> = self.gains.iter().map(|(k, v)| format!("{k} {v:.3}")).collect();
+        g.join(", ")
+    }
+
     /// One paragraph for the report: the valve the tables were identified on.
     pub fn text(&self) -> String {
         let values: Vec<String> = self
@@ -104,8 +110,7 @@ impl UnitValve {
         let cause = if self.cause == "none" {
             "no extension named".to_string()
         } else {
-            let g: Vec<String> = self.gains.iter().map(|(k, v)| format!("{k} {v:.3}")).collect();
-            format!("extension `{}` ({})", self.cause, g.join(", "))
+            format!("extension `{}` ({})", self.cause, self.gains_text())
         };
         format!(
             "valve: the unit's, as diagnose fitted it ({cause}; verdict {}): {}\n",
