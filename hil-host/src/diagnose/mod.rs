@@ -368,7 +368,9 @@ type FitOne<'a> = dyn Fn(&[&str], Option<&Fit>, usize, usize) -> Result<Fit, Str
 ///    (starting from its optimum); the best eligible one (gain ≥ `min_gain_pct` over the model
 ///    it extends, z ≥ `min_z`, penalised rank, the simpler of two nested effects unless the
 ///    richer adds `nested_margin_pct`) is added, until none is eligible, the remainder is at
-///    the floor (`stop_ratio`) or `max_causes` are in.
+///    the floor (`stop_ratio`: unless another effect was itself eligible in the round just
+///    run, since the floor is an estimate that unmodelled periodic physics inflates) or
+///    `max_causes` are in.
 /// 3. The verdict: `explained` when the remainder is within `explained_ratio` of the floor and
 ///    carries no material structure; else `unexplained`, with where the remainder lives.
 fn diagnose_fits(
@@ -398,8 +400,12 @@ fn diagnose_fits(
     let score = |c: &Candidate, base: &Fit| {
         c.fit.rmse * (1.0 + rules.penalty_per_param * c.fit.n_params().saturating_sub(base.n_params()) as f64)
     };
+    // Effects that were eligible in the round just run but not added: the next round tries
+    // them on top of the one added even when the remainder already looks like the floor.
+    let mut eligible_left = false;
     loop {
-        if selected.len() >= rules.max_causes || (!rounds.is_empty() && current.rmse <= rules.stop_ratio * floor.rmse) {
+        let at_floor = !rounds.is_empty() && current.rmse <= rules.stop_ratio * floor.rmse;
+        if selected.len() >= rules.max_causes || (at_floor && !eligible_left) {
             break;
         }
         // A simpler effect nested in a selected one adds nothing; a richer one may replace it.
@@ -611,6 +617,13 @@ fn diagnose_fits(
             }
         }
         let added = best.map(|b| last_of(&candidates[b]));
+        // The floor is estimated from the residual (its second differences): a periodic
+        // disturbance no model has yet (belt vibration) counts as noise there and lifts it.
+        // An effect that was significant on its own is evidence the floor stop must not
+        // override.
+        eligible_left = candidates
+            .iter()
+            .any(|c| c.eligible && Some(last_of(c)) != added && c.fit.effects.len() == selected.len() + 1);
         if let Some(b) = best {
             let c = &candidates[b];
             evidence.push(format!(
