@@ -551,14 +551,33 @@ fn diagnose_fits(
                 }
             }
         }
-        // Two effects can mask each other: each alone gains but not consistently enough. When
-        // no single effect is eligible, the two with the largest gains are fitted together
-        // and added together if the pair is eligible and significantly better than each alone.
+        // Two effects can mask each other: each alone gains but not consistently enough, or
+        // one alone fits the estimation data much better and loses on validation (it
+        // stands in for the other where the two vary together, e.g. two effects that both
+        // reschedule the EVVT's α/β). When no single effect is eligible, the two with the
+        // largest gains on either record are fitted together and added together if the
+        // pair is eligible and significantly better than each alone on validation.
         if best.is_none() && selected.len() + 2 <= rules.max_causes {
+            // Estimation gain in RMSE terms (the cost is a sum of squares), comparable
+            // with the validation gain.
+            let est_gain = |c: &Candidate| {
+                let g = 100.0 * (1.0 - (c.fit.est_cost / current.est_cost).sqrt());
+                if g.is_finite() {
+                    g
+                } else {
+                    f64::NEG_INFINITY
+                }
+            };
+            let pair_gain = |c: &Candidate| c.gain_pct.max(est_gain(c));
+            // The first of the two must gain at least `min_gain_pct` on one record, the
+            // second something (its own gain may be what the first one's stand-in took).
             let mut gaining: Vec<usize> = (0..candidates.len())
-                .filter(|&i| candidates[i].gain_pct >= rules.min_gain_pct && candidates[i].fit.rmse.is_finite())
+                .filter(|&i| !offs[i] && pair_gain(&candidates[i]) > 0.0 && candidates[i].fit.rmse.is_finite())
                 .collect();
-            gaining.sort_by(|&a, &b| candidates[b].gain_pct.total_cmp(&candidates[a].gain_pct));
+            gaining.sort_by(|&a, &b| pair_gain(&candidates[b]).total_cmp(&pair_gain(&candidates[a])));
+            if gaining.first().is_some_and(|&a| pair_gain(&candidates[a]) < rules.min_gain_pct) {
+                gaining.clear();
+            }
             if let [a, b, ..] = gaining[..] {
                 let (ea, eb) = (last_of(&candidates[a]), last_of(&candidates[b]));
                 let nests = family
@@ -583,7 +602,7 @@ fn diagnose_fits(
                             && beats(&candidates[a])
                             && beats(&candidates[b]);
                         evidence.push(format!(
-                            "neither effect alone is significant; `{ea}` and `{eb}` together lower the validation RMSE from {:.4} to {:.4} ({gain_pct:.1} %, z = {z:.1}){}",
+                            "neither effect alone is significant on validation; `{ea}` and `{eb}` together lower the validation RMSE from {:.4} to {:.4} ({gain_pct:.1} %, z = {z:.1}){}",
                             current.rmse,
                             pair.rmse,
                             if eligible { ", more than either alone: both added" } else { ": not added" }
