@@ -42,12 +42,23 @@ use model_core::evvt::{quantize_phase_deg, zoh};
 
 use super::catalogue::{Effect, EvvtEffect};
 use super::order_spectrum::{order_peak, project_sinusoid};
-use super::{Family, Fit};
+use super::{Family, Fit, Probe};
 use crate::log::{Log, Plant};
 use crate::lsq::{solve, LsqOptions, LsqResult};
 
 /// The catalogue effects of this family (DATA-FORMAT.md), from the typed catalogue.
 pub const EFFECTS: [&str; 4] = EvvtEffect::NAMES;
+
+/// Physics outside the catalogue the EVVT diagnosis tests for: a transport delay of the motor
+/// command (driver or bus latency). A second-order model absorbs a delay of tens of ms into
+/// lower α and β at a remainder close to the floor, so the remainder alone does not show it.
+pub const PROBES: [Probe; 1] = [Probe {
+    name: "command-delay",
+    what: "a transport delay of the motor command (driver or bus latency between the ECU's command and the phaser)",
+}];
+
+/// The longest command delay the probe fits, s.
+const PROBE_MAX_DELAY_S: f64 = 0.5;
 
 /// Settings of the family.
 #[derive(Debug)]
@@ -235,6 +246,9 @@ struct Model {
     /// Belt disturbance `c cos(2π o θ) + s sin(2π o θ)` = `A sin(2π o θ + φ)`.
     belt_cos: f64,
     belt_sin: f64,
+    /// Transport delay between the controller's command and the phaser, s (the
+    /// command-delay probe only; 0 in every catalogue model).
+    cmd_delay_s: f64,
 }
 
 impl Model {
@@ -252,6 +266,7 @@ impl Model {
             belt_order: 0.5,
             belt_cos: 0.0,
             belt_sin: 0.0,
+            cmd_delay_s: 0.0,
         }
     }
 
@@ -295,6 +310,14 @@ fn simulate(m: &Model, d: &Data, out: &mut [f64]) -> Result<(), String> {
     let mut u_held = 0.0;
     let mut key = (f64::NAN, f64::NAN);
     let mut z = zoh(0.0, 0.0, d.dt);
+    // The command history, kept only for a delayed command (linear between samples).
+    let delay_samples = (m.cmd_delay_s / d.dt).max(0.0);
+    let mut history: Vec<f64> = if delay_samples > 0.0 {
+        Vec::with_capacity(n)
+    } else {
+        Vec::new()
+    };
+    let (delay_whole, delay_frac) = (delay_samples.floor() as usize, delay_samples.fract());
     for (k, slot) in out.iter_mut().enumerate().take(n) {
         let b = belt();
         if let Drive::OpenLoop { window } = d.drive {
@@ -312,6 +335,14 @@ fn simulate(m: &Model, d: &Data, out: &mut [f64]) -> Result<(), String> {
                 u_held
             }
             Drive::OpenLoop { .. } => d.cmd[k],
+        };
+        let u = if delay_samples > 0.0 {
+            history.push(u);
+            // Before the record the command is taken as its first value.
+            let at = |back: usize| history[k.saturating_sub(back)];
+            (1.0 - delay_frac) * at(delay_whole) + delay_frac * at(delay_whole + 1)
+        } else {
+            u
         };
         let (mut a, beta) = m.alpha_beta(d.rpm[k], d.volt[k]);
         if u > 0.0 {
@@ -420,15 +451,25 @@ impl EvvtFamily {
     /// largest thing a long diagnosis held). The stride depends on the record's length only, so
     /// a model and the one it extends are scored on the same samples.
     fn solve_model(&self, effects: &[EvvtEffect], d: &Data, ctx: &Ctx, spec: &Spec) -> Result<LsqResult, String> {
+        self.solve_built(&|x: &[f64]| model_from(effects, x, ctx), d, spec)
+    }
+
+    /// [`Self::solve_model`] for any map from the parameter vector to a model.
+    fn solve_built(
+        &self,
+        build: &(dyn Fn(&[f64]) -> Model + Sync),
+        d: &Data,
+        spec: &Spec,
+    ) -> Result<LsqResult, String> {
         let n = d.y.len();
         let stride = n.div_ceil(MAX_FIT_RESIDUALS).max(1);
         let solved = if stride == 1 {
-            let r = |x: &[f64], out: &mut [f64]| sim_error(&model_from(effects, x, ctx), d, out);
+            let r = |x: &[f64], out: &mut [f64]| sim_error(&build(x), d, out);
             solve(r, &spec.x0, &spec.lo, &spec.hi, n, &self.opts())
         } else {
             let r = |x: &[f64], out: &mut [f64]| {
                 let mut whole = vec![0.0; n];
-                sim_error(&model_from(effects, x, ctx), d, &mut whole)?;
+                sim_error(&build(x), d, &mut whole)?;
                 for (o, e) in out.iter_mut().zip(whole.iter().step_by(stride)) {
                     *o = *e;
                 }
@@ -675,6 +716,88 @@ impl Family for EvvtFamily {
         let mut fit = Fit::with_shared(&Fit::label(&labels), params, ci95, measured, predicted, r.iterations)
             .with_solver(&internal_names, &lo, &hi, &r);
         fit.internal = internal_names.into_iter().zip(x).collect();
+        Ok(fit)
+    }
+
+    fn probes(&self) -> &'static [Probe] {
+        &PROBES
+    }
+
+    /// The command-delay probe: the final model with a transport delay of the motor command
+    /// (linear between samples, 0-0.5 s), every parameter refitted from the final model's
+    /// optimum; the delay starts at the best of a coarse grid with those parameters.
+    fn fit_probe(&self, probe: &str, effects: &[&str], parent: &Fit, est: &Log, val: &Log) -> Result<Fit, String> {
+        if probe != PROBES[0].name {
+            return Err(format!("no probe `{probe}` for the EVVT"));
+        }
+        let effects: Vec<EvvtEffect> = effects
+            .iter()
+            .map(|e| EvvtEffect::from_name(e))
+            .collect::<Result<_, _>>()?;
+        let de = Data::from_log(est, self.open_loop_window_s, self.quantizer_ramp_lsb)?;
+        let dv = Data::from_log(val, self.open_loop_window_s, self.quantizer_ramp_lsb)?;
+        let ctx = Ctx {
+            v_ref: Data::mean(de.volt),
+            n_ref_krpm: Data::mean(de.rpm) / 1000.0,
+        };
+        let mut x0: Vec<f64> = parent.internal.iter().map(|(_, v)| *v).collect();
+        if x0.len() < 2 {
+            return Err("the final model has no parameters to start from".into());
+        }
+        let mut lo = vec![ALPHA_BOUNDS.0, BETA_BOUNDS.0];
+        let mut hi = vec![ALPHA_BOUNDS.1, BETA_BOUNDS.1];
+        for e in &effects {
+            let s = self.spec(*e, &de, &model_from(&[], &x0, &ctx))?;
+            lo.extend(s.lo);
+            hi.extend(s.hi);
+        }
+        x0.truncate(lo.len());
+        let with_delay = |x: &[f64]| {
+            let (delay, rest) = x.split_last().unwrap_or((&0.0, x));
+            Model {
+                cmd_delay_s: *delay,
+                ..model_from(&effects, rest, &ctx)
+            }
+        };
+        let mut out = vec![0.0; de.y.len()];
+        let mut start = (f64::INFINITY, 0.0);
+        for delay_s in [0.0, 0.01, 0.02, 0.04, 0.08, 0.16, 0.32] {
+            let mut x = x0.clone();
+            x.push(delay_s);
+            if sim_error(&with_delay(&x), &de, &mut out).is_ok() {
+                let cost = out.iter().map(|e| e * e).sum::<f64>();
+                if cost < start.0 {
+                    start = (cost, delay_s);
+                }
+            }
+        }
+        x0.push(start.1);
+        lo.push(0.0);
+        hi.push(PROBE_MAX_DELAY_S);
+        let r = self.solve_built(
+            &with_delay,
+            &de,
+            &Spec {
+                x0,
+                lo: lo.clone(),
+                hi: hi.clone(),
+            },
+        )?;
+        let predicted = self.predict(&with_delay(&r.x), &dv)?;
+        let mut names = Self::report_names(&effects, &ctx);
+        names.push("command_delay_s".into());
+        let params: Vec<(String, f64)> = names.iter().cloned().zip(r.x.iter().copied()).collect();
+        let measured = Fit::shared_measured(Some(parent), dv.y);
+        let mut fit = Fit::with_shared(
+            &format!("probe: {probe}"),
+            params,
+            r.ci95.clone(),
+            measured,
+            predicted,
+            r.iterations,
+        )
+        .with_solver(&names, &lo, &hi, &r);
+        fit.internal = names.into_iter().zip(r.x.iter().copied()).collect();
         Ok(fit)
     }
 

@@ -33,6 +33,19 @@ use crate::log::{Log, Plant};
 use crate::lsq::with_iteration_observer;
 use crate::residuals::{CrossCheck, GroupCheck, Whiteness};
 
+/// A test for physics outside the catalogue: after the selection, the final model with this
+/// physics added is fitted; if it beats the final model by the selection's rules, the verdict
+/// is `unexplained` and `what` says what is missing. A probe is never a cause (the catalogue
+/// changes only through DATA-FORMAT.md): it says where the remainder lives when the remainder
+/// alone is too close to the floor to show it (a small delay absorbed into the parameters).
+#[derive(Clone, Copy, Debug)]
+pub struct Probe {
+    /// Short name (the fit's label, `probe: <name>`).
+    pub name: &'static str,
+    /// What is missing, in a calibration engineer's words.
+    pub what: &'static str,
+}
+
 /// A plant's models for the diagnosis.
 pub trait Family {
     fn plant(&self) -> Plant;
@@ -61,6 +74,15 @@ pub trait Family {
     /// Signals of the validation data to correlate the residual with (inputs and candidate
     /// regressors), aligned with the fit's `measured`.
     fn regressors<'a>(&self, val: &'a Log) -> Vec<(String, Cow<'a, [f64]>)>;
+    /// Physics outside the catalogue this family can test for (see [`Probe`]); none by default.
+    fn probes(&self) -> &'static [Probe] {
+        &[]
+    }
+    /// Calibrates the model of `parent` (the baseline plus `effects`) with the probe's extra
+    /// physics added, starting from `parent`'s optimum; predicts `val`.
+    fn fit_probe(&self, probe: &str, _effects: &[&str], _parent: &Fit, _est: &Log, _val: &Log) -> Result<Fit, String> {
+        Err(format!("no probe `{probe}` in this family"))
+    }
     /// What a perfect model would score on the validation data, estimated from `fit`'s
     /// validation residual (the part of the output the model already explains is no noise)
     /// and the quantization of the measured output.
@@ -308,6 +330,16 @@ fn diagnose_in(
             }
             Ok(fitted)
         };
+        let probe = |name: &str, effects: &[&str], parent: &Fit, index: usize, total: usize| -> Result<Fit, String> {
+            let _ = tx.send(Tick::Fit {
+                name: format!("probe: {name}"),
+                index,
+                total,
+            });
+            let held = est.borrow();
+            let est = held.as_deref().ok_or("the estimation log was freed before a fit")?;
+            family.fit_probe(name, effects, parent, est, val)
+        };
         let release = || drop(est.borrow_mut().take());
         let result = diagnose_fits(
             family,
@@ -315,7 +347,7 @@ fn diagnose_in(
             val,
             validation_is_tail,
             rules,
-            &fit,
+            (&fit, &probe),
             &release,
         );
         drop(tx);
@@ -359,6 +391,10 @@ fn without_series(mut candidates: Vec<Candidate>) -> Vec<Candidate> {
 /// `index` of (so far) `total`, and reports it.
 type FitOne<'a> = dyn Fn(&[&str], Option<&Fit>, usize, usize) -> Result<Fit, String> + 'a;
 
+/// Calibrates the final model plus a [`Probe`]'s physics (probe name, effects, final model) as
+/// fit number `index` of `total`.
+type FitProbe<'a> = dyn Fn(&str, &[&str], &Fit, usize, usize) -> Result<Fit, String> + 'a;
+
 /// The diagnosis proper; `fit` calibrates one model (and reports it). The estimation log is
 /// reached only through `fit` (here its name, length and unexcited inputs), and
 /// `release_estimation` frees it once the last fit is done.
@@ -379,7 +415,7 @@ fn diagnose_fits(
     val: &Log,
     validation_is_tail: bool,
     rules: &Rules,
-    fit: &FitOne,
+    (fit, fit_probe): (&FitOne, &FitProbe),
     release_estimation: &dyn Fn(),
 ) -> Result<Diagnosis, String> {
     let mut total = 1 + family.effects().len();
@@ -575,7 +611,10 @@ fn diagnose_fits(
                 .filter(|&i| !offs[i] && pair_gain(&candidates[i]) > 0.0 && candidates[i].fit.rmse.is_finite())
                 .collect();
             gaining.sort_by(|&a, &b| pair_gain(&candidates[b]).total_cmp(&pair_gain(&candidates[a])));
-            if gaining.first().is_some_and(|&a| pair_gain(&candidates[a]) < rules.min_gain_pct) {
+            if gaining
+                .first()
+                .is_some_and(|&a| pair_gain(&candidates[a]) < rules.min_gain_pct)
+            {
                 gaining.clear();
             }
             if let [a, b, ..] = gaining[..] {
@@ -684,6 +723,43 @@ fn diagnose_fits(
     let candidates = rounds.next().map(|r| r.candidates).unwrap_or_default();
     let rounds: Vec<Round> = rounds.collect();
 
+    // Physics outside the catalogue: a probe that beats the final model by the selection's
+    // rules makes the verdict `unexplained`, whatever the remainder's size.
+    let mut probes_found: Vec<String> = Vec::new();
+    total += family.probes().len();
+    for probe in family.probes() {
+        index += 1;
+        match fit_probe(probe.name, &selected, &current, index, total) {
+            Ok(p) => {
+                let gain_pct = 100.0 * (current.rmse - p.rmse) / current.rmse;
+                let z = improvement_z_of(&current, &p);
+                let values: Vec<String> = p
+                    .params
+                    .iter()
+                    .skip(current.params.len())
+                    .map(|(n, v)| format!("{n} = {}", crate::numbers::sig(*v, 3)))
+                    .collect();
+                if gain_pct >= rules.min_gain_pct && z >= rules.min_z {
+                    probes_found.push(format!(
+                        "{} ({}) lowers the validation RMSE from {:.4} to {:.4} ({gain_pct:.1} %, z = {z:.1}): physics outside the catalogue",
+                        probe.what,
+                        values.join(", "),
+                        current.rmse,
+                        p.rmse
+                    ));
+                } else {
+                    evidence.push(format!(
+                        "probe `{}`: {gain_pct:.1} % (z = {z:.1}, {}): not needed",
+                        probe.name,
+                        values.join(", ")
+                    ));
+                }
+            }
+            Err(e) => evidence.push(format!("probe `{}` could not be fitted: {e}", probe.name)),
+        }
+    }
+    evidence.extend(probes_found.iter().cloned());
+
     // The fits are done: what remains reads the validation log only.
     release_estimation();
     // Made after the fits, not held through them (the families' caches they read hold the
@@ -718,10 +794,11 @@ fn diagnose_fits(
         "not comparable with".to_string()
     };
     let material = rest.material_failures();
-    let explained = ratio <= rules.explained_ratio && material.is_empty();
+    let explained = ratio <= rules.explained_ratio && material.is_empty() && probes_found.is_empty();
     let mut where_ = Vec::new();
     if !explained {
-        where_ = locate(&rest, &e_ext, floor.rmse, dt_res);
+        where_ = probes_found.clone();
+        where_.extend(locate(&rest, &e_ext, floor.rmse, dt_res));
         if where_.is_empty() {
             where_.push(format!(
                 "the remainder is {ratio_txt} the noise floor with no single input, state or regime it follows; look at the residual plot for what the catalogue does not describe"
@@ -736,13 +813,27 @@ fn diagnose_fits(
         )
     } else {
         format!(
-            "verdict unexplained: the remainder (RMSE {:.4}) is {ratio_txt} the noise floor {:.4}{}: physics outside the catalogue{}",
+            "verdict unexplained: the remainder (RMSE {:.4}) is {ratio_txt} the noise floor {:.4}{}{}: physics outside the catalogue{}",
             extended.rmse,
             floor.rmse,
             if material.is_empty() {
                 String::new()
             } else {
                 format!(", with structure ({})", material.join("; "))
+            },
+            if probes_found.is_empty() {
+                String::new()
+            } else {
+                format!(
+                    "; a probe finds {}",
+                    family
+                        .probes()
+                        .iter()
+                        .filter(|p| probes_found.iter().any(|f| f.starts_with(p.what)))
+                        .map(|p| p.what)
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                )
             },
             if causes.is_empty() {
                 String::new()
@@ -884,14 +975,22 @@ mod tests {
         })
         .unwrap();
         assert_eq!(d.cause, "square");
+        // `square-again` was eligible in the first round too, so the second round tries it on
+        // top of `square` (the floor stop does not override it): a fourth fit, the total
+        // raised to 4 when that round starts.
+        assert_eq!(d.rounds.len(), 1);
         let fits = [
-            ("baseline", &d.baseline),
-            ("square", &d.candidates[0].fit),
-            ("square-again", &d.candidates[1].fit),
+            ("baseline", &d.baseline, 3),
+            ("square", &d.candidates[0].fit, 3),
+            ("square-again", &d.candidates[1].fit, 3),
+            ("square+square-again", &d.rounds[0].candidates[0].fit, 4),
         ];
-        for (i, (name, fit)) in fits.iter().enumerate() {
+        for (i, (name, fit, total)) in fits.iter().enumerate() {
             let reports: Vec<usize> = seen.iter().filter(|s| s.1 == i + 1).map(|s| s.3).collect();
-            assert!(seen.iter().filter(|s| s.1 == i + 1).all(|s| s.0 == *name && s.2 == 3));
+            assert!(seen
+                .iter()
+                .filter(|s| s.1 == i + 1)
+                .all(|s| s.0 == *name && s.2 == *total));
             // The fit's start, then one report per solver iteration, counted up.
             let expected: Vec<usize> = (0..=fit.iterations).collect();
             assert!(fit.iterations > 2, "{name}: {} iterations", fit.iterations);
