@@ -557,6 +557,27 @@ impl EvvtFamily {
         Ok(Spec { x0, lo, hi })
     }
 
+    /// A fit's inputs: the typed effects, both records and the scheduling effects' reference
+    /// point (the estimation record's mean voltage and speed).
+    fn prepare<'a>(
+        &self,
+        effects: &[&str],
+        est: &'a Log,
+        val: &'a Log,
+    ) -> Result<(Vec<EvvtEffect>, Data<'a>, Data<'a>, Ctx), String> {
+        let effects: Vec<EvvtEffect> = effects
+            .iter()
+            .map(|e| EvvtEffect::from_name(e))
+            .collect::<Result<_, _>>()?;
+        let de = Data::from_log(est, self.open_loop_window_s, self.quantizer_ramp_lsb)?;
+        let dv = Data::from_log(val, self.open_loop_window_s, self.quantizer_ramp_lsb)?;
+        let ctx = Ctx {
+            v_ref: Data::mean(de.volt),
+            n_ref_krpm: Data::mean(de.rpm) / 1000.0,
+        };
+        Ok((effects, de, dv, ctx))
+    }
+
     /// The report's names of α and β and the effects' parameters (α and β are named at the
     /// reference point of a scheduling effect).
     fn report_names(effects: &[EvvtEffect], ctx: &Ctx) -> Vec<String> {
@@ -622,16 +643,7 @@ impl Family for EvvtFamily {
     }
 
     fn fit(&self, effects: &[&str], parent: Option<&Fit>, est: &Log, val: &Log) -> Result<Fit, String> {
-        let effects: Vec<EvvtEffect> = effects
-            .iter()
-            .map(|e| EvvtEffect::from_name(e))
-            .collect::<Result<_, _>>()?;
-        let de = Data::from_log(est, self.open_loop_window_s, self.quantizer_ramp_lsb)?;
-        let dv = Data::from_log(val, self.open_loop_window_s, self.quantizer_ramp_lsb)?;
-        let ctx = Ctx {
-            v_ref: Data::mean(de.volt),
-            n_ref_krpm: Data::mean(de.rpm) / 1000.0,
-        };
+        let (effects, de, dv, ctx) = self.prepare(effects, est, val)?;
         let (alpha, beta, base_res) = match self.cached_baseline(&de).filter(|_| !effects.is_empty()) {
             Some((a, b)) => (a, b, None),
             None => {
@@ -730,16 +742,7 @@ impl Family for EvvtFamily {
         if probe != PROBES[0].name {
             return Err(format!("no probe `{probe}` for the EVVT"));
         }
-        let effects: Vec<EvvtEffect> = effects
-            .iter()
-            .map(|e| EvvtEffect::from_name(e))
-            .collect::<Result<_, _>>()?;
-        let de = Data::from_log(est, self.open_loop_window_s, self.quantizer_ramp_lsb)?;
-        let dv = Data::from_log(val, self.open_loop_window_s, self.quantizer_ramp_lsb)?;
-        let ctx = Ctx {
-            v_ref: Data::mean(de.volt),
-            n_ref_krpm: Data::mean(de.rpm) / 1000.0,
-        };
+        let (effects, de, dv, ctx) = self.prepare(effects, est, val)?;
         let mut x0: Vec<f64> = parent.internal.iter().map(|(_, v)| *v).collect();
         if x0.len() < 2 {
             return Err("the final model has no parameters to start from".into());
