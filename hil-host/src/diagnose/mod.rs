@@ -113,6 +113,11 @@ pub struct Rules {
     pub stop_ratio: f64,
     /// At most this many effects are combined.
     pub max_causes: usize,
+    /// A later effect whose z is under `min_z` is still added when its gain is at least
+    /// this, its z at least `resolve_z`, and it turns a remainder that is not noise into one
+    /// that is (step 2 of the docs).
+    pub resolve_gain_pct: f64,
+    pub resolve_z: f64,
 }
 
 impl Default for Rules {
@@ -125,6 +130,8 @@ impl Default for Rules {
             explained_ratio: 2.0,
             stop_ratio: 1.5,
             max_causes: 3,
+            resolve_gain_pct: 20.0,
+            resolve_z: 2.33,
         }
     }
 }
@@ -584,6 +591,45 @@ fn diagnose_fits(
                             candidates[b].z
                         ));
                     }
+                }
+            }
+        }
+        // A large gain that resolves the remainder: when nothing passed z >= min_z but the
+        // model so far leaves a remainder that is not noise (over explained_ratio of the floor
+        // or with material structure) and the candidate with the largest gain turns it into
+        // one that is (within explained_ratio, no material structure), that is evidence the
+        // block test alone cannot give when the gain is concentrated in part of the record
+        // (an EVVT engine-speed effect shows only away from the nominal speed, so a 29 %
+        // gain scored z = 3.3 over 40 time blocks). Such a candidate is added if its gain is
+        // at least `resolve_gain_pct` and z at least `resolve_z` (one-sided 99 %, the
+        // residual tests' level).
+        if best.is_none() {
+            let by_gain = (0..candidates.len())
+                .filter(|&i| {
+                    !offs[i]
+                        && candidates[i].fit.rmse.is_finite()
+                        && candidates[i].fit.effects.len() == selected.len() + 1
+                })
+                .max_by(|&a, &b| candidates[a].gain_pct.total_cmp(&candidates[b].gain_pct));
+            if let Some(i) = by_gain
+                .filter(|&i| candidates[i].gain_pct >= rules.resolve_gain_pct && candidates[i].z >= rules.resolve_z)
+            {
+                let regressors = family.regressors(val);
+                let resolves = |f: &Fit, floor_rmse: f64| {
+                    let tests = ResidualTests::run(&f.residual(), &regressors, lags, floor_rmse);
+                    f.rmse <= rules.explained_ratio * floor_rmse && tests.material_failures().is_empty()
+                };
+                let cand_floor = family.noise_floor(val, &candidates[i].fit).rmse.min(floor.rmse);
+                if !resolves(&current, floor.rmse) && resolves(&candidates[i].fit, cand_floor) {
+                    evidence.push(format!(
+                        "`{}` gains {:.1} % at z = {:.1} (under {}) and leaves a remainder of noise where the model without it does not: added",
+                        last_of(&candidates[i]),
+                        candidates[i].gain_pct,
+                        candidates[i].z,
+                        rules.min_z
+                    ));
+                    candidates[i].eligible = true;
+                    best = Some(i);
                 }
             }
         }
