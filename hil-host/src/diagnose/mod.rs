@@ -603,12 +603,21 @@ fn diagnose_fits(
         // gain scored z = 3.3 over 40 time blocks). Such a candidate is added if its gain is
         // at least `resolve_gain_pct` and z at least `resolve_z` (one-sided 99 %, the
         // residual tests' level).
-        if best.is_none() {
+        // Only where no candidate was eligible at all (a richer nested effect turned down by
+        // the nested margin stays turned down), and never an effect nesting a selected one.
+        if best.is_none() && !candidates.iter().any(|c| c.eligible) {
+            let nests_selected = |c: &Candidate| {
+                let e = last_of(c);
+                family.nested().iter().any(|(simple, rich)| {
+                    (*rich == e && selected.contains(simple)) || (*simple == e && selected.contains(rich))
+                })
+            };
             let by_gain = (0..candidates.len())
                 .filter(|&i| {
                     !offs[i]
                         && candidates[i].fit.rmse.is_finite()
                         && candidates[i].fit.effects.len() == selected.len() + 1
+                        && !nests_selected(&candidates[i])
                 })
                 .max_by(|&a, &b| candidates[a].gain_pct.total_cmp(&candidates[b].gain_pct));
             if let Some(i) = by_gain
