@@ -55,6 +55,9 @@ pub const EFFECTS: [&str; 4] = EvvtEffect::NAMES;
 pub const PROBES: [Probe; 1] = [Probe {
     name: "command-delay",
     what: "a transport delay of the motor command (driver or bus latency between the ECU's command and the phaser)",
+    // A delay of one log sample (the control period) or more is physics; the quantized
+    // phase (1 deg) dominates the remainder, so a 30-40 ms delay gains only 2-4 % RMSE.
+    min_samples: Some(1.0),
 }];
 
 /// The longest command delay the probe fits, s.
@@ -975,24 +978,27 @@ mod tests {
     fn the_command_delay_probe_finds_a_delay_and_only_a_delay() {
         let f = EvvtFamily::default();
         let rules = crate::diagnose::Rules::default();
-        let (est, val, t) = logs("command-delay", 1000);
-        let d = crate::diagnose::diagnose(&f, &est, &val, false, &rules, &mut |_| {}).unwrap();
-        assert!(d.causes.is_empty(), "{:?}", d.causes);
-        assert_eq!(d.verdict, "unexplained");
-        let delay_truth = truth(&t, "command_delay_s");
-        let probe = d
-            .remainder
-            .evidence
-            .iter()
-            .find(|e| e.starts_with("a transport delay of the motor command"))
-            .unwrap_or_else(|| panic!("{:?}", d.remainder.evidence));
-        let delay: f64 = probe
-            .split("command_delay_s = ")
-            .nth(1)
-            .and_then(|r| r.split(')').next())
-            .and_then(|v| v.parse().ok())
-            .unwrap();
-        assert!((delay / delay_truth - 1.0).abs() < 0.15, "{delay} vs {delay_truth}");
+        // 50 ms (14 % gain) and 40 ms (3.6 % gain at z 5.6: large by its value, four samples).
+        for seed in [1000, 32676] {
+            let (est, val, t) = logs("command-delay", seed);
+            let d = crate::diagnose::diagnose(&f, &est, &val, false, &rules, &mut |_| {}).unwrap();
+            assert!(d.causes.is_empty(), "{:?}", d.causes);
+            assert_eq!(d.verdict, "unexplained", "seed {seed}");
+            let delay_truth = truth(&t, "command_delay_s");
+            let probe = d
+                .remainder
+                .evidence
+                .iter()
+                .find(|e| e.starts_with("a transport delay of the motor command"))
+                .unwrap_or_else(|| panic!("{:?}", d.remainder.evidence));
+            let delay: f64 = probe
+                .split("command_delay_s = ")
+                .nth(1)
+                .and_then(|r| r.split(')').next())
+                .and_then(|v| v.parse().ok())
+                .unwrap();
+            assert!((delay / delay_truth - 1.0).abs() < 0.15, "{delay} vs {delay_truth}");
+        }
         let (est, val, _) = logs("none", 1000);
         let d = crate::diagnose::diagnose(&f, &est, &val, false, &rules, &mut |_| {}).unwrap();
         assert_eq!(d.verdict, "explained", "{:?}", d.evidence);

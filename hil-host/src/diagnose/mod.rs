@@ -44,6 +44,12 @@ pub struct Probe {
     pub name: &'static str,
     /// What is missing, in a calibration engineer's words.
     pub what: &'static str,
+    /// Where the probe's physics is a time (a delay, s): the value, in sample periods of the
+    /// validation log, from which it counts on its size, significance given (z >= min_z),
+    /// even when its RMSE gain is under `min_gain_pct` (the gain is small next to a coarse
+    /// quantization that dominates the remainder; a delay of a sample or more is physics,
+    /// shorter is within the sampled model's own hold). `None`: the gain rule only.
+    pub min_samples: Option<f64>,
 }
 
 /// A plant's models for the diagnosis.
@@ -779,7 +785,8 @@ fn diagnose_fits(
     let rounds: Vec<Round> = rounds.collect();
 
     // Physics outside the catalogue: a probe that beats the final model by the selection's
-    // rules makes the verdict `unexplained`, whatever the remainder's size.
+    // rules (or, significant, with a value beyond the sampling: `Probe::min_samples`) makes
+    // the verdict `unexplained`, whatever the remainder's size.
     let mut probes_found: Vec<String> = Vec::new();
     total += family.probes().len();
     for probe in family.probes() {
@@ -794,7 +801,11 @@ fn diagnose_fits(
                     .skip(current.params.len())
                     .map(|(n, v)| format!("{n} = {}", crate::numbers::sig(*v, 3)))
                     .collect();
-                if gain_pct >= rules.min_gain_pct && z >= rules.min_z {
+                let large = match (probe.min_samples, p.params.last()) {
+                    (Some(samples), Some((_, v))) if p.params.len() > current.params.len() => *v >= samples * val.dt_s,
+                    _ => false,
+                };
+                if z >= rules.min_z && (gain_pct >= rules.min_gain_pct || large) {
                     probes_found.push(format!(
                         "{} ({}) lowers the validation RMSE from {:.4} to {:.4} ({gain_pct:.1} %, z = {z:.1}): physics outside the catalogue",
                         probe.what,
