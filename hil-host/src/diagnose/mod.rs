@@ -13,10 +13,12 @@ pub mod evvt;
 mod fit;
 mod order_spectrum;
 pub mod positioner;
+mod probes;
 pub mod progress;
 pub mod report;
 mod residual_tests;
 mod significance;
+pub use probes::Probe;
 pub mod vacuum;
 
 pub use fit::{noise_floor_of, resolution, Fit, NoiseFloor};
@@ -32,25 +34,6 @@ use std::time::Instant;
 use crate::log::{Log, Plant};
 use crate::lsq::with_iteration_observer;
 use crate::residuals::{CrossCheck, GroupCheck, Whiteness};
-
-/// A test for physics outside the catalogue: after the selection, the final model with this
-/// physics added is fitted; if it beats the final model by the selection's rules, the verdict
-/// is `unexplained` and `what` says what is missing. A probe is never a cause (the catalogue
-/// changes only through DATA-FORMAT.md): it says where the remainder lives when the remainder
-/// alone is too close to the floor to show it (a small delay absorbed into the parameters).
-#[derive(Clone, Copy, Debug)]
-pub struct Probe {
-    /// Short name (the fit's label, `probe: <name>`).
-    pub name: &'static str,
-    /// What is missing, in a calibration engineer's words.
-    pub what: &'static str,
-    /// Where the probe's physics is a time (a delay, s): the value, in sample periods of the
-    /// validation log, from which it counts on its size, significance given (z >= min_z),
-    /// even when its RMSE gain is under `min_gain_pct` (the gain is small next to a coarse
-    /// quantization that dominates the remainder; a delay of a sample or more is physics,
-    /// shorter is within the sampled model's own hold). `None`: the gain rule only.
-    pub min_samples: Option<f64>,
-}
 
 /// A plant's models for the diagnosis.
 pub trait Family {
@@ -119,9 +102,9 @@ pub struct Rules {
     pub stop_ratio: f64,
     /// At most this many effects are combined.
     pub max_causes: usize,
-    /// A later effect whose z is under `min_z` is still added when its gain is at least
-    /// this, its z at least `resolve_z`, and it turns a remainder that is not noise into one
-    /// that is (step 2 of the docs).
+    /// Where no candidate is eligible, the effect with the largest gain is still added when
+    /// its gain is at least this, its z at least `resolve_z`, and it turns a remainder that is
+    /// not noise into one that is (step 2 of the docs).
     pub resolve_gain_pct: f64,
     pub resolve_z: f64,
 }
@@ -406,7 +389,7 @@ type FitOne<'a> = dyn Fn(&[&str], Option<&Fit>, usize, usize) -> Result<Fit, Str
 
 /// Calibrates the final model plus a [`Probe`]'s physics (probe name, effects, final model) as
 /// fit number `index` of `total`.
-type FitProbe<'a> = dyn Fn(&str, &[&str], &Fit, usize, usize) -> Result<Fit, String> + 'a;
+pub(super) type FitProbe<'a> = dyn Fn(&str, &[&str], &Fit, usize, usize) -> Result<Fit, String> + 'a;
 
 /// The diagnosis proper; `fit` calibrates one model (and reports it). The estimation log is
 /// reached only through `fit` (here its name, length and unexcited inputs), and
@@ -784,47 +767,18 @@ fn diagnose_fits(
     let candidates = rounds.next().map(|r| r.candidates).unwrap_or_default();
     let rounds: Vec<Round> = rounds.collect();
 
-    // Physics outside the catalogue: a probe that beats the final model by the selection's
-    // rules (or, significant, with a value beyond the sampling: `Probe::min_samples`) makes
-    // the verdict `unexplained`, whatever the remainder's size.
-    let mut probes_found: Vec<String> = Vec::new();
-    total += family.probes().len();
-    for probe in family.probes() {
-        index += 1;
-        match fit_probe(probe.name, &selected, &current, index, total) {
-            Ok(p) => {
-                let gain_pct = 100.0 * (current.rmse - p.rmse) / current.rmse;
-                let z = improvement_z_of(&current, &p);
-                let values: Vec<String> = p
-                    .params
-                    .iter()
-                    .skip(current.params.len())
-                    .map(|(n, v)| format!("{n} = {}", crate::numbers::sig(*v, 3)))
-                    .collect();
-                let large = match (probe.min_samples, p.params.last()) {
-                    (Some(samples), Some((_, v))) if p.params.len() > current.params.len() => *v >= samples * val.dt_s,
-                    _ => false,
-                };
-                if z >= rules.min_z && (gain_pct >= rules.min_gain_pct || large) {
-                    probes_found.push(format!(
-                        "{} ({}) lowers the validation RMSE from {:.4} to {:.4} ({gain_pct:.1} %, z = {z:.1}): physics outside the catalogue",
-                        probe.what,
-                        values.join(", "),
-                        current.rmse,
-                        p.rmse
-                    ));
-                } else {
-                    evidence.push(format!(
-                        "probe `{}`: {gain_pct:.1} % (z = {z:.1}, {}): not needed",
-                        probe.name,
-                        values.join(", ")
-                    ));
-                }
-            }
-            Err(e) => evidence.push(format!("probe `{}` could not be fitted: {e}", probe.name)),
-        }
-    }
-    evidence.extend(probes_found.iter().cloned());
+    // Physics outside the catalogue (`probes::run`): a probe found makes the verdict
+    // `unexplained`, whatever the remainder's size.
+    let probes_found = probes::run(
+        family,
+        rules,
+        &selected,
+        &current,
+        val,
+        fit_probe,
+        (&mut index, &mut total),
+        &mut evidence,
+    );
 
     // The fits are done: what remains reads the validation log only.
     release_estimation();
@@ -863,7 +817,7 @@ fn diagnose_fits(
     let explained = ratio <= rules.explained_ratio && material.is_empty() && probes_found.is_empty();
     let mut where_ = Vec::new();
     if !explained {
-        where_ = probes_found.clone();
+        where_ = probes_found.iter().map(|(_, sentence)| sentence.clone()).collect();
         where_.extend(locate(&rest, &e_ext, floor.rmse, dt_res));
         if where_.is_empty() {
             where_.push(format!(
@@ -892,13 +846,7 @@ fn diagnose_fits(
             } else {
                 format!(
                     "; a probe finds {}",
-                    family
-                        .probes()
-                        .iter()
-                        .filter(|p| probes_found.iter().any(|f| f.starts_with(p.what)))
-                        .map(|p| p.what)
-                        .collect::<Vec<_>>()
-                        .join(", ")
+                    probes_found.iter().map(|(what, _)| *what).collect::<Vec<_>>().join(", ")
                 )
             },
             if causes.is_empty() {
