@@ -271,18 +271,15 @@ fn unsettled_prefix(u: &[f64], lift: &[f64], first_on: usize, pre: usize) -> usi
 }
 
 /// Simulates one event from rest with model-core's reduced model, writing the lift into `out`
-/// (same length as the event).
+/// (same length as the event). The model runs from the event's first sample, its rest window
+/// included: where the spring cannot hold the valve on its seat against the back pressure
+/// ((At − Ab)·Pl > ks·ds) the valve leaves the seat before the command, as on the bench.
 pub fn simulate_event(params: &EhvvaParams, ev: &Event, dt_ms: f64, out: &mut [f64]) -> Result<(), String> {
     let mut m = EhvvaReduced::<f64, DELAY_SAMPLES>::new(params, &ev.inputs, dt_ms).map_err(|e| format!("{e:?}"))?;
     let settle = ((2.0 / dt_ms).round() as usize).max(1);
     let mut seated_for = 0usize;
     let last_off = ev.off_index.unwrap_or(usize::MAX);
     for (k, slot) in out.iter_mut().enumerate() {
-        if k < ev.on_index {
-            // At rest before the command: the model's steady state.
-            *slot = 0.0;
-            continue;
-        }
         if seated_for >= settle {
             *slot = 0.0;
             continue;
