@@ -358,8 +358,7 @@ impl VacuumFamily {
     /// Starts: an extension starts from `parent` (the model it extends, at its optimum) with the
     /// new effect at its starting magnitude, and, for a mechanical effect, also from the
     /// band-centre map of the prepared start (the baseline's rod is bent by the hysteresis it
-    /// could not describe), for a pressure effect also with the prepared mass and damping (the
-    /// parent's are bent by the pressure physics it lacked); the clearance, whose cost is multimodal, also from a large
+    /// could not describe); the clearance, whose cost is multimodal, also from a large
     /// clearance (10 %). If every start ends above the parent's position cost, the parent with
     /// the effect at its neutral value is refitted too: an extension never ends worse on the
     /// estimation data than the model it extends. Returns the model, the fitted parameter names,
@@ -407,19 +406,6 @@ impl VacuumFamily {
                     if !is_pressure_param(n) {
                         m.set(n, prepared.get(n))?;
                     }
-                }
-                starts.push(m);
-            }
-            if is_pressure_effect(last) {
-                // The parent's rod dynamics are bent by the pressure physics it lacked (a slow
-                // fall taken for a stiff retract damping): also from the prepared damping.
-                let mut m = parent_model(false)?;
-                for n in [
-                    "mass_kPa_s2_per_pct",
-                    "damping_extend_kPa_s_per_pct",
-                    "damping_retract_kPa_s_per_pct",
-                ] {
-                    m.set(n, prepared.get(n))?;
                 }
                 starts.push(m);
             }

@@ -262,35 +262,6 @@ fn extended_fits_recover_the_hidden_magnitudes() {
     assert!((m.voltage_gain - 1.0).abs() < 0.05, "{}", m.voltage_gain);
 }
 
-/// A pressure effect on top of a mechanical one: the friction model's rod dynamics are bent by
-/// the slow pressure fall it lacked (seed 1000: retract damping 0.0013 against the truth's
-/// 0.0142, extend 0.022 against 0.0074), and from that optimum alone the pressure-direction
-/// fit gained 1 % and was not added. It also starts from the prepared damping and mass and
-/// brings the remainder to the noise floor.
-#[test]
-fn a_pressure_effect_on_top_of_friction_is_named_with_it() {
-    use crate::diagnose::{diagnose, Rules};
-    let (_, est, val) = case_logs("pressure-direction+coulomb-friction", 1000);
-    let d = diagnose(
-        &VacuumFamily::default(),
-        &est,
-        &val,
-        false,
-        &Rules::default(),
-        &mut |_| {},
-    )
-    .unwrap();
-    let mut causes = d.causes.clone();
-    causes.sort();
-    assert_eq!(
-        causes,
-        ["coulomb-friction", "pressure-direction"],
-        "{}",
-        crate::diagnose::report::summary(&d)
-    );
-    assert_eq!(d.verdict, "explained", "{}", crate::diagnose::report::summary(&d));
-}
-
 #[test]
 fn position_only_logs_are_diagnosed_too() {
     use crate::diagnose::{diagnose, Rules};
