@@ -34,10 +34,6 @@ pub struct Event {
     /// Index (in the event) of the rising command edge and of the last falling one.
     pub on_index: usize,
     pub off_index: Option<usize>,
-    /// Standard errors of the supply and back pressure set-points, MPa: the spread of the
-    /// rest samples they are the mean of over √n, at least a uniform quantization error
-    /// (q/√12, which averaging identical samples does not reduce).
-    pub setpoint_se_mpa: [f64; 2],
 }
 
 impl Event {
@@ -54,10 +50,6 @@ pub struct Events {
     /// Samples in the log (the events cover it from the first one's start).
     pub samples: usize,
     pub file: String,
-    /// Weights of the lift residual per sample in the fits ([`super::calibrate`]); `None`:
-    /// all 1. Set by the diagnosis from the set-points' uncertainty
-    /// ([`super::setpoint_weights`]); a subset starts without.
-    pub weights: Option<std::sync::Arc<[f64]>>,
 }
 
 fn median(v: &mut [f64]) -> f64 {
@@ -90,8 +82,6 @@ impl Events {
         }
         let n = lift.len();
         let pre = ((PRE_MS / dt_ms).round() as usize).max(1);
-        let quantization_se =
-            [crate::diagnose::resolution(ph), crate::diagnose::resolution(pl)].map(|q| q / 12f64.sqrt());
         // A command already on at the first sample began before the log: not an edge.
         let rising: Vec<usize> = (1..n).filter(|&k| u[k] > 0.5 && u[k - 1] <= 0.5).collect();
         if rising.is_empty() {
@@ -123,19 +113,6 @@ impl Events {
                     median(&mut v)
                 }
             };
-            let standard_error = |x: &[f64], floor: f64| {
-                let m = rest.len() as f64;
-                if rest.len() < 3 {
-                    return floor;
-                }
-                let mean = x[rest.clone()].iter().sum::<f64>() / m;
-                let var = x[rest.clone()].iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (m - 1.0);
-                (var / m).sqrt().max(floor)
-            };
-            let setpoint_se_mpa = [
-                standard_error(ph, quantization_se[0]),
-                standard_error(pl, quantization_se[1]),
-            ];
             let off_index = (s + on + 1..e)
                 .rev()
                 .find(|&k| u[k] <= 0.5 && u[k - 1] > 0.5)
@@ -154,7 +131,6 @@ impl Events {
                 inputs,
                 on_index: on,
                 off_index,
-                setpoint_se_mpa,
             });
         }
         Ok(Events {
@@ -162,7 +138,6 @@ impl Events {
             events,
             samples: n,
             file: log.file.clone(),
-            weights: None,
         })
     }
 
@@ -203,7 +178,6 @@ impl Events {
             events,
             samples: at,
             file: self.file.clone(),
-            weights: None,
         }
     }
 

@@ -25,11 +25,6 @@
 //!   from the paper's calibration with the effects at the paper's gain (a baseline with the
 //!   unit knobs free can absorb part of an effect into wrong unit values); a fit that stops on
 //!   a collapsed trust region is restarted from where it stopped.
-//!
-//! The set-points are read from noisy samples at rest ([`Event::setpoint_se_mpa`]), and near
-//! force balance (a valve floating short of its stop) the lift hangs on them: after the
-//! baseline's first fit every residual sample is weighted by [`setpoint_weights`] and the
-//! baseline refitted from there; every fit on the same data uses the same weights.
 
 use std::borrow::Cow;
 use std::sync::Mutex;
@@ -37,7 +32,7 @@ use std::sync::Mutex;
 use model_core::ehvva::EhvvaParams;
 
 use super::catalogue::{Effect, EhvvaEffect};
-use super::{noise_floor_of, Family, Fit};
+use super::{Family, Fit};
 use crate::log::{Log, Plant};
 use crate::lsq::{solve, LsqOptions, LsqResult, StopReason};
 
@@ -106,7 +101,6 @@ pub fn calibrate_with(
     derive: &(dyn Fn(&mut EhvvaParams) -> Result<(), String> + Sync),
 ) -> Result<LsqResult, String> {
     let measured = set.measured();
-    let weights = set.weights.clone();
     let lo: Vec<f64> = knobs.iter().map(|k| k.lo).collect();
     let hi: Vec<f64> = knobs.iter().map(|k| k.hi).collect();
     // The threads go to the events of each simulation, not to the Jacobian's columns: the
@@ -119,11 +113,6 @@ pub fn calibrate_with(
         for (o, y) in out.iter_mut().zip(&measured) {
             *o -= y;
         }
-        if let Some(w) = &weights {
-            for (o, w) in out.iter_mut().zip(w.iter()) {
-                *o *= w;
-            }
-        }
         Ok(())
     };
     let serial = LsqOptions {
@@ -131,38 +120,6 @@ pub fn calibrate_with(
         ..opts.clone()
     };
     solve(residual, x0, &lo, &hi, set.samples, &serial).map_err(|e| format!("{}: {e}", set.file))
-}
-
-/// Weights of the lift residual for the fits: 1/√(1 + σ²ᵢₙ/σ²) per sample, σ the lift
-/// sensor's noise and σᵢₙ the lift error that the set-points' own uncertainty makes
-/// ([`Event::setpoint_se_mpa`]: supply and back pressure read from noisy samples at rest),
-/// from `params` stepped by one standard error in each pressure. Near force balance (a valve
-/// floating short of its stop, or barely reaching it) the lift moves ~10 mm per MPa of supply
-/// pressure, and one pressure LSB in the set-point misses the bench by several times the
-/// sensor noise: a perfect model would, and such samples weigh less, where everywhere else
-/// the weight is 1 within a fraction of a percent (a linearized errors-in-variables fit).
-pub fn setpoint_weights(params: &EhvvaParams, set: &Events, sigma_mm: f64, threads: usize) -> Result<Vec<f64>, String> {
-    let mut nominal = vec![0.0; set.samples];
-    simulate_all_on(params, set, &mut nominal, threads)?;
-    let mut var_in = vec![0.0; set.samples];
-    let mut shifted_sim = vec![0.0; set.samples];
-    for which in 0..2 {
-        let mut shifted = set.clone();
-        for ev in &mut shifted.events {
-            let se = ev.setpoint_se_mpa[which];
-            if which == 0 {
-                ev.inputs.p_supply_mpa += se;
-            } else {
-                ev.inputs.p_back_mpa += se;
-            }
-        }
-        simulate_all_on(params, &shifted, &mut shifted_sim, threads)?;
-        for ((v, a), b) in var_in.iter_mut().zip(&shifted_sim).zip(&nominal) {
-            *v += (a - b).powi(2);
-        }
-    }
-    let s2 = sigma_mm.max(1e-9).powi(2);
-    Ok(var_in.iter().map(|v| 1.0 / (1.0 + v / s2).sqrt()).collect())
 }
 
 /// Times at which the lift crosses 1 % of the stroke after the rising edge and 99 % after the
@@ -216,8 +173,6 @@ struct Baseline {
     /// The unit knobs were left at the paper's values (the unit fit ended worse than the four
     /// knobs alone, or `unit_baseline` is off).
     paper_unit: bool,
-    /// The residual weights of every fit on these data ([`setpoint_weights`]).
-    weights: std::sync::Arc<[f64]>,
 }
 
 /// Settings of the family.
@@ -303,7 +258,6 @@ impl EhvvaFamily {
             x: r4.x.clone(),
             r: r4,
             paper_unit: true,
-            weights: std::sync::Arc::from(Vec::new()),
         };
         let mut b = four.clone();
         if self.unit_baseline {
@@ -326,34 +280,9 @@ impl EhvvaFamily {
                     x: r.x.clone(),
                     r,
                     paper_unit: false,
-                    weights: four.weights.clone(),
                 };
             }
         }
-        // Then weighted by the set-points' uncertainty, from that optimum: the weights need a
-        // model of this unit (near force balance on the unit, not on the paper's valve), and
-        // every later fit on these data uses the same ones.
-        let p = apply_knobs(&EhvvaParams::baseline(), &b.knobs, &b.x);
-        let measured = set.measured();
-        let mut residual = vec![0.0; set.samples];
-        simulate_all_on(&p, set, &mut residual, self.lsq.threads)?;
-        for (r, y) in residual.iter_mut().zip(&measured) {
-            *r -= y;
-        }
-        let sigma_mm = noise_floor_of(&residual, super::resolution(&measured)).rmse;
-        let weights: std::sync::Arc<[f64]> = setpoint_weights(&p, set, sigma_mm, self.lsq.threads)?.into();
-        let weighted = Events {
-            weights: Some(weights.clone()),
-            ..set.clone()
-        };
-        let lsq = if b.paper_unit {
-            self.lsq.clone()
-        } else {
-            self.unit_lsq()
-        };
-        b.r = calibrate_restarted(&EhvvaParams::baseline(), &b.knobs, &b.x, &weighted, &lsq)?;
-        b.x = b.r.x.clone();
-        b.weights = weights;
         if let Ok(mut g) = self.baseline.lock() {
             *g = Some((key, b.clone()));
         }
@@ -369,7 +298,7 @@ impl Family for EhvvaFamily {
         "lift_mm"
     }
     fn formulation(&self) -> &'static str {
-        "simulation error of the lift: each valve event (cut at the rising pilot command) simulated from rest by model-core's reduced model, eq. (12), at the event's set-points (pressures read at rest before the command); trust-region least squares, eqs. (16)-(20), each sample weighted by how far the set-points' own uncertainty moves the lift (1/sqrt(1 + var_in/noise^2): samples near force balance weigh less)"
+        "simulation error of the lift: each valve event (cut at the rising pilot command) simulated from rest by model-core's reduced model, eq. (12), at the event's set-points (pressures read at rest before the command); trust-region least squares, eqs. (16)-(20)"
     }
     fn effects(&self) -> &'static [&'static str] {
         &EFFECTS
@@ -402,11 +331,10 @@ impl Family for EhvvaFamily {
 
     fn fit(&self, effects: &[&str], parent: Option<&Fit>, est: &Log, val: &Log) -> Result<Fit, String> {
         let all = Events::from_log(est)?;
-        let mut de = all.for_fitting(MAX_FIT_EVENTS);
+        let de = all.for_fitting(MAX_FIT_EVENTS);
         let (fitted_on, of) = (de.events.len(), all.events.len());
         drop(all);
         let base = self.fit_baseline(&de)?;
-        de.weights = Some(base.weights.clone());
         let (xb, rb) = (base.x.clone(), base.r.clone());
         let mut knobs: Vec<Knob> = base.knobs.clone();
         for e in effects {
@@ -644,40 +572,6 @@ mod tests {
         .unwrap();
         assert!(d.causes.is_empty(), "{:?}", d.causes);
         assert_eq!(d.verdict, "explained", "{}", crate::diagnose::report::summary(&d));
-    }
-
-    /// The fits' residual weights follow the set-points' uncertainty: where the valve floats
-    /// short of its stop (the net force at full stroke At·Ph − Ab·Pl − ks·(ds + S) negative) its
-    /// lift moves ~10 mm per MPa of supply pressure, and one standard error of the set-point
-    /// read at rest (0.002 MPa) moves it by several times the sensor noise, so those samples
-    /// weigh less; events far from force balance keep their weight.
-    #[test]
-    fn samples_near_force_balance_weigh_less_by_the_setpoints_uncertainty() {
-        let (est, _, truth) = logs("none", 72271);
-        let p = gen::params_from_truth(&truth);
-        let set = Events::from_log(&est).unwrap();
-        let w = setpoint_weights(&p, &set, 0.0026, 1).unwrap();
-        let (mut floating, mut held) = (0, 0);
-        for ev in &set.events {
-            let margin = p.area_top_mm2 * ev.inputs.p_supply_mpa
-                - p.area_bottom_mm2 * ev.inputs.p_back_mpa
-                - p.spring_n_per_mm * (p.spring_preload_mm + ev.stroke_mm(&p));
-            let we = &w[ev.start..ev.start + ev.lift_mm.len()];
-            let mean = we.iter().sum::<f64>() / we.len() as f64;
-            let min = we.iter().copied().fold(1.0, f64::min);
-            assert!(ev.setpoint_se_mpa.iter().all(|se| (0.001..0.005).contains(se)));
-            if margin < -10.0 {
-                floating += 1;
-                assert!(
-                    mean < 0.8 && min < 0.3,
-                    "margin {margin:.1} N: weights mean {mean:.3}, min {min:.3}"
-                );
-            } else if margin > 50.0 {
-                held += 1;
-                assert!(mean > 0.95, "margin {margin:.1} N: weights mean {mean:.3}");
-            }
-        }
-        assert!(floating >= 2 && held >= 5, "{floating} floating, {held} held events");
     }
 
     /// A log cut out of a longer record in the middle of a valve event (the held-out tail of
