@@ -6,10 +6,10 @@
 //! `PRE_MS` before the edge, where the valve is at rest, and runs to the next segment. Each
 //! segment is simulated by model-core's reduced model of eq. (12) ([`EhvvaReduced`](model_core::ehvva::EhvvaReduced), f64)
 //! from rest at the segment's operating point, from its first sample (a valve whose spring
-//! cannot hold it against a high back pressure leaves its seat before the command): supply and back pressure are the set-points
-//! read from the samples at rest before the edge (the logged pressures dip while the valve
-//! moves, as the accumulators of eqs. (7)-(8) do in the model), temperature the segment's
-//! mean, lift and switch valves their state at the edge. Once the valve is seated again after
+//! cannot hold it against a high back pressure leaves its seat before the command): supply
+//! and back pressure are the set-points read from the samples at rest before the edge (the
+//! logged pressures dip while the valve moves, as the accumulators of eqs. (7)-(8) do in the
+//! model), temperature the segment's mean, lift and switch valves their state at the edge. Once the valve is seated again after
 //! the last command the model is at rest and the rest of the segment is 0 without stepping.
 //!
 //! Parameters are [`Knob`]s: named values that set fields of [`EhvvaParams`], fitted by the
