@@ -507,6 +507,14 @@ mod tests {
         (est, val, case.truth)
     }
 
+    /// RMS of the lift simulated with `p` on `set`'s events minus the measured lift, mm.
+    fn simulation_rmse(p: &EhvvaParams, set: &Events) -> f64 {
+        let mut sim = vec![0.0; set.samples];
+        simulate_all(p, set, &mut sim).unwrap();
+        let e: Vec<f64> = sim.iter().zip(set.measured()).map(|(s, y)| s - y).collect();
+        crate::residuals::rmse(&e)
+    }
+
     fn get(v: &[(String, f64)], key: &str) -> f64 {
         v.iter()
             .find(|(k, _)| k == key)
@@ -522,17 +530,12 @@ mod tests {
         let (est, _, truth) = logs("direction-delay", 3);
         let set = Events::from_log(&est).unwrap();
         let p = gen::params_from_truth(&truth);
-        let mut sim = vec![0.0; set.samples];
-        simulate_all(&p, &set, &mut sim).unwrap();
-        let e: Vec<f64> = sim.iter().zip(set.measured()).map(|(s, y)| s - y).collect();
-        let rms = crate::residuals::rmse(&e);
+        let rms = simulation_rmse(&p, &set);
         assert!(rms < 0.008, "rms {rms} mm: more than the lift sensor's noise");
         // A 10 % longer delay does not.
         let mut wrong = p;
         scale_td(&mut wrong, get(&truth, "td_ms_at_7MPa_22C") * 1.1);
-        simulate_all(&wrong, &set, &mut sim).unwrap();
-        let e: Vec<f64> = sim.iter().zip(set.measured()).map(|(s, y)| s - y).collect();
-        assert!(crate::residuals::rmse(&e) > 5.0 * rms);
+        assert!(simulation_rmse(&wrong, &set) > 5.0 * rms);
     }
 
     /// A unit whose spring is too weak to hold the valve on its seat against a high back
@@ -554,10 +557,7 @@ mod tests {
             set.events.iter().any(floats),
             "the case must have an event whose valve floats at rest"
         );
-        let mut sim = vec![0.0; set.samples];
-        simulate_all(&p, &set, &mut sim).unwrap();
-        let e: Vec<f64> = sim.iter().zip(set.measured()).map(|(s, y)| s - y).collect();
-        let rms = crate::residuals::rmse(&e);
+        let rms = simulation_rmse(&p, &set);
         assert!(rms < 0.008, "rms {rms} mm: more than the lift sensor's noise");
         // The healthy unit is explained, with no cause.
         let family = EhvvaFamily::default();
@@ -600,10 +600,7 @@ mod tests {
         assert!(tail.col("lift_mm").unwrap()[seated..seated + 5]
             .iter()
             .all(|l| l.abs() < 0.05));
-        let mut sim = vec![0.0; set.samples];
-        simulate_all(&gen::params_from_truth(&truth), &set, &mut sim).unwrap();
-        let e: Vec<f64> = sim.iter().zip(set.measured()).map(|(s, y)| s - y).collect();
-        let rms = crate::residuals::rmse(&e);
+        let rms = simulation_rmse(&gen::params_from_truth(&truth), &set);
         assert!(rms < 0.008, "rms {rms} mm");
         // The family scores the skipped samples as measured, for every candidate alike.
         let fit = EhvvaFamily::default().fit(&["snubber"], None, &est, &tail).unwrap();
