@@ -143,7 +143,7 @@ fn target_bench_counts_every_task_and_plant_and_matches_the_host() {
     let _one = one_at_a_time();
     let frames: Vec<SensorFrame> = closed_loop_frames().into_iter().take(300).collect();
     let dir = std::env::temp_dir().join(format!("pil-bench-{}", std::process::id()));
-    let b = pil::target_bench(&elf, &frames, &dir).unwrap();
+    let b = pil::target_bench(&elf, &frames, &dir, false).unwrap();
     eprint!("{}", b.text());
     for (k, (name, _)) in pil::PLANT_NUMBERS.iter().enumerate() {
         assert!(b.plant_states_equal(k), "{name} plant states differ");

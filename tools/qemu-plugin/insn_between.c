@@ -8,6 +8,10 @@
  *
  *   qemu-system-arm ... -plugin tools/qemu-plugin/insn_between.so,begin=core_step:0x8001234:18,end=0x8001240:20,out=counts.txt
  *
+ * With pcs=FILE it also counts the instructions of each interval by program counter and keeps
+ * FILE as lines "label 0xADDRESS count" (the innermost open interval's label), rewritten
+ * whenever an outermost interval closes: a profile to map to source lines with addr2line.
+ *
  * begin=LABEL:ADDRESS:SIZE (repeatable) and end=ADDRESS:SIZE are the markers' ELF symbols
  * (the Thumb bit of the address is ignored). Interrupts taken inside an interval would be
  * counted too: the firmware masks them while an interval is open.
@@ -59,6 +63,61 @@ static uint64_t total;
 static struct { int label; uint64_t at; } open_intervals[MAX_DEPTH];
 static int depth;
 
+/* The per-address profile (pcs=FILE): one slot per instruction address, allocated when first
+ * translated, counting by the innermost open interval's label. */
+struct pc_slot {
+    uint64_t pc;
+    uint64_t counts[MAX_MARKERS];
+};
+#define MAX_SLOTS (1 << 17) /* a power of two: open addressing by the address's bits */
+static struct pc_slot *slots[MAX_SLOTS];
+static const char *pcs_path;
+
+static struct pc_slot *slot_for(uint64_t pc)
+{
+    for (uint64_t probe = 0; probe < MAX_SLOTS; probe++) {
+        struct pc_slot **s = &slots[((pc >> 1) + probe) & (MAX_SLOTS - 1)];
+        if (*s == NULL) {
+            *s = calloc(1, sizeof **s);
+            if (*s != NULL) {
+                (*s)->pc = pc;
+            }
+            return *s;
+        }
+        if ((*s)->pc == pc) {
+            return *s;
+        }
+    }
+    return NULL;
+}
+
+static void write_pcs(void)
+{
+    FILE *f = fopen(pcs_path, "w");
+    if (f == NULL) {
+        return;
+    }
+    for (int i = 0; i < MAX_SLOTS; i++) {
+        for (int k = 0; slots[i] != NULL && k < n_begins; k++) {
+            if (slots[i]->counts[k] != 0) {
+                fprintf(f, "%s %#llx %llu\n", begins[k].label, (unsigned long long)slots[i]->pc,
+                        (unsigned long long)slots[i]->counts[k]);
+            }
+        }
+    }
+    fclose(f);
+}
+
+static void on_insn_profiled(unsigned int vcpu, void *udata)
+{
+    (void)vcpu;
+    total++;
+    struct pc_slot *s = udata;
+    if (s != NULL && depth > 0 && depth <= MAX_DEPTH) {
+        s->counts[open_intervals[depth - 1].label]++;
+    }
+}
+
 static void on_insn(unsigned int vcpu, void *udata)
 {
     (void)vcpu;
@@ -90,6 +149,9 @@ static void on_end(unsigned int vcpu, void *udata)
         /* The host kills QEMU when it has what it needs: every line must be on disk by then. */
         fflush(out);
     }
+    if (pcs_path != NULL && depth == 0) {
+        write_pcs();
+    }
 }
 
 static int inside(const struct marker *m, uint64_t pc)
@@ -106,6 +168,10 @@ static void on_translate(qemu_plugin_id_t id, struct qemu_plugin_tb *tb)
         uint64_t pc = qemu_plugin_insn_vaddr(insn);
         qemu_plugin_vcpu_udata_cb_t cb = on_insn;
         void *udata = NULL;
+        if (pcs_path != NULL) {
+            cb = on_insn_profiled;
+            udata = slot_for(pc);
+        }
         if (inside(&end_marker, pc)) {
             cb = pc == end_marker.start ? on_end : NULL;
         }
@@ -166,8 +232,10 @@ EXPORT int qemu_plugin_install(qemu_plugin_id_t id, const qemu_info_t *info, int
             }
         } else if (strncmp(a, "out=", 4) == 0) {
             path = a + 4;
+        } else if (strncmp(a, "pcs=", 4) == 0) {
+            pcs_path = a + 4;
         } else {
-            fprintf(stderr, "insn_between: unknown argument %s (begin=, end=, out=)\n", a);
+            fprintf(stderr, "insn_between: unknown argument %s (begin=, end=, out=, pcs=)\n", a);
             return 1;
         }
     }

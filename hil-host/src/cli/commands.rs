@@ -487,10 +487,13 @@ fn target_bench(a: TargetBenchArgs) -> Result<()> {
     let frames: Vec<_> = native.frames.iter().map(|(s, _)| *s).collect();
     let b = {
         let _s = Spinner::start("counting instructions on the emulated Cortex-M4", true);
-        pil::target_bench(&elf, &frames, &a.out).map_err(fail)?
+        pil::target_bench(&elf, &frames, &a.out, a.by_address).map_err(fail)?
     };
     for name in ["insn-counts.txt", "defmt.bin", "qemu-stderr.txt"] {
         dir.record(&a.out.join(name));
+    }
+    if a.by_address {
+        dir.record(&a.out.join(pil::BY_ADDRESS_FILE));
     }
     dir.finish()?;
     print!("{}", b.text());

@@ -368,6 +368,10 @@ pub struct TargetBenchArgs {
     /// numbers f32 and fixed = Q16.16)
     #[arg(long, value_name = "FILE")]
     pub json: Option<PathBuf>,
+    /// Also count by instruction address: `insn-by-address.txt` in the output directory, lines
+    /// `label 0xADDRESS count` (map them with `addr2line -e ELF`); slower
+    #[arg(long)]
+    pub by_address: bool,
     /// Write into a directory that holds other files or another run's outputs
     #[arg(long)]
     pub force: bool,

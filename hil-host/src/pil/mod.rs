@@ -443,9 +443,20 @@ pub fn plant_bench_native() -> Result<Vec<u64>, String> {
         .collect())
 }
 
+/// The per-address profile's file name in `target_bench`'s `log_dir`.
+pub const BY_ADDRESS_FILE: &str = "insn-by-address.txt";
+
 /// Runs the firmware's bench mode under the instruction-counting plugin: the plant steps,
-/// then `frames` through the lockstep link with every task counted.
-pub fn target_bench(elf: &Path, frames: &[SensorFrame], log_dir: &Path) -> Result<TargetBench, String> {
+/// then `frames` through the lockstep link with every task counted. With `by_address` the
+/// plugin also writes `insn-by-address.txt` in `log_dir`: per counted label, the instructions
+/// executed at each address (`label 0xADDRESS count`), for `addr2line -e ELF` to map to source
+/// lines.
+pub fn target_bench(
+    elf: &Path,
+    frames: &[SensorFrame],
+    log_dir: &Path,
+    by_address: bool,
+) -> Result<TargetBench, String> {
     let plugin = plugin_path()?;
     if !plugin.is_file() {
         return Err(format!(
@@ -475,6 +486,9 @@ pub fn target_bench(elf: &Path, frames: &[SensorFrame], log_dir: &Path) -> Resul
         end.size,
         counts_file.display()
     ));
+    if by_address {
+        spec.push_str(&format!(",pcs={}", log_dir.join(BY_ADDRESS_FILE).display()));
+    }
     let qemu = QemuOptions {
         args: vec!["bench".into()],
         plugin: Some(spec),
