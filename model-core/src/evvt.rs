@@ -45,7 +45,7 @@
 //! [`PlanetaryGear`] gives the ideal kinematics for the feed-through.
 
 use crate::lut::{Lut2, LutError};
-use crate::real::{horner, Real};
+use crate::real::{horner_in_range, Real};
 
 /// Engine speed breakpoints of the identification grid (Section IV-B), rpm.
 pub const ENGINE_SPEED_BREAKPOINTS_RPM: [f64; 3] = [800.0, 1100.0, 1400.0];
@@ -309,7 +309,7 @@ pub struct Zoh<R: Real> {
 /// cancellation in `x − 1 + e^{-x}` (which in f32 would lose most digits at βT = 0.07).
 /// Negative β or T are treated as 0 (the plant is never unstable).
 pub fn zoh<R: Real>(alpha: R, beta: R, t_s: R) -> Zoh<R> {
-    zoh_scaled(alpha, beta, t_s, t_s * R::from_f64(64.0))
+    zoh_scaled(alpha, beta, t_s, t_s.mul_pow2(6))
 }
 
 /// [`zoh`] with the step also given as `t_x64_s` = 64·T, which the caller may know more
@@ -317,41 +317,67 @@ pub fn zoh<R: Real>(alpha: R, beta: R, t_s: R) -> Zoh<R> {
 /// coefficient with it).
 fn zoh_scaled<R: Real>(alpha: R, beta: R, t_s: R, t_x64_s: R) -> Zoh<R> {
     let t = t_s.max(R::ZERO);
+    let (step, phi1, phi2) = zoh_step_phis(alpha, beta, t_x64_s);
+    Zoh {
+        ad12_s: t * phi1,
+        ad12_x64_s: step.ad12_x64_s,
+        bd1_x1024_deg_per_rpm: step.bd1_x1024_deg_per_rpm,
+        bd2_x64_deg_per_s_rpm: step.bd2_x64_deg_per_s_rpm,
+        ad22: step.ad22,
+        // α·T·(T·φ2) keeps each factor well scaled for Q32.32.
+        bd1_deg_per_rpm: alpha * t * (t * phi2),
+        bd2_deg_per_s_rpm: alpha * t * phi1,
+    }
+}
+
+/// The scaled coefficients of [`Zoh`] the plant's step uses: computed every step where the
+/// engine speed or the voltage moves, so without the unscaled ones it never reads.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct ZohStep<R: Real> {
+    ad12_x64_s: R,
+    ad22: R,
+    bd1_x1024_deg_per_rpm: R,
+    bd2_x64_deg_per_s_rpm: R,
+}
+
+/// [`ZohStep`] from α, β and 64·T, with φ1 and φ2.
+#[inline(always)]
+fn zoh_step_phis<R: Real>(alpha: R, beta: R, t_x64_s: R) -> (ZohStep<R>, R, R) {
     let t64 = t_x64_s.max(R::ZERO);
-    let t32 = t64 * R::from_f64(0.5);
-    let x = ((beta * t64) * R::from_f64(1.0 / 64.0)).max(R::ZERO);
+    let t32 = t64.mul_pow2(-1);
+    let x = (beta * t64).mul_pow2(-6).max(R::ZERO);
     // Above βT = 2 the closed form is accurate even with f32's approximate exp (e^{-x} < 0.14
     // enters φ2 only through 1 − φ1 > 0.57).
     let (phi1, phi2, e) = if x < R::from_f64(2.0) {
         // g = 2 Σ (−x)^k/(k+2)! = 1 − x/3 (1 − x/4 (1 − … x/26)), coefficients as literals
         // (converted at compile time). Below βT = 1/4 (the usual step) 13 terms already leave
-        // a truncation < 1e-20.
+        // a truncation < 1e-20. In range: |x| < 2, coefficients <= 1, every partial sum within
+        // [0, 1.4].
         let nx = -x;
         let g = if x < R::from_f64(0.25) {
-            horner!(R, nx; 1.0, 0.3333333333333333, 0.08333333333333333, 0.016666666666666666, 0.002777777777777778, 0.0003968253968253968, 4.96031746031746e-05, 5.5114638447971785e-06, 5.511463844797178e-07, 5.010421677088344e-08, 4.17535139757362e-09, 3.2118087673643227e-10, 2.294149119545945e-11)
+            horner_in_range!(R, nx; 1.0, 0.3333333333333333, 0.08333333333333333, 0.016666666666666666, 0.002777777777777778, 0.0003968253968253968, 4.96031746031746e-05, 5.5114638447971785e-06, 5.511463844797178e-07, 5.010421677088344e-08, 4.17535139757362e-09, 3.2118087673643227e-10, 2.294149119545945e-11)
         } else {
-            horner!(R, nx; 1.0, 0.3333333333333333, 0.08333333333333333, 0.016666666666666666, 0.002777777777777778, 0.0003968253968253968, 4.96031746031746e-05, 5.5114638447971785e-06, 5.511463844797178e-07, 5.010421677088344e-08, 4.17535139757362e-09, 3.2118087673643227e-10, 2.294149119545945e-11, 1.5294327463639633e-12, 9.55895466477477e-14, 5.622914508691041e-15, 3.123841393717245e-16, 1.644127049324866e-17, 8.22063524662433e-19, 3.9145882126782525e-20, 1.779358278490115e-21, 7.736340341261367e-23, 3.2234751421922368e-24, 1.2893900568768947e-25, 4.9591925264495945e-27)
+            horner_in_range!(R, nx; 1.0, 0.3333333333333333, 0.08333333333333333, 0.016666666666666666, 0.002777777777777778, 0.0003968253968253968, 4.96031746031746e-05, 5.5114638447971785e-06, 5.511463844797178e-07, 5.010421677088344e-08, 4.17535139757362e-09, 3.2118087673643227e-10, 2.294149119545945e-11, 1.5294327463639633e-12, 9.55895466477477e-14, 5.622914508691041e-15, 3.123841393717245e-16, 1.644127049324866e-17, 8.22063524662433e-19, 3.9145882126782525e-20, 1.779358278490115e-21, 7.736340341261367e-23, 3.2234751421922368e-24, 1.2893900568768947e-25, 4.9591925264495945e-27)
         };
-        let phi2 = g * R::from_f64(0.5);
-        let phi1 = R::ONE - x * phi2;
+        // In range: x < 2, 0 < φ2 <= 1/2, 0 < φ1 <= 1.
+        let phi2 = g.mul_pow2(-1);
+        let phi1 = R::ONE - x.mul_in_range(phi2);
         // e^{-x} = 1 − x φ1, consistent with φ1 to the last bit.
-        (phi1, phi2, R::ONE - x * phi1)
+        (phi1, phi2, R::ONE - x.mul_in_range(phi1))
     } else {
         let e = (-x).exp();
         let phi1 = (R::ONE - e) / x;
         let phi2 = (R::ONE - phi1) / x;
         (phi1, phi2, e)
     };
-    Zoh {
-        ad12_s: t * phi1,
-        ad12_x64_s: t64 * phi1,
-        bd1_x1024_deg_per_rpm: alpha * t32 * (t32 * phi2),
-        bd2_x64_deg_per_s_rpm: alpha * t64 * phi1,
+    // φ1 and φ2 lie in [0, 1]: their products are no larger than the other factor.
+    let step = ZohStep {
+        ad12_x64_s: t64.mul_in_range(phi1),
+        bd1_x1024_deg_per_rpm: alpha * t32 * t32.mul_in_range(phi2),
+        bd2_x64_deg_per_s_rpm: (alpha * t64).mul_in_range(phi1),
         ad22: e,
-        // α·T·(T·φ2) keeps each factor well scaled for Q32.32.
-        bd1_deg_per_rpm: alpha * t * (t * phi2),
-        bd2_deg_per_s_rpm: alpha * t * phi1,
-    }
+    };
+    (step, phi1, phi2)
 }
 
 /// Rounds the phase to the resolution of the cam phase calculation (round half up), the
@@ -436,8 +462,8 @@ pub struct EvvtPlant<R: Real> {
     rate_deg_per_s: R,
     /// Belt disturbance cycle position in [0, 1).
     belt_cycle: R,
-    /// ZOH matrices and the (α, β, T) they were computed for.
-    zoh: Zoh<R>,
+    /// ZOH coefficients and the (α, β, T) they were computed for.
+    zoh: ZohStep<R>,
     zoh_key: (R, R, R),
     /// The nominal step in `R` and 64 times it converted from f64 (see [`zoh_scaled`]).
     nominal_dt_s: R,
@@ -465,7 +491,7 @@ impl<R: Real> EvvtPlant<R> {
             phase_deg: f(p.initial_phase_deg),
             rate_deg_per_s: R::ZERO,
             belt_cycle: R::ZERO,
-            zoh: zoh(R::ZERO, R::ZERO, R::ZERO),
+            zoh: zoh_step_phis(R::ZERO, R::ZERO, R::ZERO).0,
             zoh_key: (R::ZERO, R::ZERO, R::ZERO),
             nominal_dt_s: f(NOMINAL_STEP_S),
             nominal_dt_x64_s: f(64.0 * NOMINAL_STEP_S),
@@ -479,7 +505,7 @@ impl<R: Real> EvvtPlant<R> {
         self.nominal_dt_s = R::from_f64(dt_s);
         self.nominal_dt_x64_s = R::from_f64(64.0 * dt_s);
         self.zoh_key = (R::ZERO, R::ZERO, R::ZERO);
-        self.zoh = zoh(R::ZERO, R::ZERO, R::ZERO);
+        self.zoh = zoh_step_phis(R::ZERO, R::ZERO, R::ZERO).0;
     }
 
     /// α (crank-deg/(s²·rpm)) and β (1/s) of eq. (12) at engine speed `engine_rpm` and battery
@@ -506,17 +532,18 @@ impl<R: Real> EvvtPlant<R> {
             let dt_x64 = if dt == self.nominal_dt_s {
                 self.nominal_dt_x64_s
             } else {
-                dt * R::from_f64(64.0)
+                dt.mul_pow2(6)
             };
-            self.zoh = zoh_scaled(alpha, beta, dt, dt_x64);
+            self.zoh = zoh_step_phis(alpha, beta, dt_x64).0;
             self.zoh_key = key;
         }
         let z = self.zoh;
         // Products of the scaled coefficients, scaled back by exact powers of two.
         let x1 = self.phase_deg
-            + (z.ad12_x64_s * self.rate_deg_per_s) * R::from_f64(1.0 / 64.0)
-            + (z.bd1_x1024_deg_per_rpm * motor_cmd_rpm) * R::from_f64(1.0 / 1024.0);
-        let x2 = z.ad22 * self.rate_deg_per_s + (z.bd2_x64_deg_per_s_rpm * motor_cmd_rpm) * R::from_f64(1.0 / 64.0);
+            + (z.ad12_x64_s * self.rate_deg_per_s).mul_pow2(-6)
+            + (z.bd1_x1024_deg_per_rpm * motor_cmd_rpm).mul_pow2(-10);
+        // e^{-βT} in [0, 1]: in range.
+        let x2 = z.ad22.mul_in_range(self.rate_deg_per_s) + (z.bd2_x64_deg_per_s_rpm * motor_cmd_rpm).mul_pow2(-6);
         self.phase_deg = x1;
         self.rate_deg_per_s = x2;
         // Mechanical stops: the phase cannot pass them and the motion into the stop ends there.
@@ -527,7 +554,10 @@ impl<R: Real> EvvtPlant<R> {
             self.phase_deg = self.phase_min_deg;
             self.rate_deg_per_s = self.rate_deg_per_s.max(R::ZERO);
         }
-        self.advance_belt(engine_rpm.max(R::ZERO), dt);
+        // Without vibration the belt's cycle reaches no output: not advanced.
+        if self.belt_amplitude_deg != R::ZERO {
+            self.advance_belt(engine_rpm.max(R::ZERO), dt);
+        }
         self.phase_deg_out()
     }
 

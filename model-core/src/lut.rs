@@ -28,7 +28,9 @@ fn locate<R: Real, const N: usize>(axis: &[R; N], inv_dx: &[R; N], x: R) -> (usi
     while i + 2 < N && x >= axis[i + 1] {
         i += 1;
     }
-    let w = (x - axis[i]) * inv_dx[i];
+    // In range: 0 <= x − axis[i] <= the spacing and inv_dx[i] its reciprocal (rounded by at
+    // most half an LSB), so the weight is within [0, 1.5] in any type.
+    let w = (x - axis[i]).mul_in_range(inv_dx[i]);
     (i, w)
 }
 

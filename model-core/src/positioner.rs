@@ -17,7 +17,7 @@
 //!
 //! Units: m, m/s, N, kg, s.
 
-use crate::real::{horner, Real};
+use crate::real::{horner_in_range, Real};
 
 /// Why a parameter set was rejected; the name is the offending field.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -157,8 +157,6 @@ pub struct Positioner<R: Real> {
     /// 1024/M: with the states in 1/1024 m (below) the acceleration comes out in that unit.
     inv_mass_x1024: R,
     offset_n: R,
-    fv_pos: R,
-    fv_neg: R,
     fc_pos: R,
     fc_neg: R,
     v_stick_x1024: R,
@@ -174,6 +172,9 @@ pub struct Positioner<R: Real> {
     /// depend on the direction and the step alone, so a step at the nominal length looks
     /// them up instead of summing two series (the same values, computed the same way).
     nominal_weights: [(R, R); 2],
+    /// The relaxation rate a = Fv/M (1/s) sliding forward and backward: parameters alone, so
+    /// computed once.
+    relax_rate_per_s: [R; 2],
 }
 
 /// The positioner's default nominal step (the EMPS logs' 1 kHz), s: see
@@ -198,8 +199,6 @@ impl<R: Real> Positioner<R> {
         let mut positioner = Self {
             inv_mass_x1024: f(1024.0 / p.mass_kg),
             offset_n: f(p.offset_n),
-            fv_pos: f(fv_pos),
-            fv_neg: f(fv_neg),
             fc_pos: f(fc_pos),
             fc_neg: f(fc_neg),
             v_stick_x1024: f(1024.0 * p.v_stick_m_s),
@@ -208,7 +207,11 @@ impl<R: Real> Positioner<R> {
             nominal_dt_s: f(NOMINAL_STEP_S),
             nominal_dt_x1024_s: f(1024.0 * NOMINAL_STEP_S),
             nominal_weights: [(R::ZERO, R::ZERO); 2],
+            relax_rate_per_s: [R::ZERO; 2],
         };
+        for (k, fv) in [fv_pos, fv_neg].into_iter().enumerate() {
+            positioner.relax_rate_per_s[k] = (f(fv) * positioner.inv_mass_x1024).mul_pow2(-10);
+        }
         positioner.set_nominal_weights();
         Ok(positioner)
     }
@@ -220,33 +223,21 @@ impl<R: Real> Positioner<R> {
 
     /// (φ, ψ) of [`relaxation_weights`] for sliding `h_x1024` in direction `dir`.
     fn weights(&self, dir: R, h_x1024: R) -> (R, R) {
-        let k = R::from_f64(1.0 / 1024.0);
-        let (fv, _) = self.friction(dir);
-        let a = (fv * self.inv_mass_x1024) * k;
-        relaxation_weights((a * h_x1024) * k)
+        let a = self.relax_rate_per_s[usize::from(!(dir > R::ZERO))];
+        relaxation_weights((a * h_x1024).mul_pow2(-10))
     }
 
     /// Sets the state (e.g. to a log's first sample).
     pub fn set_state(&mut self, pos_m: R, vel_m_s: R) {
-        let x1024 = R::from_f64(1024.0);
-        self.pos_x1024_m = pos_m * x1024;
-        self.vel_x1024_m_s = vel_m_s * x1024;
+        self.pos_x1024_m = pos_m.mul_pow2(10);
+        self.vel_x1024_m_s = vel_m_s.mul_pow2(10);
     }
 
     pub fn pos_m(&self) -> R {
-        self.pos_x1024_m * R::from_f64(1.0 / 1024.0)
+        self.pos_x1024_m.mul_pow2(-10)
     }
     pub fn vel_m_s(&self) -> R {
-        self.vel_x1024_m_s * R::from_f64(1.0 / 1024.0)
-    }
-
-    /// Friction coefficients (Fv, Fc) for a direction of motion `dir` = ±1.
-    fn friction(&self, dir: R) -> (R, R) {
-        if dir > R::ZERO {
-            (self.fv_pos, self.fc_pos)
-        } else {
-            (self.fv_neg, self.fc_neg)
-        }
+        self.vel_x1024_m_s.mul_pow2(-10)
     }
 
     /// Sliding for `h` in direction `dir` from velocity `v` under a constant drive: exact
@@ -256,19 +247,22 @@ impl<R: Real> Positioner<R> {
     /// `v` and the results in 1/1024 m/s and 1/1024 m. Returns (velocity at the end, distance
     /// covered).
     fn slide(&self, v: R, drive: R, dir: R, h_x1024: R) -> (R, R) {
-        let k = R::from_f64(1.0 / 1024.0);
-        let (fv, fc) = self.friction(dir);
+        let backward = usize::from(!(dir > R::ZERO));
+        // dir·Fc with dir = ±1: the same bits as the product, without one.
+        let dir_fc = if dir > R::ZERO { self.fc_pos } else { -self.fc_neg };
         // Acceleration in 1/1024 m/s², rate a = Fv/M in 1/s.
-        let acc = (drive - dir * fc) * self.inv_mass_x1024;
-        let a = (fv * self.inv_mass_x1024) * k;
+        let acc = (drive - dir_fc) * self.inv_mass_x1024;
+        let a = self.relax_rate_per_s[backward];
         let (phi, psi) = if h_x1024 == self.nominal_dt_x1024_s {
-            self.nominal_weights[usize::from(!(dir > R::ZERO))]
+            self.nominal_weights[backward]
         } else {
-            relaxation_weights((a * h_x1024) * k)
+            relaxation_weights((a * h_x1024).mul_pow2(-10))
         };
-        // v(h) = v + (acc − a·v)·h·φ(ah), x(h) = h·(v·φ(ah) + acc·h·ψ(ah)).
-        let v_end = v + ((acc - a * v) * h_x1024 * phi) * k;
-        let distance = (h_x1024 * (v * phi + (acc * h_x1024 * psi) * k)) * k;
+        // v(h) = v + (acc − a·v)·h·φ(ah), x(h) = h·(v·φ(ah) + acc·h·ψ(ah)). The weights lie
+        // in [0, 1] (φ, ψ of a non-negative argument): their products are in range.
+        let v_end = v + ((acc - a * v) * h_x1024).mul_in_range(phi).mul_pow2(-10);
+        let distance =
+            (h_x1024 * (v.mul_in_range(phi) + (acc * h_x1024).mul_in_range(psi).mul_pow2(-10))).mul_pow2(-10);
         (v_end, distance)
     }
 
@@ -291,7 +285,7 @@ impl<R: Real> Positioner<R> {
         let h_x1024 = if dt_s == self.nominal_dt_s {
             self.nominal_dt_x1024_s
         } else {
-            dt_s * R::from_f64(1024.0)
+            dt_s.mul_pow2(10)
         };
         let drive = force_n - self.offset_n;
         let v = self.vel_x1024_m_s;
@@ -332,11 +326,12 @@ impl<R: Real> Positioner<R> {
 fn relaxation_weights<R: Real>(x: R) -> (R, R) {
     if x < R::from_f64(0.5) {
         // φ = Σ (−x)^k/(k+1)!, ψ = Σ (−x)^k/(k+2)!, k = 0..9 (error < 3e-9), coefficients as
-        // literals (converted at compile time).
+        // literals (converted at compile time). In range: 0 <= x < 0.5 (a = Fv/M >= 0, h > 0),
+        // coefficients <= 1.
         let nx = -x;
-        let phi = horner!(R, nx; 1.0, 1.0 / 2.0, 1.0 / 6.0, 1.0 / 24.0, 1.0 / 120.0, 1.0 / 720.0, 1.0 / 5040.0,
+        let phi = horner_in_range!(R, nx; 1.0, 1.0 / 2.0, 1.0 / 6.0, 1.0 / 24.0, 1.0 / 120.0, 1.0 / 720.0, 1.0 / 5040.0,
             1.0 / 40320.0, 1.0 / 362880.0, 1.0 / 3628800.0);
-        let psi = horner!(R, nx; 1.0 / 2.0, 1.0 / 6.0, 1.0 / 24.0, 1.0 / 120.0, 1.0 / 720.0, 1.0 / 5040.0,
+        let psi = horner_in_range!(R, nx; 1.0 / 2.0, 1.0 / 6.0, 1.0 / 24.0, 1.0 / 120.0, 1.0 / 720.0, 1.0 / 5040.0,
             1.0 / 40320.0, 1.0 / 362880.0, 1.0 / 3628800.0, 1.0 / 39916800.0);
         (phi, psi)
     } else {
