@@ -16,9 +16,9 @@ pub struct Fit {
     /// 95 % half-widths, same order as `params`.
     pub ci95: Vec<Option<f64>>,
     /// Measured and predicted output on the validation data (same length). Empty in the
-    /// candidates of a [`Diagnosis`] (their figures are kept, not their series); the baseline
+    /// candidates of a [`Diagnosis`](super::Diagnosis) (their figures are kept, not their series); the baseline
     /// and the extended model keep theirs. Shared: every fit of one diagnosis measures the same
-    /// validation output, so it is held once ([`diagnose`] joins equal copies).
+    /// validation output, so it is held once ([`diagnose`](super::diagnose) joins equal copies).
     pub measured: Arc<[f64]>,
     pub predicted: Vec<f64>,
     pub rmse: f64,

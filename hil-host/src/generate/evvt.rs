@@ -124,7 +124,7 @@ fn unit_params(v: &UnitValues) -> EvvtParams {
 }
 
 /// The plant of the unit a generated truth.json describes (its `params`, looked up by `get`),
-/// as [`draw_params`] made it for the estimation run; `hil-host run --unit` simulates it. A
+/// as `draw_params` made it for the estimation run; `hil-host run --unit` simulates it. A
 /// truth with physics outside the catalogue the plant does not model (a command delay) is
 /// refused by name.
 pub fn unit_from_truth(get: &dyn Fn(&str) -> Option<f64>) -> Result<EvvtParams, String> {

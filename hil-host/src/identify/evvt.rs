@@ -667,7 +667,7 @@ fn breakpoints3(values: &[f64], tol: f64) -> Vec<f64> {
 }
 
 /// The model-core table from the points when they form a 3×3 grid of engine speed (groups
-/// within 50 rpm, or split at the two largest gaps: [`breakpoints3`]) and battery voltage (groups within 0.5 V, likewise); several
+/// within 50 rpm, or split at the two largest gaps: `breakpoints3`) and battery voltage (groups within 0.5 V, likewise); several
 /// points in a cell are averaged. The breakpoints are the group means.
 pub fn lpv_table(points: &[EvvtPointResult]) -> Result<EvvtLpvTable, String> {
     let speeds = breakpoints3(&points.iter().map(|p| p.engine_rpm).collect::<Vec<_>>(), 50.0);

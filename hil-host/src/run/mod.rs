@@ -181,7 +181,7 @@ pub struct Summary {
     pub vacuum_position_error_pct_rms: f64,
     pub ehvva_events: usize,
     /// Pilot cycles whose valve was below 99 % of its stroke at the closing command (no
-    /// closing time; [`LIFT_FRACTION`]).
+    /// closing time; `LIFT_FRACTION`).
     pub ehvva_stop_not_held_events: usize,
     /// Closings timed (the rest of the events: no held stop, or the run ended first).
     pub ehvva_closings: usize,
