@@ -143,7 +143,7 @@ fn target_bench_counts_every_task_and_plant_and_matches_the_host() {
     let _one = one_at_a_time();
     let frames: Vec<SensorFrame> = closed_loop_frames().into_iter().take(300).collect();
     let dir = std::env::temp_dir().join(format!("pil-bench-{}", std::process::id()));
-    let b = pil::target_bench(&elf, &frames, &dir, false).unwrap();
+    let b = pil::target_bench(&elf, &frames, &dir, true).unwrap();
     eprint!("{}", b.text());
     for (k, (name, _)) in pil::PLANT_NUMBERS.iter().enumerate() {
         assert!(b.plant_states_equal(k), "{name} plant states differ");
@@ -177,6 +177,24 @@ fn target_bench_counts_every_task_and_plant_and_matches_the_host() {
         );
         assert_eq!((f.n, x.n), (8, 8));
         assert!(f.min > 20 && x.min > 20, "{label}: f32 {f:?}, Q16 {x:?}");
+    }
+    // The per-address profile accounts for every counted instruction of a step that holds no
+    // other counted interval: per label, its addresses sum to the raw intervals' counts.
+    let sums = |file: &str, count_column: usize| {
+        let text = std::fs::read_to_string(dir.join(file)).unwrap();
+        let mut by_label = std::collections::HashMap::<String, u64>::new();
+        for line in text.lines() {
+            let cols: Vec<&str> = line.split_whitespace().collect();
+            *by_label.entry(cols[0].to_string()).or_default() += cols[count_column].parse::<u64>().unwrap();
+        }
+        by_label
+    };
+    let (raw, by_address) = (sums("insn-counts.txt", 1), sums(pil::BY_ADDRESS_FILE, 2));
+    for plant in model_core::plant_bench::BenchPlant::ALL {
+        for number in ["f32", "fixed"] {
+            let label = format!("{}_plant_{number}", plant.label());
+            assert_eq!(by_address.get(&label), raw.get(&label), "{label}");
+        }
     }
     let json = b.to_json();
     let rows = json["plant_steps"].as_array().unwrap();
