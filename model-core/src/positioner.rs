@@ -223,7 +223,7 @@ impl<R: Real> Positioner<R> {
 
     /// (φ, ψ) of [`relaxation_weights`] for sliding `h_x1024` in direction `dir`.
     fn weights(&self, dir: R, h_x1024: R) -> (R, R) {
-        let a = self.relax_rate_per_s[usize::from(!(dir > R::ZERO))];
+        let a = self.relax_rate_per_s[direction_index(dir)];
         relaxation_weights((a * h_x1024).mul_pow2(-10))
     }
 
@@ -247,7 +247,7 @@ impl<R: Real> Positioner<R> {
     /// `v` and the results in 1/1024 m/s and 1/1024 m. Returns (velocity at the end, distance
     /// covered).
     fn slide(&self, v: R, drive: R, dir: R, h_x1024: R) -> (R, R) {
-        let backward = usize::from(!(dir > R::ZERO));
+        let backward = direction_index(dir);
         // dir·Fc with dir = ±1: the same bits as the product, without one.
         let dir_fc = if dir > R::ZERO { self.fc_pos } else { -self.fc_neg };
         // Acceleration in 1/1024 m/s², rate a = Fv/M in 1/s.
@@ -319,6 +319,12 @@ impl<R: Real> Positioner<R> {
         self.pos_x1024_m += distance;
         self.pos_m()
     }
+}
+
+/// The index of a direction of motion `dir` = ±1 in the per-direction arrays: 0 forward, 1
+/// backward.
+fn direction_index<R: Real>(dir: R) -> usize {
+    usize::from(!(dir > R::ZERO))
 }
 
 /// φ(x) = (1 − e^(−x))/x and ψ(x) = (x − 1 + e^(−x))/x², the weights of the exact first-order
