@@ -380,6 +380,19 @@ fn zoh_step_phis<R: Real>(alpha: R, beta: R, t_x64_s: R) -> (ZohStep<R>, R, R) {
     (step, phi1, phi2)
 }
 
+/// The table input an effect scale makes of `x`: `nominal + scale·(x − nominal)`. With the
+/// effect off (scale exactly 1) fixed point takes `x` itself, the same value (no voltage or
+/// speed makes the difference saturate) without two products; the floats keep the formula,
+/// whose rounding their results carry.
+#[inline(always)]
+fn effect_scaled<R: Real>(x: R, nominal: R, scale: R) -> R {
+    if !R::IS_FLOAT && scale == R::ONE {
+        x
+    } else {
+        nominal + scale * (x - nominal)
+    }
+}
+
 /// Rounds the phase to the resolution of the cam phase calculation (round half up), the
 /// measurement the controller sees (Section IV-C: 1 crank degree). A non-positive resolution
 /// returns the phase unchanged.
@@ -511,8 +524,8 @@ impl<R: Real> EvvtPlant<R> {
     /// α (crank-deg/(s²·rpm)) and β (1/s) of eq. (12) at engine speed `engine_rpm` and battery
     /// voltage `u_batt_v`, with the `supply-voltage` and `engine-speed` effect scales applied.
     pub fn alpha_beta(&self, engine_rpm: R, u_batt_v: R) -> (R, R) {
-        let v = self.nominal_voltage_v + self.voltage_effect_scale * (u_batt_v - self.nominal_voltage_v);
-        let n = self.nominal_engine_rpm + self.engine_speed_effect_scale * (engine_rpm - self.nominal_engine_rpm);
+        let v = effect_scaled(u_batt_v, self.nominal_voltage_v, self.voltage_effect_scale);
+        let n = effect_scaled(engine_rpm, self.nominal_engine_rpm, self.engine_speed_effect_scale);
         // Both tables are on the same grid: one look-up.
         let at = self.alpha.locate(n, v);
         (self.alpha.eval_at(at), self.beta.eval_at(at))
@@ -524,7 +537,9 @@ impl<R: Real> EvvtPlant<R> {
     pub fn step(&mut self, motor_cmd_rpm: R, engine_rpm: R, u_batt_v: R, dt_s: R) -> R {
         let dt = dt_s.max(R::ZERO);
         let (mut alpha, beta) = self.alpha_beta(engine_rpm, u_batt_v);
-        if motor_cmd_rpm > R::ZERO {
+        // A factor of exactly 1 (the effect off) changes no bit: fixed point skips its product
+        // (the floats' one instruction is cheaper than the test).
+        if motor_cmd_rpm > R::ZERO && (R::IS_FLOAT || self.advance_alpha_factor != R::ONE) {
             alpha *= self.advance_alpha_factor;
         }
         let key = (alpha, beta, dt);
