@@ -11,6 +11,9 @@ pub enum LutError {
     NotIncreasing { axis: u8, index: usize },
     /// A table needs at least two breakpoints per axis.
     TooFewPoints,
+    /// In fixed point, a table value beyond 1/16 of the type's range (index in row-major
+    /// order): the interpolation's products are then proven in range (see `check_values`).
+    ValueOutOfRange { index: usize },
 }
 
 /// Index of the interval holding `x` and the interpolation weight in it, clamped to the ends.
@@ -29,7 +32,7 @@ fn locate<R: Real, const N: usize>(axis: &[R; N], inv_dx: &[R; N], x: R) -> (usi
         i += 1;
     }
     // In range: 0 <= x − axis[i] <= the spacing and inv_dx[i] its reciprocal (rounded by at
-    // most half an LSB), so the weight is within [0, 1.5] in any type.
+    // most half an LSB), so the weight is within [0, 2) in any type (see `check_values`).
     let w = (x - axis[i]).mul_in_range(inv_dx[i]);
     (i, w)
 }
@@ -41,6 +44,23 @@ fn inverse_spacing<R: Real, const N: usize>(axis: &[f64; N]) -> [R; N] {
         inv[i] = R::from_f64(1.0 / (axis[i + 1] - axis[i]));
     }
     inv
+}
+
+/// In fixed point, every table value within 1/16 of the range (2048 in Q16.16): the look-ups
+/// then multiply without the saturation test ([`Real::mul_in_range`]). Why it holds: a weight
+/// `w = (x − x_i)·(1/Δx)` is at most `(Δx + 1 LSB)·(1/Δx + ½ LSB)`, below 2 for any spacing
+/// the type holds; with |z| <= L an interpolated value `(1 − w)·z_a + w·z_b` stays within 3L,
+/// a difference of two within 6L, and a weight times it within 12L < the range. The floats
+/// take any table.
+fn check_values<R: Real>(values: impl Iterator<Item = f64>) -> Result<(), LutError> {
+    if R::IS_FLOAT {
+        return Ok(());
+    }
+    let limit = R::RANGE_ABS / 16.0;
+    match values.enumerate().find(|(_, v)| !(v.abs() <= limit)) {
+        Some((index, _)) => Err(LutError::ValueOutOfRange { index }),
+        None => Ok(()),
+    }
 }
 
 fn check_axis(axis: &[f64], which: u8) -> Result<(), LutError> {
@@ -67,6 +87,7 @@ pub struct Lut1<R: Real, const N: usize> {
 impl<R: Real, const N: usize> Lut1<R, N> {
     pub fn new(x: [f64; N], y: [f64; N]) -> Result<Self, LutError> {
         check_axis(&x, 0)?;
+        check_values::<R>(y.iter().copied())?;
         Ok(Self {
             x: x.map(R::from_f64),
             inv_dx: inverse_spacing(&x),
@@ -75,7 +96,7 @@ impl<R: Real, const N: usize> Lut1<R, N> {
     }
     pub fn eval(&self, x: R) -> R {
         let (i, w) = locate(&self.x, &self.inv_dx, x);
-        self.y[i] + w * (self.y[i + 1] - self.y[i])
+        self.y[i] + w.mul_in_range(self.y[i + 1] - self.y[i])
     }
     /// Where `x` lies on the breakpoints, for [`Self::eval_at`]: tables on the same
     /// breakpoints then share one look-up.
@@ -89,7 +110,7 @@ impl<R: Real, const N: usize> Lut1<R, N> {
     #[inline]
     pub fn eval_at(&self, p: LutPoint<R, N>) -> R {
         let LutPoint { i, w } = p;
-        self.y[i] + w * (self.y[i + 1] - self.y[i])
+        self.y[i] + w.mul_in_range(self.y[i + 1] - self.y[i])
     }
     pub fn breakpoints(&self) -> &[R; N] {
         &self.x
@@ -132,6 +153,7 @@ impl<R: Real, const NX: usize, const NY: usize> Lut2<R, NX, NY> {
     pub fn new(x: [f64; NX], y: [f64; NY], z: [[f64; NY]; NX]) -> Result<Self, LutError> {
         check_axis(&x, 0)?;
         check_axis(&y, 1)?;
+        check_values::<R>(z.iter().flatten().copied())?;
         Ok(Self {
             x: x.map(R::from_f64),
             y: y.map(R::from_f64),
@@ -143,9 +165,9 @@ impl<R: Real, const NX: usize, const NY: usize> Lut2<R, NX, NY> {
     pub fn eval(&self, x: R, y: R) -> R {
         let (i, wx) = locate(&self.x, &self.inv_dx, x);
         let (j, wy) = locate(&self.y, &self.inv_dy, y);
-        let z0 = self.z[i][j] + wy * (self.z[i][j + 1] - self.z[i][j]);
-        let z1 = self.z[i + 1][j] + wy * (self.z[i + 1][j + 1] - self.z[i + 1][j]);
-        z0 + wx * (z1 - z0)
+        let z0 = self.z[i][j] + wy.mul_in_range(self.z[i][j + 1] - self.z[i][j]);
+        let z1 = self.z[i + 1][j] + wy.mul_in_range(self.z[i + 1][j + 1] - self.z[i + 1][j]);
+        z0 + wx.mul_in_range(z1 - z0)
     }
     /// Where `(x, y)` lies on the grid, for [`Self::eval_at`]: tables on the same breakpoints
     /// then share one look-up.
@@ -160,9 +182,9 @@ impl<R: Real, const NX: usize, const NY: usize> Lut2<R, NX, NY> {
     #[inline]
     pub fn eval_at(&self, p: LutPoint2<R, NX, NY>) -> R {
         let LutPoint2 { i, wx, j, wy } = p;
-        let z0 = self.z[i][j] + wy * (self.z[i][j + 1] - self.z[i][j]);
-        let z1 = self.z[i + 1][j] + wy * (self.z[i + 1][j + 1] - self.z[i + 1][j]);
-        z0 + wx * (z1 - z0)
+        let z0 = self.z[i][j] + wy.mul_in_range(self.z[i][j + 1] - self.z[i][j]);
+        let z1 = self.z[i + 1][j] + wy.mul_in_range(self.z[i + 1][j + 1] - self.z[i + 1][j]);
+        z0 + wx.mul_in_range(z1 - z0)
     }
     /// The table along x at a fixed `y`: `slice_y(y).eval(x) == eval(x, y)` bit for bit (the
     /// same operations: the slice holds the values interpolated along y), for a model whose y
@@ -172,7 +194,7 @@ impl<R: Real, const NX: usize, const NY: usize> Lut2<R, NX, NY> {
         Lut1 {
             x: self.x,
             inv_dx: self.inv_dx,
-            y: core::array::from_fn(|i| self.z[i][j] + wy * (self.z[i][j + 1] - self.z[i][j])),
+            y: core::array::from_fn(|i| self.z[i][j] + wy.mul_in_range(self.z[i][j + 1] - self.z[i][j])),
         }
     }
     pub fn x_breakpoints(&self) -> &[R; NX] {
@@ -191,6 +213,52 @@ impl<R: Real, const NX: usize, const NY: usize> Lut2<R, NX, NY> {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    #[test]
+    fn fixed_point_tables_keep_their_values_within_a_sixteenth_of_the_range() {
+        use crate::real::Q16;
+        assert_eq!(
+            Lut2::<Q16, 2, 2>::new([0.0, 1.0], [0.0, 1.0], [[0.0, 2048.0], [-2048.5, 0.0]]).unwrap_err(),
+            LutError::ValueOutOfRange { index: 2 }
+        );
+        assert_eq!(
+            Lut1::<Q16, 2>::new([0.0, 1.0], [0.0, f64::NAN]).unwrap_err(),
+            LutError::ValueOutOfRange { index: 1 }
+        );
+        assert!(Lut1::<f32, 2>::new([0.0, 1.0], [0.0, 1e30]).is_ok());
+    }
+
+    proptest! {
+        /// The range proof of `check_values`, tried: Q16.16 look-ups of any table it accepts,
+        /// on any breakpoints (spacings down to a fraction of an LSB) and anywhere on or off
+        /// the grid, give the bits of the same interpolation with saturating products.
+        #[test]
+        fn q16_lookups_equal_the_saturating_interpolation(
+            x0 in -30000.0f64..30000.0, dxs in proptest::collection::vec(1e-6f64..5000.0, 2),
+            y0 in -30000.0f64..30000.0, dys in proptest::collection::vec(1e-6f64..5000.0, 2),
+            z in proptest::collection::vec(-2048.0f64..=2048.0, 9),
+            px in -40000.0f64..40000.0, py in -40000.0f64..40000.0, pick in 0usize..3,
+        ) {
+            use crate::real::Q16;
+            let xs = [x0, x0 + dxs[0], x0 + dxs[0] + dxs[1]];
+            let ys = [y0, y0 + dys[0], y0 + dys[0] + dys[1]];
+            let zz = [[z[0], z[1], z[2]], [z[3], z[4], z[5]], [z[6], z[7], z[8]]];
+            let t = Lut2::<Q16, 3, 3>::new(xs, ys, zz).unwrap();
+            // Points on the grid's cells as well as anywhere.
+            let (qx, qy) = match pick {
+                0 => (Q16::from_f64(px), Q16::from_f64(py)),
+                _ => (Q16::from_f64(xs[pick] - 1e-5), Q16::from_f64(ys[pick - 1] + 1e-5)),
+            };
+            let (i, wx) = locate(&t.x, &t.inv_dx, qx);
+            let (j, wy) = locate(&t.y, &t.inv_dy, qy);
+            let z0 = t.z[i][j] + wy * (t.z[i][j + 1] - t.z[i][j]);
+            let z1 = t.z[i + 1][j] + wy * (t.z[i + 1][j + 1] - t.z[i + 1][j]);
+            prop_assert_eq!(t.eval(qx, qy), z0 + wx * (z1 - z0));
+            let s = t.slice_y(qy);
+            let y = [s.y[i], s.y[i + 1]];
+            prop_assert_eq!(s.eval(qx), y[0] + wx * (y[1] - y[0]));
+        }
+    }
 
     #[test]
     fn rejects_unsorted_and_nan_breakpoints() {

@@ -71,6 +71,8 @@ pub trait Real:
     /// a long division of about a hundred instructions, a product of ten, `x·0 + y == y`
     /// exactly) they may take forms with fewer divisions, or skip products with zero.
     const IS_FLOAT: bool;
+    /// The largest magnitude the type holds (fixed point saturates there).
+    const RANGE_ABS: f64;
 
     /// Converts a constant (parameters, table values). Out-of-range values saturate.
     fn from_f64(x: f64) -> Self;
@@ -198,6 +200,7 @@ impl Real for f32 {
     const ONE: Self = 1.0;
     const NAME: &'static str = "f32";
     const IS_FLOAT: bool = true;
+    const RANGE_ABS: f64 = f32::MAX as f64;
     type Divisor = f32;
     #[inline(always)]
     fn divisor(d: Self) -> Self {
@@ -265,6 +268,7 @@ impl Real for f64 {
     const ONE: Self = 1.0;
     const NAME: &'static str = "f64";
     const IS_FLOAT: bool = true;
+    const RANGE_ABS: f64 = f64::MAX;
     type Divisor = f64;
     #[inline(always)]
     fn divisor(d: Self) -> Self {
@@ -414,6 +418,7 @@ impl Real for Q32 {
     const ONE: Self = Q32(I32F32::ONE);
     const NAME: &'static str = "Q32.32";
     const IS_FLOAT: bool = false;
+    const RANGE_ABS: f64 = 2147483648.0;
     type Divisor = Q32;
     fn divisor(d: Self) -> Self {
         d
@@ -642,6 +647,7 @@ impl Real for Q16 {
     const ONE: Self = Q16(1 << 16);
     const NAME: &'static str = "Q16.16";
     const IS_FLOAT: bool = false;
+    const RANGE_ABS: f64 = 32768.0;
     type Divisor = Q16Divisor;
     /// `m = round(2^(30+p) / |d|)` with p the index of |d|'s leading one, so m is in
     /// [2^29, 2^30] (carrying d's sign) and `x / d = x · m / 2^(14+p)`: relative error below
