@@ -320,13 +320,7 @@ pub(super) fn diagnose_fits(
                             let c = candidates.len() - 1;
                             selected.extend([na, nb]);
                             current = candidates[c].fit.clone();
-                            let f = family.noise_floor(val, &current);
-                            if f.rmse < floor.rmse {
-                                floor = NoiseFloor {
-                                    rmse: f.rmse,
-                                    method: format!("{} (from the model with {})", f.method, selected.join(" + ")),
-                                };
-                            }
+                            lower_floor(&mut floor, family, val, &current, &selected);
                             rounds.push(Round {
                                 base: selected[..selected.len() - 2].iter().map(|s| s.to_string()).collect(),
                                 candidates: without_series(candidates),
@@ -366,13 +360,7 @@ pub(super) fn diagnose_fits(
             selected.retain(|s| !family.nested().iter().any(|(simple, rich)| simple == s && *rich == new));
             selected.push(new);
             current = c.fit.clone();
-            let f = family.noise_floor(val, &current);
-            if f.rmse < floor.rmse {
-                floor = NoiseFloor {
-                    rmse: f.rmse,
-                    method: format!("{} (from the model with {})", f.method, selected.join(" + ")),
-                };
-            }
+            lower_floor(&mut floor, family, val, &current, &selected);
         }
         rounds.push(Round {
             base: round_base(&selected, added.is_some()),
@@ -523,4 +511,16 @@ fn round_base(selected: &[&str], added: bool) -> Vec<String> {
         selected.len()
     };
     selected[..k].iter().map(|s| s.to_string()).collect()
+}
+
+/// Keeps the lower of `floor` and the floor read from the residual of the model now selected
+/// (`current`, with the effects `selected`).
+fn lower_floor(floor: &mut NoiseFloor, family: &dyn Family, val: &Log, current: &Fit, selected: &[&str]) {
+    let f = family.noise_floor(val, current);
+    if f.rmse < floor.rmse {
+        *floor = NoiseFloor {
+            rmse: f.rmse,
+            method: format!("{} (from the model with {})", f.method, selected.join(" + ")),
+        };
+    }
 }

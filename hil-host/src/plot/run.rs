@@ -119,17 +119,7 @@ pub fn run_svgs(sc: &Scenario, o: &RunOutput) -> Vec<(String, String)> {
                     hlines: vec![],
                     band: None,
                 },
-                Panel {
-                    y_label: "battery (V)",
-                    series: vec![Series {
-                        label: "battery",
-                        colour: RED,
-                        x: &et,
-                        y: &e_u,
-                    }],
-                    hlines: vec![],
-                    band: None,
-                },
+                battery_panel(&et, &e_u),
             ],
             &markers,
         ),
@@ -211,17 +201,7 @@ pub fn run_svgs(sc: &Scenario, o: &RunOutput) -> Vec<(String, String)> {
                         hlines: vec![],
                         band: None,
                     },
-                    Panel {
-                        y_label: "battery (V)",
-                        series: vec![Series {
-                            label: "battery",
-                            colour: RED,
-                            x: &vt,
-                            y: &v_u,
-                        }],
-                        hlines: vec![],
-                        band: None,
-                    },
+                    battery_panel(&vt, &v_u),
                 ],
                 &markers,
             ),
@@ -370,4 +350,19 @@ pub fn run_svgs(sc: &Scenario, o: &RunOutput) -> Vec<(String, String)> {
         ),
     ));
     svgs
+}
+
+/// The supply voltage's panel, shared by the actuators' plots.
+fn battery_panel<'a>(t_s: &'a [f64], u_v: &'a [f64]) -> Panel<'a> {
+    Panel {
+        y_label: "battery (V)",
+        series: vec![Series {
+            label: "battery",
+            colour: RED,
+            x: t_s,
+            y: u_v,
+        }],
+        hlines: vec![],
+        band: None,
+    }
 }
