@@ -538,6 +538,29 @@ mod tests {
         assert!(simulation_rmse(&wrong, &set) > 5.0 * rms);
     }
 
+    /// The events stepped side by side (lanes) and on two threads give the bits of each event
+    /// simulated alone, whatever the number of events per lane group (9 here: two groups of
+    /// four and a lone one).
+    #[test]
+    fn events_in_lanes_give_the_numbers_of_one_event_at_a_time() {
+        let (est, _, truth) = logs("snubber", 5);
+        let set = Events::from_log(&est).unwrap().for_fitting(9);
+        assert_eq!(set.events.len(), 9);
+        let p = gen::params_from_truth(&truth);
+        let mut alone = vec![0.0; set.samples];
+        for ev in &set.events {
+            let len = ev.lift_mm.len();
+            simulate_event(&p, ev, set.dt_ms, &mut alone[ev.start..ev.start + len]).unwrap();
+        }
+        let (mut lanes, mut threaded) = (vec![0.0; set.samples], vec![0.0; set.samples]);
+        simulate_all(&p, &set, &mut lanes).unwrap();
+        simulate_all_on(&p, &set, &mut threaded, 2).unwrap();
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&lanes), bits(&alone));
+        assert_eq!(bits(&threaded), bits(&alone));
+        assert!(alone.iter().any(|&y| y > 1.0), "the events open the valve");
+    }
+
     /// A unit whose spring is too weak to hold the valve on its seat against a high back
     /// pressure ((At − Ab)·Pl > ks·ds with the top chamber at Pl): the valve leaves its seat
     /// before the command, in the rest window of the event. Its events are simulated from the
