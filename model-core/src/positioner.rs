@@ -175,6 +175,82 @@ pub struct Positioner<R: Real> {
     /// The relaxation rate a = Fv/M (1/s) sliding forward and backward: parameters alone, so
     /// computed once.
     relax_rate_per_s: [R; 2],
+    /// Fixed point only: a nominal step sliding forward and backward as a linear map of
+    /// (velocity, force), its coefficients from f64 (see [`SlideMap`]).
+    nominal_map: [SlideMap<R>; 2],
+    /// M and Fv forward/backward, for the coefficients of `nominal_map`.
+    mass_kg: f64,
+    fv_n_s_per_m: [f64; 2],
+}
+
+/// A coefficient `c` >= 0 as `m·2^-shift` with m in [1/2, 1] (1 only by rounding; a zero `c`
+/// is `m` = 0): the product with any value in range is in range, and a small coefficient keeps 15 significant
+/// bits in Q16.16 (stored as is it would keep a few: a 1 ms step's 5.4e-6 is 0.35 LSB).
+#[derive(Clone, Copy, Debug)]
+struct ScaledCoef<R: Real> {
+    mantissa: R,
+    shift: i32,
+}
+
+impl<R: Real> ScaledCoef<R> {
+    fn new(c: f64) -> Self {
+        debug_assert!(c >= 0.0, "ScaledCoef: negative coefficient {c}");
+        // shift in -15..=16: beyond that the coefficient saturates or rounds to zero anyway.
+        // The scale is a power of two, so the scaled coefficient is exact in f64.
+        let (mut shift, mut scale) = (0, 1.0);
+        while shift < 16 && c != 0.0 && c.abs() * scale * 2.0 < 1.0 {
+            shift += 1;
+            scale *= 2.0;
+        }
+        while shift > -15 && c.abs() * scale >= 1.0 {
+            shift -= 1;
+            scale *= 0.5;
+        }
+        Self {
+            // A coefficient beyond 2^15 (no fixed-point type here holds it) saturates there.
+            mantissa: R::from_f64((c * scale).min(1.0)),
+            shift,
+        }
+    }
+    /// `c·x`: 0 <= m <= 1, so the product is in range; the scaling back saturates if it must.
+    #[inline(always)]
+    fn times(self, x: R) -> R {
+        x.mul_in_range(self.mantissa).mul_pow2(-self.shift)
+    }
+}
+
+/// One step of length h sliding in one direction as a linear map (the exact solution of
+/// [`Positioner::slide`] rearranged): with F = drive − dir·Fc, x = a·h, a = Fv/M, velocity and
+/// distance in 1/1024 m/s and 1/1024 m,
+/// `v(h) = v − v·xφ(x) + F·1024hφ(x)/M` and `d = v·hφ(x) + F·1024h²ψ(x)/M`.
+/// Four products with coefficients in range (a fixed-point product elsewhere needs a
+/// saturation test), where the series form takes eight.
+#[derive(Clone, Copy, Debug)]
+struct SlideMap<R: Real> {
+    v_loss: ScaledCoef<R>,
+    v_per_n: ScaledCoef<R>,
+    d_per_v: ScaledCoef<R>,
+    d_per_n: ScaledCoef<R>,
+}
+
+impl<R: Real> SlideMap<R> {
+    fn new(mass_kg: f64, fv_n_s_per_m: f64, h_s: f64) -> Self {
+        let x = fv_n_s_per_m / mass_kg * h_s;
+        let (phi, psi) = relaxation_weights(x);
+        Self {
+            v_loss: ScaledCoef::new(x * phi),
+            v_per_n: ScaledCoef::new(1024.0 * h_s * phi / mass_kg),
+            d_per_v: ScaledCoef::new(h_s * phi),
+            d_per_n: ScaledCoef::new(1024.0 * h_s * h_s * psi / mass_kg),
+        }
+    }
+    /// (velocity at the end, distance covered) from velocity `v` under the net force `f_n`.
+    #[inline(always)]
+    fn slide(&self, v: R, f_n: R) -> (R, R) {
+        let v_end = v - self.v_loss.times(v) + self.v_per_n.times(f_n);
+        let distance = self.d_per_v.times(v) + self.d_per_n.times(f_n);
+        (v_end, distance)
+    }
 }
 
 /// The positioner's default nominal step (the EMPS logs' 1 kHz), s: see
@@ -208,17 +284,21 @@ impl<R: Real> Positioner<R> {
             nominal_dt_x1024_s: f(1024.0 * NOMINAL_STEP_S),
             nominal_weights: [(R::ZERO, R::ZERO); 2],
             relax_rate_per_s: [R::ZERO; 2],
+            nominal_map: [SlideMap::new(1.0, 0.0, 0.0); 2],
+            mass_kg: p.mass_kg,
+            fv_n_s_per_m: [fv_pos, fv_neg],
         };
         for (k, fv) in [fv_pos, fv_neg].into_iter().enumerate() {
             positioner.relax_rate_per_s[k] = (f(fv) * positioner.inv_mass_x1024).mul_pow2(-10);
         }
-        positioner.set_nominal_weights();
+        positioner.set_nominal_weights(NOMINAL_STEP_S);
         Ok(positioner)
     }
 
-    fn set_nominal_weights(&mut self) {
+    fn set_nominal_weights(&mut self, dt_s: f64) {
         let h = self.nominal_dt_x1024_s;
         self.nominal_weights = [self.weights(R::ONE, h), self.weights(-R::ONE, h)];
+        self.nominal_map = self.fv_n_s_per_m.map(|fv| SlideMap::new(self.mass_kg, fv, dt_s));
     }
 
     /// (φ, ψ) of [`relaxation_weights`] for sliding `h_x1024` in direction `dir`.
@@ -272,7 +352,7 @@ impl<R: Real> Positioner<R> {
     pub fn set_nominal_step_s(&mut self, dt_s: f64) {
         self.nominal_dt_s = R::from_f64(dt_s);
         self.nominal_dt_x1024_s = R::from_f64(1024.0 * dt_s);
-        self.set_nominal_weights();
+        self.set_nominal_weights(dt_s);
     }
 
     /// Advances by `dt_s` under the applied force `force_n` (held over the step) and returns
@@ -301,8 +381,21 @@ impl<R: Real> Positioner<R> {
         } else {
             drive.sign()
         };
-        let (mut v_new, mut distance) = self.slide(v, drive, dir, h_x1024);
-        if v_new * dir < R::ZERO {
+        let (mut v_new, mut distance) = if !R::IS_FLOAT && h_x1024 == self.nominal_dt_x1024_s {
+            // Fixed point: the nominal step as a linear map, half the products (the floats
+            // keep the series form, whose rounding their results carry).
+            let dir_fc = if dir > R::ZERO { self.fc_pos } else { -self.fc_neg };
+            self.nominal_map[direction_index(dir)].slide(v, drive - dir_fc)
+        } else {
+            self.slide(v, drive, dir, h_x1024)
+        };
+        // The velocity reversed (dir = ±1: the sign of v_new·dir, without the product).
+        let reversed = if dir > R::ZERO {
+            v_new < R::ZERO
+        } else {
+            v_new > R::ZERO
+        };
+        if reversed {
             // Friction stops the motion within the step; it cannot reverse it. Stop at the
             // zero crossing (time by linear interpolation of the velocity), then either stick
             // or break away the other way for the rest of the step.
@@ -482,6 +575,28 @@ mod tests {
                 let (dev_pos, dev_vel) = deviation_from_f64::<crate::real::Q16>(&p, &forces);
                 prop_assert!(dev_pos <= 2e-4, "position {dev_pos} m, velocity {dev_vel} m/s");
             }
+        }
+
+        /// The fixed-point nominal step's linear map is the series form rearranged: in f64 the
+        /// two agree to rounding for any mass, viscous friction and step; in Q16.16 a scaled
+        /// coefficient c times a value is within 2·max(1, c) LSB and 2e-5 of the exact product.
+        #[test]
+        fn the_linear_slide_map_is_the_exact_slide(
+            mass_kg in 1.0f64..500.0, fv in 0.0f64..2000.0, h_s in 1e-5f64..0.05,
+            v in -400.0f64..400.0, f_n in -400.0f64..400.0, c in 1e-7f64..3e4, x_mant in -1.0f64..1.0, x_exp in 0i32..16,
+        ) {
+            let p = PositionerParams { mass_kg, fv_n_s_per_m: fv, fc_n: 0.0, ..PositionerParams::emps() };
+            let mut plant = plant::<f64>(&p);
+            plant.set_nominal_step_s(h_s);
+            let map = SlideMap::<f64>::new(mass_kg, fv, h_s);
+            let (v_map, d_map) = map.slide(v, f_n);
+            let (v_series, d_series) = plant.slide(v, f_n, 1.0, 1024.0 * h_s);
+            prop_assert!((v_map - v_series).abs() <= 1e-9 * (1.0 + v_series.abs()), "{v_map} vs {v_series}");
+            prop_assert!((d_map - d_series).abs() <= 1e-9 * (1.0 + d_series.abs()), "{d_map} vs {d_series}");
+            let x = x_mant * f64::from(1u32 << x_exp);
+            let q = ScaledCoef::<crate::real::Q16>::new(c).times(crate::real::Q16::from_f64(x)).to_f64();
+            let exact = (c * crate::real::Q16::from_f64(x).to_f64()).clamp(-32768.0, 32768.0 - 1.0 / 65536.0);
+            prop_assert!((q - exact).abs() <= 2.0 / 65536.0 * c.max(1.0) + 2e-5 * exact.abs(), "{c} x {x}: {q} vs {exact}");
         }
 
         /// With no applied force the friction only dissipates: kinetic energy never grows, the
