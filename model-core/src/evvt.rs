@@ -340,44 +340,106 @@ struct ZohStep<R: Real> {
     bd2_x64_deg_per_s_rpm: R,
 }
 
-/// [`ZohStep`] from α, β and 64·T, with φ1 and φ2.
+/// φ1, φ2 and e^{-x} of [`Zoh`] at x = βT >= 0.
 #[inline(always)]
-fn zoh_step_phis<R: Real>(alpha: R, beta: R, t_x64_s: R) -> (ZohStep<R>, R, R) {
-    let t64 = t_x64_s.max(R::ZERO);
-    let t32 = t64.mul_pow2(-1);
-    let x = (beta * t64).mul_pow2(-6).max(R::ZERO);
+fn zoh_phis<R: Real>(x: R) -> (R, R, R) {
     // Above βT = 2 the closed form is accurate even with f32's approximate exp (e^{-x} < 0.14
     // enters φ2 only through 1 − φ1 > 0.57).
-    let (phi1, phi2, e) = if x < R::from_f64(2.0) {
+    if x < R::from_f64(2.0) {
         // g = 2 Σ (−x)^k/(k+2)! = 1 − x/3 (1 − x/4 (1 − … x/26)), coefficients as literals
         // (converted at compile time). Below βT = 1/4 (the usual step) 13 terms already leave
         // a truncation < 1e-20. In range: |x| < 2, coefficients <= 1, every partial sum within
         // [0, 1.4].
         let nx = -x;
-        let g = if x < R::from_f64(0.25) {
+        let g = if R::from_f64(1e-6) == R::ZERO {
+            // A type that cannot hold 1e-6 (Q16.16, LSB 1.5e-5) needs fewer terms: the first
+            // left out is below one LSB, 1.1e-5 for x < 1/4 (4 terms) and 4.3e-6 for x < 2
+            // (10 terms), and enters φ2 halved.
+            if x < R::from_f64(0.25) {
+                horner_in_range!(R, nx; 1.0, 0.3333333333333333, 0.08333333333333333, 0.016666666666666666)
+            } else {
+                horner_in_range!(R, nx; 1.0, 0.3333333333333333, 0.08333333333333333, 0.016666666666666666, 0.002777777777777778, 0.0003968253968253968, 4.96031746031746e-05, 5.5114638447971785e-06, 5.511463844797178e-07, 5.010421677088344e-08)
+            }
+        } else if x < R::from_f64(0.25) {
             horner_in_range!(R, nx; 1.0, 0.3333333333333333, 0.08333333333333333, 0.016666666666666666, 0.002777777777777778, 0.0003968253968253968, 4.96031746031746e-05, 5.5114638447971785e-06, 5.511463844797178e-07, 5.010421677088344e-08, 4.17535139757362e-09, 3.2118087673643227e-10, 2.294149119545945e-11)
         } else {
             horner_in_range!(R, nx; 1.0, 0.3333333333333333, 0.08333333333333333, 0.016666666666666666, 0.002777777777777778, 0.0003968253968253968, 4.96031746031746e-05, 5.5114638447971785e-06, 5.511463844797178e-07, 5.010421677088344e-08, 4.17535139757362e-09, 3.2118087673643227e-10, 2.294149119545945e-11, 1.5294327463639633e-12, 9.55895466477477e-14, 5.622914508691041e-15, 3.123841393717245e-16, 1.644127049324866e-17, 8.22063524662433e-19, 3.9145882126782525e-20, 1.779358278490115e-21, 7.736340341261367e-23, 3.2234751421922368e-24, 1.2893900568768947e-25, 4.9591925264495945e-27)
         };
         // In range: x < 2, 0 < φ2 <= 1/2, 0 < φ1 <= 1.
         let phi2 = g.mul_pow2(-1);
-        let phi1 = R::ONE - x.mul_in_range(phi2);
+        let phi1 = R::ONE - x.mul_floor_in_range(phi2);
         // e^{-x} = 1 − x φ1, consistent with φ1 to the last bit.
-        (phi1, phi2, R::ONE - x.mul_in_range(phi1))
+        (phi1, phi2, R::ONE - x.mul_floor_in_range(phi1))
     } else {
         let e = (-x).exp();
         let phi1 = (R::ONE - e) / x;
         let phi2 = (R::ONE - phi1) / x;
         (phi1, phi2, e)
-    };
+    }
+}
+
+/// [`ZohStep`] in fixed point at a step with 64·T <= 2, from the prescaled table values α·64T
+/// and β·64T ([`EvvtPlant`]'s `prescaled`): the products of [`zoh_step_phis`] with T fall
+/// away. In range: α·64T <= 3·2 048 (lut.rs) times the advance factor <= 4 is below 24 576,
+/// T·32φ2 <= 1/2 and φ1 <= 1.
+#[inline(always)]
+fn zoh_step_prescaled<R: Real>(alpha_t64: R, beta_t64: R, t_x64_s: R) -> ZohStep<R> {
+    let x = beta_t64.mul_pow2(-6).max(R::ZERO);
+    let (phi1, phi2, e) = zoh_phis(x);
+    let t32 = t_x64_s.mul_pow2(-1);
+    ZohStep {
+        ad12_x64_s: t_x64_s.mul_floor_in_range(phi1),
+        // α·(32T)²φ2 = (α·64T)·(32T·φ2)/2.
+        bd1_x1024_deg_per_rpm: alpha_t64.mul_floor_in_range(t32.mul_floor_in_range(phi2)).mul_pow2(-1),
+        bd2_x64_deg_per_s_rpm: alpha_t64.mul_floor_in_range(phi1),
+        ad22: e,
+    }
+}
+
+/// [`ZohStep`] from α, β and 64·T, with φ1 and φ2.
+#[inline(always)]
+fn zoh_step_phis<R: Real>(alpha: R, beta: R, t_x64_s: R) -> (ZohStep<R>, R, R) {
+    let t64 = t_x64_s.max(R::ZERO);
+    let t32 = t64.mul_pow2(-1);
+    // Fixed point, 64·T <= 2 (T <= 31 ms; the ECU's 10 ms step): the products with α and β
+    // are in range. The tables hold α < 10^3 and β < 10^4 ([`EvvtLpvTable::build`]), at most
+    // 2 048 in fixed point (lut.rs), and an interpolated value is within 3× an entry: β·64T
+    // <= 12 288, α (times the advance factor <= 4) <= 12 000, α·64T <= 24 000, α·32T·32Tφ2
+    // <= 6 000. Longer steps keep the saturating products.
+    let in_range = !R::IS_FLOAT && t64 <= R::from_f64(2.0);
+    let mul = |a: R, b: R| if in_range { a.mul_in_range(b) } else { a * b };
+    let x = mul(beta, t64).mul_pow2(-6).max(R::ZERO);
+    let (phi1, phi2, e) = zoh_phis(x);
     // φ1 and φ2 lie in [0, 1]: their products are no larger than the other factor.
     let step = ZohStep {
         ad12_x64_s: t64.mul_in_range(phi1),
-        bd1_x1024_deg_per_rpm: alpha * t32 * t32.mul_in_range(phi2),
-        bd2_x64_deg_per_s_rpm: (alpha * t64).mul_in_range(phi1),
+        bd1_x1024_deg_per_rpm: mul(mul(alpha, t32), t32.mul_in_range(phi2)),
+        bd2_x64_deg_per_s_rpm: mul(alpha, t64).mul_in_range(phi1),
         ad22: e,
     };
     (step, phi1, phi2)
+}
+
+/// The fixed-point tables α·64T and β·64T for the nominal step `dt_s` (see
+/// [`EvvtPlant`]'s `prescaled`); `None` for the floats and where they do not apply.
+fn prescaled_tables<R: Real>(lpv: &EvvtLpvTable, dt_s: f64) -> Option<(Lut2<R, 3, 3>, Lut2<R, 3, 3>)> {
+    if R::IS_FLOAT || !(dt_s > 0.0 && 64.0 * dt_s <= 2.0) {
+        return None;
+    }
+    let t64 = 64.0 * dt_s;
+    let scaled = EvvtLpvTable {
+        alpha_deg_per_s2_rpm: lpv.alpha_deg_per_s2_rpm.map(|row| row.map(|a| a * t64)),
+        beta_per_s: lpv.beta_per_s.map(|row| row.map(|b| b * t64)),
+        ..*lpv
+    };
+    let alpha = Lut2::new(
+        scaled.engine_speed_rpm,
+        scaled.battery_voltage_v,
+        scaled.alpha_deg_per_s2_rpm,
+    )
+    .ok()?;
+    let beta = Lut2::new(scaled.engine_speed_rpm, scaled.battery_voltage_v, scaled.beta_per_s).ok()?;
+    Some((alpha, beta))
 }
 
 /// The table input an effect scale makes of `x`: `nominal + scale·(x − nominal)`. With the
@@ -481,6 +543,13 @@ pub struct EvvtPlant<R: Real> {
     /// The nominal step in `R` and 64 times it converted from f64 (see [`zoh_scaled`]).
     nominal_dt_s: R,
     nominal_dt_x64_s: R,
+    /// Fixed point with 64·T <= 2 at the nominal step: the tables α·64T and β·64T (the
+    /// scaling is linear, so they interpolate to 64T times the interpolated α and β), which
+    /// spare the zero-order hold three products ([`zoh_step_prescaled`]). `None` for the
+    /// floats, for longer steps and for tables whose scaled values leave lut.rs's bound.
+    prescaled: Option<(Lut2<R, 3, 3>, Lut2<R, 3, 3>)>,
+    /// The table, kept to prescale it for a new nominal step.
+    lpv: EvvtLpvTable,
 }
 
 impl<R: Real> EvvtPlant<R> {
@@ -508,6 +577,8 @@ impl<R: Real> EvvtPlant<R> {
             zoh_key: (R::ZERO, R::ZERO, R::ZERO),
             nominal_dt_s: f(NOMINAL_STEP_S),
             nominal_dt_x64_s: f(64.0 * NOMINAL_STEP_S),
+            prescaled: prescaled_tables(&p.lpv, NOMINAL_STEP_S),
+            lpv: p.lpv,
         })
     }
 
@@ -517,6 +588,7 @@ impl<R: Real> EvvtPlant<R> {
     pub fn set_nominal_step_s(&mut self, dt_s: f64) {
         self.nominal_dt_s = R::from_f64(dt_s);
         self.nominal_dt_x64_s = R::from_f64(64.0 * dt_s);
+        self.prescaled = prescaled_tables(&self.lpv, dt_s);
         self.zoh_key = (R::ZERO, R::ZERO, R::ZERO);
         self.zoh = zoh_step_phis(R::ZERO, R::ZERO, R::ZERO).0;
     }
@@ -524,11 +596,23 @@ impl<R: Real> EvvtPlant<R> {
     /// α (crank-deg/(s²·rpm)) and β (1/s) of eq. (12) at engine speed `engine_rpm` and battery
     /// voltage `u_batt_v`, with the `supply-voltage` and `engine-speed` effect scales applied.
     pub fn alpha_beta(&self, engine_rpm: R, u_batt_v: R) -> (R, R) {
-        let v = effect_scaled(u_batt_v, self.nominal_voltage_v, self.voltage_effect_scale);
-        let n = effect_scaled(engine_rpm, self.nominal_engine_rpm, self.engine_speed_effect_scale);
-        // Both tables are on the same grid: one look-up.
-        let at = self.alpha.locate(n, v);
-        (self.alpha.eval_at(at), self.beta.eval_at(at))
+        Self::look_up(&self.alpha, &self.beta, self.table_input(engine_rpm, u_batt_v))
+    }
+
+    /// The (speed, voltage) the tables are read at: the effect scales applied.
+    #[inline(always)]
+    fn table_input(&self, engine_rpm: R, u_batt_v: R) -> (R, R) {
+        (
+            effect_scaled(engine_rpm, self.nominal_engine_rpm, self.engine_speed_effect_scale),
+            effect_scaled(u_batt_v, self.nominal_voltage_v, self.voltage_effect_scale),
+        )
+    }
+
+    /// Both tables at `(n, v)`: they are on the same grid, so one look-up.
+    #[inline(always)]
+    fn look_up(a: &Lut2<R, 3, 3>, b: &Lut2<R, 3, 3>, (n, v): (R, R)) -> (R, R) {
+        let at = a.locate(n, v);
+        (a.eval_at(at), b.eval_at(at))
     }
 
     /// Advances the plant by `dt_s` with the motor speed command `motor_cmd_rpm` (motor speed
@@ -536,7 +620,18 @@ impl<R: Real> EvvtPlant<R> {
     /// the belt disturbance, not quantized).
     pub fn step(&mut self, motor_cmd_rpm: R, engine_rpm: R, u_batt_v: R, dt_s: R) -> R {
         let dt = dt_s.max(R::ZERO);
-        let (mut alpha, beta) = self.alpha_beta(engine_rpm, u_batt_v);
+        let input = self.table_input(engine_rpm, u_batt_v);
+        // Fixed point at the nominal step: α·64T and β·64T from the prescaled tables (the key
+        // below tells them apart by the step).
+        let prescaled = match &self.prescaled {
+            Some(tables) if !R::IS_FLOAT && dt == self.nominal_dt_s => Some(tables),
+            _ => None,
+        };
+        let (table_a, table_b) = match prescaled {
+            Some((a, b)) => (a, b),
+            None => (&self.alpha, &self.beta),
+        };
+        let (mut alpha, beta) = Self::look_up(table_a, table_b, input);
         // A factor of exactly 1 (the effect off) changes no bit: fixed point skips its product
         // (the floats' one instruction is cheaper than the test).
         if motor_cmd_rpm > R::ZERO && (R::IS_FLOAT || self.advance_alpha_factor != R::ONE) {
@@ -544,19 +639,27 @@ impl<R: Real> EvvtPlant<R> {
         }
         let key = (alpha, beta, dt);
         if key != self.zoh_key {
-            let dt_x64 = if dt == self.nominal_dt_s {
-                self.nominal_dt_x64_s
+            self.zoh = if prescaled.is_some() {
+                zoh_step_prescaled(alpha, beta, self.nominal_dt_x64_s)
             } else {
-                dt.mul_pow2(6)
+                let dt_x64 = if dt == self.nominal_dt_s {
+                    self.nominal_dt_x64_s
+                } else {
+                    dt.mul_pow2(6)
+                };
+                zoh_step_phis(alpha, beta, dt_x64).0
             };
-            self.zoh = zoh_step_phis(alpha, beta, dt_x64).0;
             self.zoh_key = key;
         }
         let z = self.zoh;
-        // Products of the scaled coefficients, scaled back by exact powers of two.
-        let x1 = self.phase_deg
-            + (z.ad12_x64_s * self.rate_deg_per_s).mul_pow2(-6)
-            + (z.bd1_x1024_deg_per_rpm * motor_cmd_rpm).mul_pow2(-10);
+        // Products of the scaled coefficients, scaled back by exact powers of two. Fixed point,
+        // T <= 1/64 s (the ECU's 10 ms): 64Tφ1 <= 1, so its product is in range.
+        let ad12_rate = if !R::IS_FLOAT && dt <= R::from_f64(1.0 / 64.0) {
+            z.ad12_x64_s.mul_in_range(self.rate_deg_per_s)
+        } else {
+            z.ad12_x64_s * self.rate_deg_per_s
+        };
+        let x1 = self.phase_deg + ad12_rate.mul_pow2(-6) + (z.bd1_x1024_deg_per_rpm * motor_cmd_rpm).mul_pow2(-10);
         // e^{-βT} in [0, 1]: in range.
         let x2 = z.ad22.mul_in_range(self.rate_deg_per_s) + (z.bd2_x64_deg_per_s_rpm * motor_cmd_rpm).mul_pow2(-6);
         self.phase_deg = x1;
@@ -653,7 +756,7 @@ mod tests {
     /// Phase and rate of the plant in `R` and in f64 under the same piecewise-constant inputs
     /// (command rpm, engine rpm, battery V per segment of 20 steps of 10 ms); the largest
     /// deviations (deg, deg/s), `None` when the f64 run came within 1 degree of a stop.
-    fn deviation_from_f64<R: Real>(segments: &[(f64, f64, f64)]) -> Option<(f64, f64)> {
+    pub(super) fn deviation_from_f64<R: Real>(segments: &[(f64, f64, f64)]) -> Option<(f64, f64)> {
         let p = EvvtParams {
             initial_phase_deg: 20.0,
             ..EvvtParams::default()

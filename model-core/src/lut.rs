@@ -33,7 +33,7 @@ fn locate<R: Real, const N: usize>(axis: &[R; N], inv_dx: &[R; N], x: R) -> (usi
     }
     // In range: 0 <= x − axis[i] <= the spacing and inv_dx[i] its reciprocal (rounded by at
     // most half an LSB), so the weight is within [0, 2) in any type (see `check_values`).
-    let w = (x - axis[i]).mul_in_range(inv_dx[i]);
+    let w = (x - axis[i]).mul_floor_in_range(inv_dx[i]);
     (i, w)
 }
 
@@ -96,7 +96,7 @@ impl<R: Real, const N: usize> Lut1<R, N> {
     }
     pub fn eval(&self, x: R) -> R {
         let (i, w) = locate(&self.x, &self.inv_dx, x);
-        self.y[i] + w.mul_in_range(self.y[i + 1] - self.y[i])
+        self.y[i] + w.mul_floor_in_range(self.y[i + 1] - self.y[i])
     }
     /// Where `x` lies on the breakpoints, for [`Self::eval_at`]: tables on the same
     /// breakpoints then share one look-up.
@@ -110,7 +110,7 @@ impl<R: Real, const N: usize> Lut1<R, N> {
     #[inline]
     pub fn eval_at(&self, p: LutPoint<R, N>) -> R {
         let LutPoint { i, w } = p;
-        self.y[i] + w.mul_in_range(self.y[i + 1] - self.y[i])
+        self.y[i] + w.mul_floor_in_range(self.y[i + 1] - self.y[i])
     }
     pub fn breakpoints(&self) -> &[R; N] {
         &self.x
@@ -165,9 +165,9 @@ impl<R: Real, const NX: usize, const NY: usize> Lut2<R, NX, NY> {
     pub fn eval(&self, x: R, y: R) -> R {
         let (i, wx) = locate(&self.x, &self.inv_dx, x);
         let (j, wy) = locate(&self.y, &self.inv_dy, y);
-        let z0 = self.z[i][j] + wy.mul_in_range(self.z[i][j + 1] - self.z[i][j]);
-        let z1 = self.z[i + 1][j] + wy.mul_in_range(self.z[i + 1][j + 1] - self.z[i + 1][j]);
-        z0 + wx.mul_in_range(z1 - z0)
+        let z0 = self.z[i][j] + wy.mul_floor_in_range(self.z[i][j + 1] - self.z[i][j]);
+        let z1 = self.z[i + 1][j] + wy.mul_floor_in_range(self.z[i + 1][j + 1] - self.z[i + 1][j]);
+        z0 + wx.mul_floor_in_range(z1 - z0)
     }
     /// Where `(x, y)` lies on the grid, for [`Self::eval_at`]: tables on the same breakpoints
     /// then share one look-up.
@@ -182,9 +182,9 @@ impl<R: Real, const NX: usize, const NY: usize> Lut2<R, NX, NY> {
     #[inline]
     pub fn eval_at(&self, p: LutPoint2<R, NX, NY>) -> R {
         let LutPoint2 { i, wx, j, wy } = p;
-        let z0 = self.z[i][j] + wy.mul_in_range(self.z[i][j + 1] - self.z[i][j]);
-        let z1 = self.z[i + 1][j] + wy.mul_in_range(self.z[i + 1][j + 1] - self.z[i + 1][j]);
-        z0 + wx.mul_in_range(z1 - z0)
+        let z0 = self.z[i][j] + wy.mul_floor_in_range(self.z[i][j + 1] - self.z[i][j]);
+        let z1 = self.z[i + 1][j] + wy.mul_floor_in_range(self.z[i + 1][j + 1] - self.z[i + 1][j]);
+        z0 + wx.mul_floor_in_range(z1 - z0)
     }
     /// The table along x at a fixed `y`: `slice_y(y).eval(x) == eval(x, y)` bit for bit (the
     /// same operations: the slice holds the values interpolated along y), for a model whose y
@@ -194,7 +194,7 @@ impl<R: Real, const NX: usize, const NY: usize> Lut2<R, NX, NY> {
         Lut1 {
             x: self.x,
             inv_dx: self.inv_dx,
-            y: core::array::from_fn(|i| self.z[i][j] + wy.mul_in_range(self.z[i][j + 1] - self.z[i][j])),
+            y: core::array::from_fn(|i| self.z[i][j] + wy.mul_floor_in_range(self.z[i][j + 1] - self.z[i][j])),
         }
     }
     pub fn x_breakpoints(&self) -> &[R; NX] {
@@ -231,7 +231,8 @@ mod tests {
     proptest! {
         /// The range proof of `check_values`, tried: Q16.16 look-ups of any table it accepts,
         /// on any breakpoints (spacings down to a fraction of an LSB) and anywhere on or off
-        /// the grid, give the bits of the same interpolation with saturating products.
+        /// the grid, give the bits of the same interpolation with saturating products (rounded
+        /// down, as the look-ups' products are: `Real::mul_floor_in_range`).
         #[test]
         fn q16_lookups_equal_the_saturating_interpolation(
             x0 in -30000.0f64..30000.0, dxs in proptest::collection::vec(1e-6f64..5000.0, 2),
@@ -240,6 +241,11 @@ mod tests {
             px in -40000.0f64..40000.0, py in -40000.0f64..40000.0, pick in 0usize..3,
         ) {
             use crate::real::Q16;
+            // The full product rounded down, saturated to the range.
+            let mul = |a: Q16, b: Q16| {
+                let p = (i64::from(a.to_bits()) * i64::from(b.to_bits())) >> 16;
+                Q16::from_bits(p.clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32)
+            };
             let xs = [x0, x0 + dxs[0], x0 + dxs[0] + dxs[1]];
             let ys = [y0, y0 + dys[0], y0 + dys[0] + dys[1]];
             let zz = [[z[0], z[1], z[2]], [z[3], z[4], z[5]], [z[6], z[7], z[8]]];
@@ -251,12 +257,12 @@ mod tests {
             };
             let (i, wx) = locate(&t.x, &t.inv_dx, qx);
             let (j, wy) = locate(&t.y, &t.inv_dy, qy);
-            let z0 = t.z[i][j] + wy * (t.z[i][j + 1] - t.z[i][j]);
-            let z1 = t.z[i + 1][j] + wy * (t.z[i + 1][j + 1] - t.z[i + 1][j]);
-            prop_assert_eq!(t.eval(qx, qy), z0 + wx * (z1 - z0));
+            let z0 = t.z[i][j] + mul(wy, t.z[i][j + 1] - t.z[i][j]);
+            let z1 = t.z[i + 1][j] + mul(wy, t.z[i + 1][j + 1] - t.z[i + 1][j]);
+            prop_assert_eq!(t.eval(qx, qy), z0 + mul(wx, z1 - z0));
             let s = t.slice_y(qy);
             let y = [s.y[i], s.y[i + 1]];
-            prop_assert_eq!(s.eval(qx), y[0] + wx * (y[1] - y[0]));
+            prop_assert_eq!(s.eval(qx), y[0] + mul(wx, y[1] - y[0]));
         }
     }
 

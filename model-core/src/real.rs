@@ -115,6 +115,15 @@ pub trait Real:
     fn mul_in_range(self, rhs: Self) -> Self {
         self * rhs
     }
+    /// [`Real::mul_in_range`] rounded down (towards −∞) in fixed point: an error of at most one
+    /// LSB, always the same way, for 3 instructions where rounding to nearest takes 5 on the
+    /// Cortex-M4. For the arithmetic of coefficients (a table's interpolation, a series, a
+    /// discretization), whose error enters the model as a relative error of the coefficient;
+    /// never for an increment that an integrator sums (it would drift). The floats round as `*`.
+    #[inline(always)]
+    fn mul_floor_in_range(self, rhs: Self) -> Self {
+        self.mul_in_range(rhs)
+    }
     /// `self · 2^exp` for a constant `exp` in -16..=16: the scalings of the models' scaled
     /// states (a time in 1/1024 s, a position in 1/1024 m). The bits of `self ·
     /// from_f64(2^exp)` in every type; Q16.16 shifts instead of multiplying (3 instructions for
@@ -704,6 +713,17 @@ impl Real for Q16 {
         Q16((p >> 16) as i32)
     }
     #[inline(always)]
+    fn mul_floor_in_range(self, rhs: Self) -> Self {
+        let p = i64::from(self.0) * i64::from(rhs.0);
+        debug_assert!(
+            (p >> 16) == i64::from((p >> 16) as i32),
+            "mul_floor_in_range: {} * {} leaves the Q16.16 range",
+            self.to_f64(),
+            rhs.to_f64()
+        );
+        Q16((p >> 16) as i32)
+    }
+    #[inline(always)]
     fn mul_pow2(self, exp: i32) -> Self {
         debug_assert!((-16..=16).contains(&exp), "mul_pow2: exponent {exp} outside -16..=16");
         if exp >= 0 {
@@ -1179,6 +1199,15 @@ mod tests {
             prop_assert_eq!(qa.mul_in_range(qw), qa * qw);
             let (qb, qc) = (Q16::from_bits(b), Q16::from_bits(c));
             prop_assert_eq!(qb.mul_in_range(qc), qb * qc);
+            // Rounded down: the exact product's floor, at most one LSB below the rounded one,
+            // and the same where the exact product is a whole number of LSB.
+            for (x, y) in [(qa, qw), (qb, qc)] {
+                let exact = i64::from(x.to_bits()) * i64::from(y.to_bits());
+                let floor = x.mul_floor_in_range(y);
+                prop_assert_eq!(i64::from(floor.to_bits()), exact.div_euclid(1 << 16));
+                let below = i64::from((x * y).to_bits()) - i64::from(floor.to_bits());
+                prop_assert!(below == 0 || below == 1, "{below}");
+            }
         }
 
         #[test]
