@@ -21,7 +21,7 @@
 //! Effects the diagnosis switches (DATA-FORMAT.md, plant `vacuum`) are the fields of
 //! [`VacuumEffects`]; [`VacuumParams::baseline`] turns all of them off.
 
-use crate::real::{horner, Real};
+use crate::real::{horner, horner_in_range, Real};
 
 /// Specific gas constant of air, J/(kg·K).
 pub const R_AIR_J_PER_KG_K: f64 = 287.0;
@@ -547,9 +547,17 @@ const ONE_MINUS_EXP_NEG_COEFFS: [f64; 16] = {
 /// Unrolled by `horner!` so that each coefficient converts to `R` at compile time (a loop left
 /// `R::from_f64` at run time: soft-float double arithmetic on the target, ~60 % of the Q16.16
 /// actuator step). The same operations in the same order as the loop `s = c + x·s` from s = 0.
+///
+/// A type that cannot hold 1e-6 (Q16.16, LSB 1.5e-5) takes the series to x⁸ (the first term
+/// left out below 2.8e-7) with products in range: 0 <= x < 1, coefficients and partial sums
+/// within [−1, 1].
 fn one_minus_exp_neg<R: Real>(x: R) -> R {
     if x < R::ONE {
         const C: [f64; 16] = ONE_MINUS_EXP_NEG_COEFFS;
+        if R::from_f64(1e-6) == R::ZERO {
+            let s = horner_in_range!(R, x; C[0], C[1], C[2], C[3], C[4], C[5], C[6], C[7], C[8]);
+            return x.mul_in_range(s);
+        }
         let s = horner!(R, x; C[0], C[1], C[2], C[3], C[4], C[5], C[6], C[7], C[8], C[9], C[10], C[11],
             C[12], C[13], C[14], C[15]);
         x * s
