@@ -380,7 +380,7 @@ fn zoh_phis<R: Real>(x: R) -> (R, R, R) {
 
 /// [`ZohStep`] in fixed point at a step with 64·T <= 2, from the prescaled table values α·64T
 /// and β·64T ([`EvvtPlant`]'s `prescaled`): the products of [`zoh_step_phis`] with T fall
-/// away. In range: α·64T <= 3·2 048 (lut.rs) times the advance factor <= 4 is below 24 576,
+/// away. In range: α·64T <= 3·2 048 (lut.rs) times the advance factor <= 4 is at most 24 576,
 /// T·32φ2 <= 1/2 and φ1 <= 1.
 #[inline(always)]
 fn zoh_step_prescaled<R: Real>(alpha_t64: R, beta_t64: R, t_x64_s: R) -> ZohStep<R> {
