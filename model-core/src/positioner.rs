@@ -184,8 +184,10 @@ pub struct Positioner<R: Real> {
 }
 
 /// A coefficient `c` >= 0 as `m·2^-shift` with m in [1/2, 1] (1 only by rounding; a zero `c`
-/// is `m` = 0): the product with any value in range is in range, and a small coefficient keeps 15 significant
-/// bits in Q16.16 (stored as is it would keep a few: a 1 ms step's 5.4e-6 is 0.35 LSB).
+/// is `m` = 0): the product with any value in range is in range, and a small coefficient
+/// keeps 15 significant bits in Q16.16 (stored as is it would keep a few: a 1 ms step's 5.4e-6
+/// is 0.35 LSB). A coefficient above 1 (none at a 1 ms step of a load above 1 kg) costs the
+/// value's low bits: the product is within max(1, c) LSB.
 #[derive(Clone, Copy, Debug)]
 struct ScaledCoef<R: Real> {
     mantissa: R,
