@@ -156,15 +156,23 @@ pub fn params(plant: Plant, effect: &str) -> &'static [(&'static str, Neutral)] 
 /// 1e-6)? `values` are the fit's parameters by name. An extension whose effect ends off gains
 /// only by refitting the rest: it is no evidence for the effect.
 pub fn is_off(plant: Plant, effect: &str, values: &[(String, f64)]) -> bool {
+    is_off_within(plant, effect, values, |_| None)
+}
+
+/// [`is_off`] with each parameter's 95 % half-width `ci95(name)` where the fit knows it: an
+/// effect whose parameters are within their intervals of the neutral values is off (the data
+/// cannot tell it from neutral), whatever its refitted model gains.
+pub fn is_off_within(plant: Plant, effect: &str, values: &[(String, f64)], ci95: impl Fn(&str) -> Option<f64>) -> bool {
     let get = |n: &str| values.iter().find(|(k, _)| k == n).map(|(_, v)| *v);
-    let near = |a: f64, b: f64| (a - b).abs() <= 1e-6 * b.abs().max(1.0);
+    let near = |a: f64, b: f64, ci: f64| (a - b).abs() <= (1e-6 * b.abs().max(1.0)).max(ci);
+    let half = |n: &str| ci95(n).filter(|c| c.is_finite()).unwrap_or(0.0);
     let ps = params(plant, effect);
     !ps.is_empty()
         && ps.iter().all(|(name, neutral)| match neutral {
             Neutral::Shape => true,
-            Neutral::Value(v) => get(name).is_some_and(|x| near(x, *v)),
+            Neutral::Value(v) => get(name).is_some_and(|x| near(x, *v, half(name))),
             Neutral::SameAs(other) => match (get(name), get(other)) {
-                (Some(x), Some(y)) => near(x, y),
+                (Some(x), Some(y)) => near(x, y, half(name) + half(other)),
                 _ => false,
             },
         })
@@ -230,5 +238,32 @@ mod tests {
         // A parameter missing from the fit is not taken as neutral; unknown effects are never off.
         assert!(!is_off(Plant::Ehvva, "snubber", &v(&[])));
         assert!(!is_off(Plant::Ehvva, "duty-delay", &v(&[])));
+    }
+
+    #[test]
+    fn an_effect_within_its_fitted_intervals_of_neutral_is_off() {
+        let v = |pairs: &[(&str, f64)]| pairs.iter().map(|(k, x)| (k.to_string(), *x)).collect::<Vec<_>>();
+        // τfall/τrise = 0.99: off when the two intervals (±0.001 each) cover the difference,
+        // on when they are ten times narrower.
+        let taus = v(&[("tau_rise_s", 0.0500), ("tau_fall_s", 0.0495)]);
+        assert!(is_off_within(Plant::Vacuum, "pressure-direction", &taus, |_| Some(
+            0.001
+        )));
+        assert!(!is_off_within(Plant::Vacuum, "pressure-direction", &taus, |_| Some(
+            0.0001
+        )));
+        // A value parameter: Fc = 0.02 ± 0.05 kPa is off, 1.6 ± 0.05 is not; an unknown or
+        // non-finite interval falls back to 1e-6.
+        let fc = |x: f64| v(&[("fc_kPa", x), ("dahl_x_pct", 0.3)]);
+        assert!(is_off_within(Plant::Vacuum, "coulomb-friction", &fc(0.02), |_| Some(
+            0.05
+        )));
+        assert!(!is_off_within(Plant::Vacuum, "coulomb-friction", &fc(1.6), |_| Some(
+            0.05
+        )));
+        assert!(!is_off_within(Plant::Vacuum, "coulomb-friction", &fc(0.02), |_| Some(
+            f64::NAN
+        )));
+        assert!(!is_off_within(Plant::Vacuum, "coulomb-friction", &fc(0.02), |_| None));
     }
 }

@@ -73,6 +73,13 @@ pub trait Family {
     fn fit_probe(&self, probe: &str, _effects: &[&str], _parent: &Fit, _est: &Log, _val: &Log) -> Result<Fit, String> {
         Err(format!("no probe `{probe}` in this family"))
     }
+    /// Whether `effect` ended at its neutral value in `fit` (switched off: its gain comes from
+    /// refitting the rest of the model). By default to 1e-6 ([`catalogue::is_off`]); a family
+    /// whose starts can lower the cost of a practically neutral effect judges by the fitted
+    /// 95 % intervals instead.
+    fn is_off(&self, effect: &str, fit: &Fit) -> bool {
+        catalogue::is_off(self.plant(), effect, &fit.internal)
+    }
     /// What a perfect model would score on the validation data, estimated from `fit`'s
     /// validation residual (the part of the output the model already explains is no noise)
     /// and the quantization of the measured output.

@@ -106,7 +106,7 @@ pub(super) fn diagnose_fits(
             // that only shaves noise is not a cause.
             // An effect that ends switched off (at its neutral value) gains only by refitting
             // the rest of the model: no evidence for it.
-            let off = catalogue::is_off(family.plant(), effect, &fitted.internal);
+            let off = family.is_off(effect, &fitted);
             if off && gain_pct >= rules.min_gain_pct {
                 evidence.push(format!(
                     "`{effect}` ends at its neutral value (switched off); its {gain_pct:.1} % come from refitting the rest of the model: not a cause"
