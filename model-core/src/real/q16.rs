@@ -1,0 +1,549 @@
+//! [`Q16`]: Q16.16 fixed point for the FPU-less ECUs, and the integer routines of its
+//! functions (square root, exp, ln, sin, atan, tan in Q2.30).
+
+use super::*;
+
+/// Signed Q16.16 fixed point in an `i32`: range ±32768, resolution 1.5e-5, saturating like
+/// [`Q32`]. Made for the FPU-less Cortex-M0+/M3 ECUs: a product is one 32×32→64 multiply
+/// (`smull`, a single instruction on the M3/M4) and a shift, so a model step costs a small
+/// multiple of its f32 step, where Q32.32 needs 128-bit intermediates (about 30×).
+///
+/// Models that run in it keep their signals within the range and well above the resolution;
+/// each plant's tests measure its error against f64 over its operating envelope.
+/// Products round to nearest (an integrator fed truncated products would drift by half an
+/// LSB per step); the functions work in Q2.30 internally, errors in `real/tests.rs`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct Q16(pub(super) i32);
+
+impl Q16 {
+    /// The largest value, 32767.99998.
+    pub const MAX: Q16 = Q16(i32::MAX);
+    /// The most negative value, -32768.
+    pub const MIN: Q16 = Q16(i32::MIN);
+    /// Resolution: one least significant bit, 2^-16.
+    pub const LSB: Q16 = Q16(1);
+    /// Fractional bits.
+    pub const FRAC_BITS: u32 = 16;
+
+    /// The raw integer (value · 2^16).
+    pub const fn to_bits(self) -> i32 {
+        self.0
+    }
+    /// From the raw integer (value · 2^16).
+    pub const fn from_bits(bits: i32) -> Self {
+        Q16(bits)
+    }
+
+    #[inline(always)]
+    pub(super) fn saturate(x: i64) -> Q16 {
+        // It fits when the high word is the low word's sign extension (two 32-bit compares of
+        // a 64-bit clamp cost twice as many instructions); else the limit of x's sign.
+        let hi = (x >> 32) as i32;
+        let lo = x as i32;
+        if hi != (lo >> 31) {
+            Q16((hi >> 31) ^ i32::MAX)
+        } else {
+            Q16(lo)
+        }
+    }
+}
+
+/// A Q16.16 divisor prepared for repeated division ([`Real::divisor`], [`Real::div_by`]): a
+/// reciprocal normalised to 30 bits and its shift.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Q16Divisor {
+    m: i32,
+    shift: u32,
+    /// Half the shift's unit, for rounding.
+    half: i64,
+}
+
+impl Add for Q16 {
+    type Output = Q16;
+    #[inline(always)]
+    fn add(self, rhs: Q16) -> Q16 {
+        Q16(self.0.saturating_add(rhs.0))
+    }
+}
+impl Sub for Q16 {
+    type Output = Q16;
+    #[inline(always)]
+    fn sub(self, rhs: Q16) -> Q16 {
+        Q16(self.0.saturating_sub(rhs.0))
+    }
+}
+impl Mul for Q16 {
+    type Output = Q16;
+    #[inline(always)]
+    fn mul(self, rhs: Q16) -> Q16 {
+        let p = i64::from(self.0) * i64::from(rhs.0) + (1 << 15);
+        // Bits 16..47 of the product; it fits when bits 47..63 all equal the sign (checked on
+        // the high word alone: a few instructions, where a 64-bit clamp takes a dozen).
+        let hi = (p >> 32) as i32;
+        let r = (p >> 16) as i32;
+        if (hi >> 15) != (r >> 31) {
+            // MAX for a positive product, MIN for a negative one: the sign of a·b, from the
+            // factors' signs (the product is far from zero here). Taken from `p`, the compiler
+            // multiplied a second time to compare it with zero: 16 instructions a product
+            // on the Cortex-M4, 11 this way.
+            Q16(((self.0 ^ rhs.0) >> 31) ^ i32::MAX)
+        } else {
+            Q16(r)
+        }
+    }
+}
+impl Div for Q16 {
+    type Output = Q16;
+    fn div(self, rhs: Q16) -> Q16 {
+        let (a, b) = (self.0, rhs.0);
+        if b == 0 {
+            return match a.cmp(&0) {
+                core::cmp::Ordering::Less => Q16::MIN,
+                core::cmp::Ordering::Greater => Q16::MAX,
+                core::cmp::Ordering::Equal => Q16(0),
+            };
+        }
+        // |a| < 0.5: the shifted dividend fits 32 bits, one hardware division (truncating,
+        // like the path below).
+        if a > -(1 << 15) && a < (1 << 15) {
+            return Q16((a << 16) / b);
+        }
+        // |a|·2^16 / |b| truncated, with the sign after: what `(a << 16) / b` in i64 gives,
+        // without the 64-bit division routine (about 270 instructions on the Cortex-M).
+        let q = div_48_by_32(u64::from(a.unsigned_abs()) << 16, b.unsigned_abs());
+        if (a < 0) != (b < 0) {
+            if q > 1 << 31 {
+                Q16::MIN
+            } else {
+                Q16((q as u32).wrapping_neg() as i32)
+            }
+        } else if q > i32::MAX as u64 {
+            Q16::MAX
+        } else {
+            Q16(q as i32)
+        }
+    }
+}
+
+/// `n / d` truncated for `n < 2^48` and `d > 0`, or `2^32` when the quotient does not fit 32
+/// bits: long division in two base-2^16 digits (Knuth's algorithm D for a two-digit divisor),
+/// each digit estimated by one 32-bit hardware division and corrected at most twice.
+#[inline(always)]
+fn div_48_by_32(n: u64, d: u32) -> u64 {
+    if (n >> 32) as u32 >= d {
+        return 1 << 32;
+    }
+    // Normalise: the divisor's top bit set (n < d·2^32 still fits 64 bits after the shift).
+    let s = d.leading_zeros();
+    let d = d << s;
+    let n = n << s;
+    let (dh, dl) = (d >> 16, d & 0xFFFF);
+    let n1 = (n >> 32) as u32;
+    let n0 = n as u32;
+    let digit = |top: u32, next: u32| -> (u32, u32) {
+        // top < d; the digit q = (top·2^16 + next) / d < 2^16, estimated from dh alone
+        // (too large by at most 2).
+        let mut q = top / dh;
+        let mut r = top - q * dh;
+        while q >= 1 << 16 || q * dl > ((r << 16) | next) {
+            q -= 1;
+            r += dh;
+            if r >= 1 << 16 {
+                break;
+            }
+        }
+        // The remainder, below d: exact in wrapping arithmetic.
+        (q, ((top << 16) | next).wrapping_sub(q.wrapping_mul(d)))
+    };
+    let (q1, r1) = digit(n1, n0 >> 16);
+    let (q0, _) = digit(r1, n0 & 0xFFFF);
+    (u64::from(q1) << 16) | u64::from(q0)
+}
+impl Neg for Q16 {
+    type Output = Q16;
+    #[inline(always)]
+    fn neg(self) -> Q16 {
+        Q16(self.0.saturating_neg())
+    }
+}
+impl AddAssign for Q16 {
+    #[inline(always)]
+    fn add_assign(&mut self, rhs: Q16) {
+        *self = *self + rhs;
+    }
+}
+impl SubAssign for Q16 {
+    #[inline(always)]
+    fn sub_assign(&mut self, rhs: Q16) {
+        *self = *self - rhs;
+    }
+}
+impl MulAssign for Q16 {
+    #[inline(always)]
+    fn mul_assign(&mut self, rhs: Q16) {
+        *self = *self * rhs;
+    }
+}
+
+impl Real for Q16 {
+    const ZERO: Self = Q16(0);
+    const ONE: Self = Q16(1 << 16);
+    const NAME: &'static str = "Q16.16";
+    const IS_FLOAT: bool = false;
+    const RANGE_ABS: f64 = 32768.0;
+    type Divisor = Q16Divisor;
+    /// `m = round(2^(30+p) / |d|)` with p the index of |d|'s leading one, so m is in
+    /// [2^29, 2^30] (carrying d's sign) and `x / d = x · m / 2^(14+p)`: relative error below
+    /// 2^-29, far under the result's LSB. A zero divisor keeps `m = i32::MAX` and no shift, so
+    /// any nonzero dividend saturates towards its sign (1 LSB of -1 gives MIN + 1).
+    #[inline]
+    fn divisor(d: Self) -> Q16Divisor {
+        let ud = d.0.unsigned_abs();
+        if ud == 0 {
+            return Q16Divisor {
+                m: i32::MAX,
+                shift: 0,
+                half: 0,
+            };
+        }
+        let p = 31 - ud.leading_zeros();
+        let m = (((1u64 << (30 + p)) + u64::from(ud / 2)) / u64::from(ud)) as i32;
+        Q16Divisor {
+            m: if d.0 < 0 { -m } else { m },
+            shift: 14 + p,
+            half: 1 << (13 + p),
+        }
+    }
+    #[inline(always)]
+    fn div_by(self, d: Q16Divisor) -> Self {
+        let p = i64::from(self.0) * i64::from(d.m);
+        Q16::saturate((p + d.half) >> d.shift)
+    }
+    #[inline(always)]
+    fn from_f64(x: f64) -> Self {
+        // Constants fold at compile time; a run-time conversion is soft-float on the M0+/M3.
+        // `as` saturates and maps NaN to 0.
+        let s = x * 65536.0;
+        Q16::saturate((if s >= 0.0 { s + 0.5 } else { s - 0.5 }) as i64)
+    }
+    fn to_f64(self) -> f64 {
+        f64::from(self.0) / 65536.0
+    }
+    fn floor_i32(self) -> i32 {
+        self.0 >> 16
+    }
+    fn from_i32(n: i32) -> Self {
+        Q16::saturate(i64::from(n) << 16)
+    }
+    #[inline(always)]
+    fn mul_in_range(self, rhs: Self) -> Self {
+        let p = i64::from(self.0) * i64::from(rhs.0) + (1 << 15);
+        debug_assert!(
+            (p >> 16) == i64::from((p >> 16) as i32),
+            "mul_in_range: {} * {} leaves the Q16.16 range",
+            self.to_f64(),
+            rhs.to_f64()
+        );
+        Q16((p >> 16) as i32)
+    }
+    #[inline(always)]
+    fn mul_floor_in_range(self, rhs: Self) -> Self {
+        let p = i64::from(self.0) * i64::from(rhs.0);
+        debug_assert!(
+            (p >> 16) == i64::from((p >> 16) as i32),
+            "mul_floor_in_range: {} * {} leaves the Q16.16 range",
+            self.to_f64(),
+            rhs.to_f64()
+        );
+        Q16((p >> 16) as i32)
+    }
+    #[inline(always)]
+    fn mul_pow2(self, exp: i32) -> Self {
+        debug_assert!((-16..=16).contains(&exp), "mul_pow2: exponent {exp} outside -16..=16");
+        if exp >= 0 {
+            // The product x·2^e is exact; it only saturates.
+            Q16::saturate(i64::from(self.0) << exp)
+        } else {
+            // The product rounds (x·2^(16+e) + 2^15) >> 16 = floor((x + 2^(n-1)) / 2^n) for
+            // n = -e: the shifted value plus the last bit shifted out, without the sum's overflow.
+            let n = (-exp) as u32;
+            Q16((self.0 >> n) + ((self.0 >> (n - 1)) & 1))
+        }
+    }
+    fn step_times(self, k: Self, x: Self) -> Self {
+        // |k| < 1 where this is used (a reciprocal mass in m/s per ms per N), so k·x cannot
+        // overflow where x does not.
+        self * (k * x)
+    }
+    fn sqrt(self) -> Self {
+        Q16(q16_sqrt(self.0))
+    }
+    fn exp(self) -> Self {
+        Q16(q16_exp(self.0))
+    }
+    fn atan(self) -> Self {
+        Q16(q16_atan(self.0))
+    }
+    fn sin(self) -> Self {
+        Q16(q16_sin(self.0))
+    }
+    fn ln(self) -> Self {
+        Q16(q16_ln(self.0))
+    }
+    fn tan(self) -> Self {
+        Q16(q16_tan(self.0))
+    }
+}
+
+/// Horner's scheme on integer coefficients `$c` (highest degree first) with the product
+/// `$mul`: `s = c[0]`, then `s = c[k] + mul(x, s)` for the listed k, written out (a loop is
+/// not unrolled in the size-optimised firmware: ~5 instructions an iteration).
+macro_rules! horner_int {
+    ($mul:expr, $x:expr, $c:expr; $($k:literal),+) => {{
+        let mut s = $c[0];
+        $(s = $c[$k] + $mul($x, s);)+
+        s
+    }};
+}
+
+/// `a·b` of two Q2.30 numbers, rounded.
+#[inline(always)]
+fn mul30(a: i32, b: i32) -> i32 {
+    ((i64::from(a) * i64::from(b) + (1 << 29)) >> 30) as i32
+}
+
+/// `round(y · 2^shift)` of a non-negative `y`, saturating (shift may be negative).
+#[inline(always)]
+fn shift_round(y: i64, shift: i32) -> i32 {
+    let v = if shift >= 0 {
+        if shift > 31 {
+            return i32::MAX;
+        }
+        y << shift
+    } else if shift < -62 {
+        0
+    } else {
+        (y + (1 << (-shift - 1))) >> -shift
+    };
+    v.min(i64::from(i32::MAX)) as i32
+}
+
+/// sqrt of a raw Q16.16: normalised to a 32-bit radicand with an even shift, then the
+/// bit-by-bit integer square root (16 result bits, relative error < 2^-15).
+fn q16_sqrt(x: i32) -> i32 {
+    if x <= 0 {
+        return 0;
+    }
+    // sqrt(x·2^-16)·2^16 = sqrt(x·2^16) = sqrt(x·2^s)·2^((16-s)/2), s even, x·2^s in [2^30, 2^32).
+    let lz = x.leading_zeros() as i32; // >= 1
+    let s = lz & !1;
+    let n = (x as u32) << s;
+    let mut rem = n;
+    let mut root: u32 = 0;
+    let mut bit: u32 = 1 << 30;
+    while bit != 0 {
+        if rem >= root + bit {
+            rem -= root + bit;
+            root = (root >> 1) + bit;
+        } else {
+            root >>= 1;
+        }
+        bit >>= 2;
+    }
+    // Round: the next bit of the root is 1 when rem > root.
+    if rem > root {
+        root += 1;
+    }
+    shift_round(i64::from(root), (16 - s) / 2)
+}
+
+/// exp of a raw Q16.16: `2^k · e^r`, `|r| <= ln2/2` in Q2.30, Taylor polynomial to r^7
+/// (truncation < 3e-9 relative).
+fn q16_exp(x: i32) -> i32 {
+    // e^10.3972 = 32768: above saturates; below -11.8 the result rounds to 0.
+    if x > 681_391 {
+        return i32::MAX;
+    }
+    if x < -773_325 {
+        return 0;
+    }
+    // k = round(x / ln2): 1/ln2 in Q0.16 · x, rounded at bit 32.
+    let k = ((i64::from(x) * 94_548 + (1 << 31)) >> 32) as i32;
+    const LN2_Q30: i64 = 744_261_118;
+    let r = ((i64::from(x) << 14) - i64::from(k) * LN2_Q30) as i32;
+    // 1/n! in Q2.30, n = 7..0.
+    const C: [i32; 8] = [
+        213_044,
+        1_491_308,
+        8_947_849,
+        44_739_243,
+        178_956_971,
+        536_870_912,
+        1_073_741_824,
+        1_073_741_824,
+    ];
+    let y = horner_int!(mul30, r, C; 1, 2, 3, 4, 5, 6, 7);
+    // y in Q2.30 → Q16.16 · 2^k
+    shift_round(i64::from(y), k - 14)
+}
+
+/// ln of a raw Q16.16: `x = 2^e · m`, `m = (1 + i/16)(1 + t)` with the table below and
+/// `|t| < 1/16`, `ln(1+t)` by its series to t^6 (error < 3e-9).
+fn q16_ln(x: i32) -> i32 {
+    if x <= 0 {
+        return i32::MIN;
+    }
+    // m in [1, 2) as Q2.30.
+    let top = 31 - x.leading_zeros() as i32; // bit index of the leading one, 0..=30
+    let m = ((x as u32) << (30 - top)) as i32;
+    let i = ((m >> 26) & 15) as usize; // m ≈ 1 + i/16
+                                       // t = m / (1 + i/16) − 1 = (m − c)·(1/c), in Q2.30.
+    let c = (1 << 30) + ((i as i32) << 26);
+    let t = mul30(m - c, INV_1_PLUS_I16_Q30[i]);
+    // ln(1+t) = t − t²/2 + t³/3 − … (Horner from t^6).
+    const C: [i32; 6] = [
+        -178_956_971,
+        214_748_365,
+        -268_435_456,
+        357_913_941,
+        -536_870_912,
+        1_073_741_824,
+    ];
+    let s = horner_int!(mul30, t, C; 1, 2, 3, 4, 5);
+    let ln_m = i64::from(mul30(t, s)) + i64::from(LN_1_PLUS_I16_Q30[i]);
+    // ln x = ln m + (top − 16)·ln2, back to Q16.16 (rounded).
+    const LN2_Q30: i64 = 744_261_118;
+    let v = ln_m + i64::from(top - 16) * LN2_Q30;
+    ((v + (1 << 13)) >> 14) as i32
+}
+
+/// `1/(1 + i/16)` in Q2.30, i = 0..15.
+const INV_1_PLUS_I16_Q30: [i32; 16] = {
+    let mut t = [0i32; 16];
+    let mut i = 0;
+    while i < 16 {
+        // 2^30·16/(16+i), rounded.
+        let num: i64 = (1i64 << 34) + (16 + i as i64) / 2;
+        t[i] = (num / (16 + i as i64)) as i32;
+        i += 1;
+    }
+    t
+};
+
+/// `ln(1 + i/16)` in Q2.30, i = 0..15 (values of libm::log, rounded).
+const LN_1_PLUS_I16_Q30: [i32; 16] = [
+    0,
+    65_095_192,
+    126_468_572,
+    184_522_808,
+    239_598_564,
+    291_986_604,
+    341_937_090,
+    389_666_807,
+    435_364_845,
+    479_197_128,
+    521_310_048,
+    561_833_416,
+    600_882_877,
+    638_561_895,
+    674_963_409,
+    710_171_213,
+];
+
+/// sin of a raw Q16.16: the angle as a fraction of a turn (exact wrap-around in a u32), folded
+/// to [-π/2, π/2], Taylor polynomial to r^11 in Q4.28 (truncation < 2.4e-7).
+fn q16_sin(x: i32) -> i32 {
+    // turns · 2^32 = x · 2^16 / (2π): the constant 2^32/(2π) = 683 565 275.576 as its whole
+    // part and its fraction in 1/65536 (the whole part alone, rounded, was 6e-10 off: at
+    // 30 000 rad that turned the angle by 1.8e-5 rad, more than the result's LSB).
+    const TURN_WHOLE: i64 = 683_565_275;
+    const TURN_FRAC_Q16: i64 = 37_777;
+    let x64 = i64::from(x);
+    let phase = ((x64 * TURN_WHOLE + ((x64 * TURN_FRAC_Q16) >> 16) + (1 << 15)) >> 16) as u32;
+    // Fold: sin(π − a) = sin a; work on a signed quarter-turn in [-1/4, 1/4] of a turn.
+    let mut p = phase as i32; // [-1/2, 1/2) turn
+    if p > (1 << 30) {
+        p = (1i32 << 31).wrapping_sub(p); // π − a
+    } else if p < -(1 << 30) {
+        p = (-(1i64 << 31) - i64::from(p)) as i32; // −π − a
+    }
+    // r in rad, Q4.28: p · 2π / 2^32 · 2^28 = p · 2π / 16.
+    const TWO_PI_Q28: i64 = 1_686_629_713;
+    let r = ((i64::from(p) * TWO_PI_Q28 + (1 << 31)) >> 32) as i32;
+    let mul28 = |a: i32, b: i32| ((i64::from(a) * i64::from(b) + (1 << 27)) >> 28) as i32;
+    let r2 = mul28(r, r);
+    // sin r = r(1 − r²/6 + r⁴/120 − …), coefficients (−1)^n/(2n+1)! in Q4.28, n = 5..0.
+    const C: [i32; 6] = [-7, 740, -53_261, 2_236_962, -44_739_243, 268_435_456];
+    let mut s = C[0];
+    for &c in &C[1..] {
+        s = c + mul28(r2, s);
+    }
+    let y = i64::from(mul28(r, s));
+    ((y + (1 << 11)) >> 12) as i32
+}
+
+/// atan of a raw Q16.16: |x| > 1 through π/2 − atan(1/x), then the polynomial of Abramowitz
+/// and Stegun 4.4.49 on [0, 1] (error < 1e-5 rad), in Q2.30.
+fn q16_atan(x: i32) -> i32 {
+    let neg = x < 0;
+    let a = i64::from(x).abs();
+    let inverted = a > (1 << 16);
+    // a in Q2.30, in [0, 1].
+    let a30 = if inverted {
+        ((1i64 << 46) / a) as i32
+    } else {
+        (a << 14) as i32
+    };
+    const C: [i32; 5] = [22_371_518, -91_410_863, 193_424_926, -354_656_388, 1_073_597_943];
+    let a2 = mul30(a30, a30);
+    let s = horner_int!(mul30, a2, C; 1, 2, 3, 4);
+    let mut y = mul30(a30, s);
+    if inverted {
+        const HALF_PI_Q30: i32 = 1_686_629_713;
+        y = HALF_PI_Q30 - y;
+    }
+    let y16 = (y + (1 << 13)) >> 14;
+    if neg {
+        -y16
+    } else {
+        y16
+    }
+}
+
+/// tan of a raw Q16.16 for |x| <= 1.5 rad (larger |x| is taken as 1.5 rad): [`tan_series`]'s
+/// steps in Q2.30 (products of a few instructions, without Q16.16's saturation checks, and 14
+/// more bits), the odd function on |x|. z = |x|/4 <= 0.375, t = tan z <= 0.394 by the series to
+/// z¹⁵, then tan 4z = 4t(1 − t²)/(1 − 6t² + t⁴), whose denominator is cos 4z / cos⁴ z, at
+/// least 0.09 here, in one 48-by-32-bit division rounded to nearest (error well under the
+/// result's LSB; the series in Q16.16 had up to 8.2e-4 relative, see vacuum.rs's
+/// `series_helpers_match_libm`).
+fn q16_tan(x: i32) -> i32 {
+    const LIM: u32 = 98_304; // 1.5 · 2^16
+    let a = x.unsigned_abs().min(LIM);
+    // z = a/4 in Q2.30: a · 2^14 / 4.
+    let z = (a << 12) as i32;
+    let z2 = mul30(z, z);
+    // The series' coefficients in Q2.30, from z¹⁴'s to 1 (the exact fractions, rounded), in
+    // Horner's scheme written out (as a loop it is not unrolled in the size-optimised
+    // firmware: ~5 instructions an iteration).
+    let mut s = 1_563_190;
+    s = 3_857_018 + mul30(z2, s);
+    s = 9_516_827 + mul30(z2, s);
+    s = 23_482_185 + mul30(z2, s);
+    s = 57_947_971 + mul30(z2, s);
+    s = 143_165_577 + mul30(z2, s);
+    s = 357_913_941 + mul30(z2, s);
+    s = 1_073_741_824 + mul30(z2, s);
+    let t = mul30(z, s);
+    let t2 = mul30(t, t);
+    // num <= 1.33 and den in [0.09, 1], both Q2.30.
+    let num = mul30(t, (1 << 30) - t2) << 2;
+    let den = (1 << 30) - 6 * t2 + mul30(t2, t2);
+    // num / den in Q16.16: (num · 2^16 + den/2) / den, num · 2^16 < 2^47.
+    let q = div_48_by_32((u64::from(num as u32) << 16) + u64::from(den as u32 / 2), den as u32) as i32;
+    if x < 0 {
+        -q
+    } else {
+        q
+    }
+}
