@@ -351,7 +351,7 @@ fn zoh_phis<R: Real>(x: R) -> (R, R, R) {
         // a truncation < 1e-20. In range: |x| < 2, coefficients <= 1, every partial sum within
         // [0, 1.4].
         let nx = -x;
-        let g = if R::from_f64(1e-6) == R::ZERO {
+        let g = if !crate::real::resolves::<R>(1e-6) {
             // A type that cannot hold 1e-6 (Q16.16, LSB 1.5e-5) needs fewer terms: the first
             // left out is below one LSB, 1.1e-5 for x < 1/4 (4 terms) and 4.3e-6 for x < 2
             // (10 terms), and enters φ2 halved.

@@ -195,6 +195,14 @@ pub trait Real:
     fn div_by(self, d: Self::Divisor) -> Self;
 }
 
+/// Whether the number type `R` holds `x` (> 0) as a nonzero value: false for a fixed-point
+/// type whose resolution is coarser (Q16.16 for 1e-6). A series whose next term is below `x`
+/// can stop there in such a type; folded at compile time.
+#[inline(always)]
+pub(crate) fn resolves<R: Real>(x: f64) -> bool {
+    R::from_f64(x) != R::ZERO
+}
+
 /// 2^exp as an f64, exact for exp in the normal range (-1022..=1023); built from its bits so it
 /// folds at compile time for a constant exp.
 #[inline(always)]

@@ -554,7 +554,7 @@ const ONE_MINUS_EXP_NEG_COEFFS: [f64; 16] = {
 fn one_minus_exp_neg<R: Real>(x: R) -> R {
     if x < R::ONE {
         const C: [f64; 16] = ONE_MINUS_EXP_NEG_COEFFS;
-        if R::from_f64(1e-6) == R::ZERO {
+        if !crate::real::resolves::<R>(1e-6) {
             let s = horner_in_range!(R, x; C[0], C[1], C[2], C[3], C[4], C[5], C[6], C[7], C[8]);
             return x.mul_in_range(s);
         }

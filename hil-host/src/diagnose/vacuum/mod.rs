@@ -404,15 +404,13 @@ impl VacuumFamily {
             // describe) and for a pressure effect too (a friction model takes a slow pressure
             // fall for a bent retract damping, and from its optimum the pressure effect gains
             // nothing).
-            {
-                let mut m = parent_model(false)?;
-                for n in prepared.parameter_names(&[])? {
-                    if !is_pressure_param(n) {
-                        m.set(n, prepared.get(n))?;
-                    }
+            let mut rod_from_prepared = parent_model(false)?;
+            for n in prepared.parameter_names(&[])? {
+                if !is_pressure_param(n) {
+                    rod_from_prepared.set(n, prepared.get(n))?;
                 }
-                starts.push(m);
             }
+            starts.push(rod_from_prepared);
             if last == VacuumEffect::Backlash.name() {
                 let mut m = parent_model(false)?;
                 m.backlash_pct = 10.0;
