@@ -113,11 +113,13 @@ impl<R: Real> Piston<R> {
     /// opens and only the main valve restricts. Closing: the notch is covered linearly over the
     /// snubbing zone `L < Ls1`, leaving the fixed orifice plus the switch orifice when the
     /// switch valve is off.
+    #[inline(always)]
     pub fn inv_a2_top(&self, lift: R, closing: bool, switch_on: bool) -> R {
         self.inv_a2_main + self.inv_a2_top_snubber(lift, closing, switch_on)
     }
 
     /// 1/A² of the top snubber alone (0 while opening: the check valve bypasses it).
+    #[inline(always)]
     pub fn inv_a2_top_snubber(&self, lift: R, closing: bool, switch_on: bool) -> R {
         if !closing {
             return R::ZERO;
@@ -143,6 +145,7 @@ impl<R: Real> Piston<R> {
 
     /// 1/Aorib² of the equivalent bottom orifice (eq. (6)): bottom port in series with the
     /// bottom notch, which closes linearly over the last Ls2 before full lift.
+    #[inline(always)]
     pub fn inv_a2_bottom(&self, lift: R, stroke: R) -> R {
         let to_go = stroke - lift;
         if to_go >= self.snub_bottom_len {
@@ -222,6 +225,7 @@ impl<R: Real> Piston<R> {
     /// dPh/dt of eq. (8): the piston draws At·v from the supply while opening; the pump
     /// delivers a constant flow; the relief valve returns the excess above the crack pressure,
     /// set so the steady state with the valve at rest is exactly the set-point.
+    #[inline(always)]
     pub fn p_high_rate(&self, p_high: R, p_set: R, vel: R) -> R {
         let crack = p_set - self.pump_over_relief_high;
         let relief = self.relief_high * (p_high - crack).max(R::ZERO);
@@ -231,6 +235,7 @@ impl<R: Real> Piston<R> {
     /// dPl/dt of eq. (7): the bottom chamber pushes Ab·v into the back-pressure line while
     /// opening; the top chamber returns (At − Ab)·|v| net while closing (volume balance of the
     /// two chambers); relief above and check-valve make-up below the set-point.
+    #[inline(always)]
     pub fn p_low_rate(&self, p_low: R, p_set: R, vel: R) -> R {
         let inflow = self.area_bottom * vel.max(R::ZERO) + (self.area_top - self.area_bottom) * (-vel).max(R::ZERO);
         (inflow - self.relief_low * (p_low - p_set)) * self.inv_cap_low
@@ -247,12 +252,36 @@ impl<R: Real> Piston<R> {
         if impact.is_some() && m.lift > R::ZERO {
             m.seat_velocity = impact;
         }
-        let dph = self.p_high_rate(m.p_high, p_supply_set, vel);
-        let dpl = self.p_low_rate(m.p_low, p_back_set, vel);
-        m.p_high += h * dph;
-        m.p_low += h * dpl;
         m.lift = lift;
         m.vel = vel;
+        self.advance_accumulators(m, h, p_supply_set, p_back_set);
+    }
+
+    /// Whether a piston at rest (`vel == 0`) on a stop stays there this sub-step: on the seat
+    /// with the net `force` not lifting it, or on the sleeve with the force not pulling it
+    /// back. Then [`Self::advance`] would compute a velocity into the stop (its sign is the
+    /// force's: the damping only scales it), which the stop takes away, leaving lift and
+    /// velocity as they are; [`Self::advance_held`] gives the same numbers without the
+    /// damping and the division.
+    pub fn held_at_stop(&self, m: &Moving<R>, force: R, stroke: R) -> bool {
+        m.vel == R::ZERO && ((m.lift == R::ZERO && force <= R::ZERO) || (m.lift == stroke && force >= R::ZERO))
+    }
+
+    /// One sub-step of a piston [`Self::held_at_stop`]: only the accumulators move, as in
+    /// [`Self::advance`] with the velocity 0.
+    pub fn advance_held(&self, m: &mut Moving<R>, h: R, p_supply_set: R, p_back_set: R) {
+        m.vel = R::ZERO;
+        self.advance_accumulators(m, h, p_supply_set, p_back_set);
+    }
+
+    /// Eqs. (7)-(8) over a sub-step with the piston's new velocity. Inlined into both
+    /// callers: as a call of its own it cost ~10 instructions a sub-step on the target.
+    #[inline(always)]
+    fn advance_accumulators(&self, m: &mut Moving<R>, h: R, p_supply_set: R, p_back_set: R) {
+        let dph = self.p_high_rate(m.p_high, p_supply_set, m.vel);
+        let dpl = self.p_low_rate(m.p_low, p_back_set, m.vel);
+        m.p_high += h * dph;
+        m.p_low += h * dpl;
     }
 }
 
@@ -265,4 +294,77 @@ pub struct Moving<R> {
     pub p_high: R,
     pub p_low: R,
     pub seat_velocity: Option<R>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::real::Q16;
+    use proptest::prelude::*;
+
+    /// One sub-step both ways from a piston at rest on a stop; `None` where the fast path does
+    /// not apply. Compares bits (a zero's sign aside: ±0 are the same velocity).
+    fn both_ways<R: Real>(lift_on_seat: bool, force: f64, quad_gain: f64, h: f64, ph: f64, pl: f64) -> Option<bool> {
+        let p = EhvvaParams::paper_default();
+        let piston = Piston::<R>::new(&p).unwrap();
+        let stroke = piston.stroke(true);
+        let m0 = Moving {
+            lift: if lift_on_seat { R::ZERO } else { stroke },
+            vel: R::ZERO,
+            p_high: R::from_f64(ph),
+            p_low: R::from_f64(pl),
+            seat_velocity: None,
+        };
+        let (force, set_high, set_low) = (R::from_f64(force), R::from_f64(6.0), R::from_f64(2.0));
+        if !piston.held_at_stop(&m0, force, stroke) {
+            return None;
+        }
+        let (mut full, mut held) = (m0, m0);
+        piston.advance(
+            &mut full,
+            force,
+            R::from_f64(quad_gain),
+            R::from_f64(h),
+            stroke,
+            set_high,
+            set_low,
+        );
+        piston.advance_held(&mut held, R::from_f64(h), set_high, set_low);
+        Some(
+            full.lift == held.lift
+                && full.vel == held.vel
+                && full.p_high == held.p_high
+                && full.p_low == held.p_low
+                && full.seat_velocity.is_none()
+                && held.seat_velocity.is_none(),
+        )
+    }
+
+    proptest! {
+        /// The held sub-step is the full sub-step's result for a piston on a stop that the
+        /// force presses it against, whatever the damping, step and accumulator pressures, in
+        /// f64, f32 and Q16.16; and a force away from the stop is never taken as held.
+        #[test]
+        fn a_held_piston_steps_as_the_full_sub_step_gives(
+            on_seat: bool,
+            force_n in -3000.0f64..3000.0,
+            tiny in proptest::bool::weighted(0.2),
+            quad_gain in 0.0f64..1e4,
+            h_ms in 1e-4f64..0.01,
+            ph in 3.0f64..9.0,
+            pl in 0.5f64..5.0,
+        ) {
+            // Forces near 0 too, where the velocity into the stop rounds to nothing.
+            let force = if tiny { force_n * 1e-12 } else { force_n };
+            let into_stop = if on_seat { force <= 0.0 } else { force >= 0.0 };
+            for same in [
+                both_ways::<f64>(on_seat, force, quad_gain, h_ms, ph, pl),
+                both_ways::<f32>(on_seat, force, quad_gain, h_ms, ph, pl),
+            ] {
+                prop_assert_eq!(same.is_some(), into_stop);
+                prop_assert!(same.unwrap_or(true));
+            }
+            prop_assert!(both_ways::<Q16>(on_seat, force, quad_gain.min(30.0), h_ms, ph, pl).unwrap_or(true));
+        }
+    }
 }

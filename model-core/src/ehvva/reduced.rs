@@ -156,10 +156,17 @@ impl<R: Real, const N: usize> EhvvaReduced<R, N> {
             self.p_mo * inv_1_plus_lag + lag * p_in
         };
         // Eq. (12) first line, with eqs. (5)-(6) as damping.
+        let force = self.piston.static_force(p_top, self.m.p_low, self.m.lift);
+        // Seated or at full lift and held there (much of an event): the same numbers as the
+        // full sub-step, without the damping and the division it only scales.
+        if self.piston.held_at_stop(&self.m, force, stroke) {
+            self.piston
+                .advance_held(&mut self.m, self.h, inputs.p_supply_mpa, inputs.p_back_mpa);
+            return;
+        }
         let k = self
             .piston
             .quadratic_gain_inv_cd2(inv_cd2, self.m.lift, self.m.vel, stroke, inputs.snubber_on);
-        let force = self.piston.static_force(p_top, self.m.p_low, self.m.lift);
         // Piston, end stops and eqs. (7)-(8).
         self.piston.advance(
             &mut self.m,
