@@ -83,6 +83,14 @@ pub trait Family {
     /// What a perfect model would score on the validation data, estimated from `fit`'s
     /// validation residual (the part of the output the model already explains is no noise)
     /// and the quantization of the measured output.
+    /// What the measured inputs' own error costs even a perfect model on the validation data:
+    /// the output's RMS error it causes (same units as the noise floor) and how it was found,
+    /// where the family can tell (`None`: not estimated). The verdict's floor is the root sum
+    /// of squares of this and [`Self::noise_floor`]; the forward selection stops on the
+    /// sensor floor alone.
+    fn input_floor(&self, _val: &Log, _fit: &Fit) -> Option<(f64, String)> {
+        None
+    }
     fn noise_floor(&self, _val: &Log, fit: &Fit) -> NoiseFloor {
         noise_floor_of(&fit.residual(), resolution(&fit.measured))
     }

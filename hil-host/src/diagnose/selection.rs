@@ -390,6 +390,16 @@ pub(super) fn diagnose_fits(
 
     // The fits are done: what remains reads the validation log only.
     release_estimation();
+    // What the logged inputs' own error costs a perfect model joins the floor of the verdict
+    // (after the selection, which stops on the sensor floor: the causes do not depend on it).
+    if let Some((input_rmse, how)) = family.input_floor(val, &current) {
+        if input_rmse > 0.0 {
+            floor = NoiseFloor {
+                rmse: floor.rmse.hypot(input_rmse),
+                method: format!("{}; {how}; floor = their root sum of squares", floor.method),
+            };
+        }
+    }
     // Made after the fits, not held through them (the families' caches they read hold the
     // baseline from its fit).
     let regressors = family.regressors(val);

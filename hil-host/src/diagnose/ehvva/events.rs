@@ -34,6 +34,10 @@ pub struct Event {
     /// Index (in the event) of the rising command edge and of the last falling one.
     pub on_index: usize,
     pub off_index: Option<usize>,
+    /// Standard errors of the set-points in `inputs` (supply, back pressure), MPa: each is the
+    /// mean of the rest samples before the command, so it carries their scatter over √n (or,
+    /// where the rest samples do not scatter, the quantization error q/√12 of their column).
+    pub setpoint_se_mpa: (f64, f64),
 }
 
 impl Event {
@@ -82,6 +86,7 @@ impl Events {
         }
         let n = lift.len();
         let pre = ((PRE_MS / dt_ms).round() as usize).max(1);
+        let (q_supply, q_back) = (crate::diagnose::resolution(ph), crate::diagnose::resolution(pl));
         // A command already on at the first sample began before the log: not an edge.
         let rising: Vec<usize> = (1..n).filter(|&k| u[k] > 0.5 && u[k - 1] <= 0.5).collect();
         if rising.is_empty() {
@@ -113,6 +118,19 @@ impl Events {
                     median(&mut v)
                 }
             };
+            let setpoint_se = |x: &[f64], q: f64| {
+                let v = &x[rest.clone()];
+                if v.len() < 3 {
+                    return q / 12f64.sqrt();
+                }
+                let m = v.iter().sum::<f64>() / v.len() as f64;
+                let var = v.iter().map(|y| (y - m).powi(2)).sum::<f64>() / (v.len() - 1) as f64;
+                if var > 0.0 {
+                    (var / v.len() as f64).sqrt()
+                } else {
+                    q / 12f64.sqrt()
+                }
+            };
             let off_index = (s + on + 1..e)
                 .rev()
                 .find(|&k| u[k] <= 0.5 && u[k - 1] > 0.5)
@@ -131,6 +149,7 @@ impl Events {
                 inputs,
                 on_index: on,
                 off_index,
+                setpoint_se_mpa: (setpoint_se(ph, q_supply), setpoint_se(pl, q_back)),
             });
         }
         Ok(Events {
