@@ -244,6 +244,10 @@ struct Model {
     n_ref_krpm: f64,
     alpha_per_krpm: f64,
     beta_per_krpm: f64,
+    /// Relative slopes per V·1000 rpm: with both scheduling effects, how the voltage
+    /// dependence changes with speed ([`SCHEDULE_INTERACTION`]).
+    alpha_per_v_krpm: f64,
+    beta_per_v_krpm: f64,
     advance_factor: f64,
     belt_order: f64,
     /// Belt disturbance `c cos(2π o θ) + s sin(2π o θ)` = `A sin(2π o θ + φ)`.
@@ -265,6 +269,8 @@ impl Model {
             n_ref_krpm: 1.1,
             alpha_per_krpm: 0.0,
             beta_per_krpm: 0.0,
+            alpha_per_v_krpm: 0.0,
+            beta_per_v_krpm: 0.0,
             advance_factor: 1.0,
             belt_order: 0.5,
             belt_cos: 0.0,
@@ -278,8 +284,8 @@ impl Model {
     fn alpha_beta(&self, n: f64, v: f64) -> (f64, f64) {
         let dn = n / 1000.0 - self.n_ref_krpm;
         let dv = v - self.v_ref;
-        let fa = (1.0 + self.alpha_per_v * dv + self.alpha_per_krpm * dn).max(0.02);
-        let fb = (1.0 + self.beta_per_v * dv + self.beta_per_krpm * dn).max(0.0);
+        let fa = (1.0 + self.alpha_per_v * dv + self.alpha_per_krpm * dn + self.alpha_per_v_krpm * dv * dn).max(0.02);
+        let fb = (1.0 + self.beta_per_v * dv + self.beta_per_krpm * dn + self.beta_per_v_krpm * dv * dn).max(0.0);
         (self.alpha * fa, self.beta * fb)
     }
 
@@ -408,8 +414,43 @@ struct Ctx {
     n_ref_krpm: f64,
 }
 
+/// With both scheduling effects (`supply-voltage` and `engine-speed`) α and β also move with
+/// the product of the voltage and speed deviations: the paper's table is not a sum of a
+/// voltage and a speed part (Section IV-D: α/β halves from 14 to 9.5 V at high engine speed,
+/// while at 1100 rpm α and β move together; the phaser slows with speed at low voltage, and
+/// the table moves only 10 % with speed at 14 V). The second of the two to enter a model adds
+/// these two relative slopes (per V·1000 rpm, neutral 0) after its own: the pair's bilinear
+/// part, which neither effect has alone.
+const SCHEDULE_INTERACTION: [&str; 2] = ["alpha_rel_slope_per_V_1000rpm", "beta_rel_slope_per_V_1000rpm"];
+
+/// Whether `effect`, entering a model that has `before`, completes the two scheduling effects
+/// (and so adds [`SCHEDULE_INTERACTION`]).
+fn completes_schedule(before: &[EvvtEffect], effect: EvvtEffect) -> bool {
+    match effect {
+        EvvtEffect::SupplyVoltage => before.contains(&EvvtEffect::EngineSpeed),
+        EvvtEffect::EngineSpeed => before.contains(&EvvtEffect::SupplyVoltage),
+        _ => false,
+    }
+}
+
+/// The parameter names the `i`-th of `effects` adds: its catalogue parameters, then the
+/// scheduling interaction if it completes the pair.
+fn param_names(effects: &[EvvtEffect], i: usize) -> Vec<&'static str> {
+    let mut names: Vec<&'static str> = effects[i].params().iter().map(|(n, _)| *n).collect();
+    if completes_schedule(&effects[..i], effects[i]) {
+        names.extend(SCHEDULE_INTERACTION);
+    }
+    names
+}
+
+/// All parameter names after α and β, in order.
+fn effect_param_names(effects: &[EvvtEffect]) -> Vec<&'static str> {
+    (0..effects.len()).flat_map(|i| param_names(effects, i)).collect()
+}
+
 /// The model of the baseline plus `effects`; `x` is α, β, then each effect's parameters in
-/// the order of `effects` (the catalogue's parameters of each).
+/// the order of `effects` ([`param_names`]: the catalogue's parameters of each, and the
+/// scheduling interaction after the second scheduling effect).
 fn model_from(effects: &[EvvtEffect], x: &[f64], ctx: &Ctx) -> Model {
     let mut m = Model {
         v_ref: ctx.v_ref,
@@ -417,7 +458,7 @@ fn model_from(effects: &[EvvtEffect], x: &[f64], ctx: &Ctx) -> Model {
         ..Model::lti(x[0], x[1])
     };
     let mut at = 2;
-    for e in effects {
+    for (i, e) in effects.iter().enumerate() {
         let v = |i: usize| x.get(at + i).copied().unwrap_or(0.0);
         match e {
             EvvtEffect::SupplyVoltage => {
@@ -435,7 +476,12 @@ fn model_from(effects: &[EvvtEffect], x: &[f64], ctx: &Ctx) -> Model {
                 m.belt_sin = v(2);
             }
         }
-        at += e.params().len();
+        let own = e.params().len();
+        if completes_schedule(&effects[..i], *e) {
+            m.alpha_per_v_krpm = v(own);
+            m.beta_per_v_krpm = v(own + 1);
+        }
+        at += param_names(effects, i).len();
     }
     m
 }
@@ -529,10 +575,11 @@ impl EvvtFamily {
         (self.min_order, self.max_order.min(nyquist_order))
     }
 
-    /// The parameters `effect` adds (catalogue names), their start and bounds; `parent` is the
-    /// model it extends (the belt disturbance's order is read off its residual).
-    fn spec(&self, effect: EvvtEffect, d: &Data, parent: &Model) -> Result<Spec, String> {
-        let (x0, lo, hi) = match effect {
+    /// The parameters `effect` adds ([`param_names`]) to a model with `before`, their start
+    /// and bounds; `parent` is the model it extends (the belt disturbance's order is read off
+    /// its residual).
+    fn spec(&self, before: &[EvvtEffect], effect: EvvtEffect, d: &Data, parent: &Model) -> Result<Spec, String> {
+        let (mut x0, mut lo, mut hi) = match effect {
             EvvtEffect::SupplyVoltage => (vec![0.0, 0.0], vec![-1.0, -1.0], vec![1.0, 1.0]),
             EvvtEffect::EngineSpeed => (vec![0.0, 0.0], vec![-3.0, -3.0], vec![3.0, 3.0]),
             EvvtEffect::Direction => (vec![1.0], vec![0.1], vec![4.0]),
@@ -557,6 +604,11 @@ impl EvvtFamily {
                 )
             }
         };
+        if completes_schedule(before, effect) {
+            x0.extend([0.0; 2]);
+            lo.extend([-3.0; 2]);
+            hi.extend([3.0; 2]);
+        }
         Ok(Spec { x0, lo, hi })
     }
 
@@ -597,9 +649,7 @@ impl EvvtFamily {
                 *n = format!("{n}_at_{}", at.join("_"));
             }
         }
-        for e in effects {
-            names.extend(e.params().iter().map(|(n, _)| n.to_string()));
-        }
+        names.extend(effect_param_names(effects).into_iter().map(String::from));
         names
     }
 
@@ -659,11 +709,7 @@ impl Family for EvvtFamily {
         let internal_names: Vec<String> = ["alpha", "beta"]
             .iter()
             .map(|s| s.to_string())
-            .chain(
-                effects
-                    .iter()
-                    .flat_map(|e| e.params().iter().map(|(n, _)| n.to_string())),
-            )
+            .chain(effect_param_names(&effects).into_iter().map(String::from))
             .collect();
         let r = match effects.split_last() {
             None => base_res.ok_or("baseline fit missing")?,
@@ -675,15 +721,23 @@ impl Family for EvvtFamily {
                     Some(f) if f.internal.len() >= 2 => f.internal.iter().map(|(_, v)| *v).collect(),
                     _ => vec![alpha, beta],
                 };
-                for e in before {
-                    // Bounds of the effects already in (their values come from the parent).
-                    let s = self.spec(*e, &de, &model_from(&[], &x0, &ctx))?;
+                let parent_len = x0.len();
+                let mut neutral = Vec::new();
+                for (i, e) in before.iter().enumerate() {
+                    // Bounds of the effects already in (their values come from the parent;
+                    // without one, from their own starts).
+                    let s = self.spec(&before[..i], *e, &de, &model_from(&[], &x0, &ctx))?;
                     lo.extend(s.lo);
                     hi.extend(s.hi);
+                    neutral.extend(s.x0);
+                }
+                if parent_len < lo.len() {
+                    x0.truncate(2);
+                    x0.extend(neutral);
                 }
                 x0.truncate(lo.len());
                 let parent_model = model_from(before, &x0, &ctx);
-                let spec = self.spec(*last, &de, &parent_model)?;
+                let spec = self.spec(before, *last, &de, &parent_model)?;
                 x0.extend(spec.x0);
                 lo.extend(spec.lo);
                 hi.extend(spec.hi);
@@ -710,7 +764,7 @@ impl Family for EvvtFamily {
             (names.into_iter().zip(x.iter().copied()).collect(), r.ci95.clone());
         if let Some(pos) = effects.iter().position(|e| *e == EvvtEffect::BeltVibration) {
             // Report amplitude and phase instead of the cos/sin pair (same count).
-            let at = 2 + effects[..pos].iter().map(|e| e.params().len()).sum::<usize>();
+            let at = 2 + (0..pos).map(|i| param_names(&effects, i).len()).sum::<usize>();
             let (c, s) = (x[at + 1], x[at + 2]);
             let amp = c.hypot(s);
             let (cc, cs) = (ci95[at + 1], ci95[at + 2]);
@@ -752,8 +806,8 @@ impl Family for EvvtFamily {
         }
         let mut lo = vec![ALPHA_BOUNDS.0, BETA_BOUNDS.0];
         let mut hi = vec![ALPHA_BOUNDS.1, BETA_BOUNDS.1];
-        for e in &effects {
-            let s = self.spec(*e, &de, &model_from(&[], &x0, &ctx))?;
+        for (i, e) in effects.iter().enumerate() {
+            let s = self.spec(&effects[..i], *e, &de, &model_from(&[], &x0, &ctx))?;
             lo.extend(s.lo);
             hi.extend(s.hi);
         }
