@@ -13,7 +13,8 @@ use super::*;
 ///    it extends, z ≥ `min_z`, penalised rank, the simpler of two nested effects unless the
 ///    richer adds `nested_margin_pct`) is added, until none is eligible, the remainder is at
 ///    the floor (`stop_ratio`: unless another effect was itself eligible in the round just
-///    run, since the floor is an estimate that unmodelled periodic physics inflates) or
+///    run, since the floor is an estimate that unmodelled periodic physics inflates, or
+///    gained `min_gain_pct` at z ≥ `resolve_z`, evidence short of eligibility) or
 ///    `max_causes` are in.
 /// 3. The verdict: `explained` when the remainder is within `explained_ratio` of the floor and
 ///    carries no material structure; else `unexplained`, with where the remainder lives.
@@ -44,8 +45,11 @@ pub(super) fn diagnose_fits(
     let score = |c: &Candidate, base: &Fit| {
         c.fit.rmse * (1.0 + rules.penalty_per_param * c.fit.n_params().saturating_sub(base.n_params()) as f64)
     };
-    // Effects that were eligible in the round just run but not added: the next round tries
-    // them on top of the one added even when the remainder already looks like the floor.
+    // Effects that were eligible in the round just run but not added, or that gained at least
+    // `min_gain_pct` at z ≥ `resolve_z`: the next round tries them on top of the one added
+    // even when the remainder already looks like the floor (an EVVT engine-speed effect next
+    // to supply voltage gained 10.5 % at z = 3.5 alone, the remainder with supply voltage was
+    // 1.37x the floor, and the pair would have gained 27 % to 1.00x).
     let mut eligible_left = false;
     loop {
         let at_floor = !rounds.is_empty() && current.rmse <= rules.stop_ratio * floor.rmse;
@@ -238,7 +242,12 @@ pub(super) fn diagnose_fits(
                     f.rmse <= rules.explained_ratio * floor_rmse && tests.material_failures().is_empty()
                 };
                 let cand_floor = family.noise_floor(val, &candidates[i].fit).rmse.min(floor.rmse);
-                if !resolves(without, floor.rmse) && resolves(&candidates[i].fit, cand_floor) {
+                // A remainder already called noise may still hold an effect whose gain was
+                // spread too unevenly over the blocks for z: the candidate must then take at
+                // least three quarters of what lies above the floor (variance beyond it).
+                let excess2 = |f: &Fit| f.rmse * f.rmse - floor.rmse * floor.rmse;
+                let takes_the_excess = excess2(&candidates[i].fit) <= 0.25 * excess2(without);
+                if (!resolves(without, floor.rmse) || takes_the_excess) && resolves(&candidates[i].fit, cand_floor) {
                     evidence.push(format!(
                         "`{}` gains {:.1} % at z = {:.1} (under {}) and leaves a remainder of noise where the model without it does not: added",
                         last_of(&candidates[i]),
@@ -337,9 +346,11 @@ pub(super) fn diagnose_fits(
         // disturbance no model has yet (belt vibration) counts as noise there and lifts it.
         // An effect that was significant on its own is evidence the floor stop must not
         // override.
-        eligible_left = candidates
-            .iter()
-            .any(|c| c.eligible && Some(last_of(c)) != added && c.fit.effects.len() == selected.len() + 1);
+        eligible_left = candidates.iter().any(|c| {
+            (c.eligible || (c.gain_pct >= rules.min_gain_pct && c.z >= rules.resolve_z))
+                && Some(last_of(c)) != added
+                && c.fit.effects.len() == selected.len() + 1
+        });
         if let Some(b) = best {
             let c = &candidates[b];
             evidence.push(format!(
