@@ -86,7 +86,9 @@ impl Events {
         }
         let n = lift.len();
         let pre = ((PRE_MS / dt_ms).round() as usize).max(1);
-        let (q_supply, q_back) = (crate::diagnose::resolution(ph), crate::diagnose::resolution(pl));
+        // The columns' quantization steps, found (by sorting the column) only if some rest
+        // window does not scatter.
+        let (q_supply, q_back) = (std::cell::OnceCell::new(), std::cell::OnceCell::new());
         // A command already on at the first sample began before the log: not an edge.
         let rising: Vec<usize> = (1..n).filter(|&k| u[k] > 0.5 && u[k - 1] <= 0.5).collect();
         if rising.is_empty() {
@@ -118,17 +120,18 @@ impl Events {
                     median(&mut v)
                 }
             };
-            let setpoint_se = |x: &[f64], q: f64| {
+            let setpoint_se = |x: &[f64], q: &std::cell::OnceCell<f64>| {
                 let v = &x[rest.clone()];
+                let quantization = || *q.get_or_init(|| crate::diagnose::resolution(x)) / 12f64.sqrt();
                 if v.len() < 3 {
-                    return q / 12f64.sqrt();
+                    return quantization();
                 }
                 let m = v.iter().sum::<f64>() / v.len() as f64;
                 let var = v.iter().map(|y| (y - m).powi(2)).sum::<f64>() / (v.len() - 1) as f64;
                 if var > 0.0 {
                     (var / v.len() as f64).sqrt()
                 } else {
-                    q / 12f64.sqrt()
+                    quantization()
                 }
             };
             let off_index = (s + on + 1..e)
@@ -149,7 +152,7 @@ impl Events {
                 inputs,
                 on_index: on,
                 off_index,
-                setpoint_se_mpa: (setpoint_se(ph, q_supply), setpoint_se(pl, q_back)),
+                setpoint_se_mpa: (setpoint_se(ph, &q_supply), setpoint_se(pl, &q_back)),
             });
         }
         Ok(Events {
