@@ -80,9 +80,6 @@ pub trait Family {
     fn is_off(&self, effect: &str, fit: &Fit) -> bool {
         catalogue::is_off(self.plant(), effect, &fit.internal)
     }
-    /// What a perfect model would score on the validation data, estimated from `fit`'s
-    /// validation residual (the part of the output the model already explains is no noise)
-    /// and the quantization of the measured output.
     /// What the measured inputs' own error costs even a perfect model on the validation data:
     /// the output's RMS error it causes (same units as the noise floor) and how it was found,
     /// where the family can tell (`None`: not estimated). The verdict's floor is the root sum
@@ -91,6 +88,9 @@ pub trait Family {
     fn input_floor(&self, _val: &Log, _fit: &Fit) -> Option<(f64, String)> {
         None
     }
+    /// What a perfect model would score on the validation data, estimated from `fit`'s
+    /// validation residual (the part of the output the model already explains is no noise)
+    /// and the quantization of the measured output.
     fn noise_floor(&self, _val: &Log, fit: &Fit) -> NoiseFloor {
         noise_floor_of(&fit.residual(), resolution(&fit.measured))
     }

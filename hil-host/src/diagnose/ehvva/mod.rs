@@ -516,10 +516,12 @@ pub fn setpoint_floor(p: &EhvvaParams, val: &Log, threads: usize) -> Option<(f64
     simulate_all_on(p, &set, &mut base, threads).ok()?;
     let mut moved = vec![0.0; set.samples];
     let mut sum_sq = 0.0;
+    // One copy of the events, its set-points moved from the logged ones each time.
+    let mut shifted = set.clone();
     for (supply, sign) in [(true, 1.0), (true, -1.0), (false, 1.0), (false, -1.0)] {
-        let mut shifted = set.clone();
-        for ev in &mut shifted.events {
-            let (se_supply, se_back) = ev.setpoint_se_mpa;
+        for (ev, logged) in shifted.events.iter_mut().zip(&set.events) {
+            let (se_supply, se_back) = logged.setpoint_se_mpa;
+            ev.inputs = logged.inputs;
             if supply {
                 ev.inputs.p_supply_mpa += sign * se_supply;
             } else {

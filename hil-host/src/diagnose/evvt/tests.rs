@@ -2,6 +2,7 @@
 //! selection on pairs it used to miss, the command-delay probe, open-loop windows.
 use super::*;
 use crate::generate::evvt as gen;
+use model_core::evvt::quantize_phase_deg;
 
 fn logs(effect: &str, seed: u64) -> (Log, Log, Vec<(String, f64)>) {
     let case = gen::generate(effect, seed).unwrap();
