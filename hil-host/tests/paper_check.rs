@@ -19,11 +19,7 @@ use hil_host::paper_check::{self, Check, Row, TOLERANCE};
 ///   faster.
 /// - Fig. 10's opening 2 ms faster at 4 MPa back pressure: in eqs. (10)-(12) Pl only opposes
 ///   the opening (Ab·Pl) and td(Ph, T) does not depend on it; the model is 0.1 ms slower.
-/// - Vacuum: HPC more voltage-sensitive than HPT and HPC sticking at 1 %, not 10 %. A refit
-///   that passes both rows exists (HPT position map a4 5 kPa, HPC a2 80 %/rad, a3 71.9 kPa,
-///   a4 32 kPa, clearance 20 %) but breaks five controller and ECU tests (vacuum_position,
-///   vacuum_task) and a friction test; not landed.
-const KNOWN_FAILING: [&str; 9] = [
+const KNOWN_FAILING: [&str; 7] = [
     "ehvva.table3.closing_ms.high_lift.7p2MPa",
     "ehvva.fig2.tail_ms.7p2MPa",
     "ehvva.table4.vc_time_ms.m20C",
@@ -31,8 +27,6 @@ const KNOWN_FAILING: [&str; 9] = [
     "ehvva.table4.vc_time_ratio.m20C_over_22C",
     "ehvva.table4.vo_time_ratio.100C_over_22C",
     "ehvva.fig10.opening_faster_ms.4MPa",
-    "vacuum.hpt.sec5_1.most_voltage_sensitive",
-    "vacuum.hpc.fig12.stick_pct.closing_step",
 ];
 
 const REQUIRED_PREFIXES: [&str; 8] = [

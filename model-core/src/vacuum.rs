@@ -219,14 +219,16 @@ impl VacuumParams {
             },
             tau_rise_s: 0.05,
             tau_fall_s: 0.08,
-            // x(80 kPa) = 14 %, 5 %/kPa at 70 kPa; x = 0 at 94 kPa, 100 % at 46 kPa.
+            // 8 %/kPa at 70 kPa, the steepest of the three maps (Sec. 5.1: "the most
+            // sensitive to supply voltage disturbances, due to steepness of the pressure to
+            // position curves"); x = 0 at 85 kPa, 100 % at 55 kPa, x(80 kPa) = 6 %.
             position_map: PositionMap::Arctan {
                 a1_pct: 50.0,
                 a2_pct_per_rad: 40.0,
                 a3_kpa: 70.0,
-                a4_kpa: 8.0,
+                a4_kpa: 5.0,
             },
-            // Spring 0.2 kPa/% mid-stroke: ω = 45 rad/s.
+            // Spring 0.125 kPa/% mid-stroke: ω = 35 rad/s.
             mass_kpa_s2_per_pct: 1.0e-4,
             damping_extend_kpa_s_per_pct: 0.006,
             damping_retract_kpa_s_per_pct: 0.012,
@@ -252,12 +254,16 @@ impl VacuumParams {
             },
             tau_rise_s: 0.05,
             tau_fall_s: 0.085,
-            // x = 0 at 93 kPa, 100 % at 31 kPa.
+            // x = 0 at ambient (100 kPa), 100 % at 49 kPa, 2.3 %/kPa mid-stroke. The spring
+            // barely holds the valve near its seat (x(95 kPa) = 8 %): a closing step ends
+            // where the spring no longer overcomes the rod's 5 kPa friction, and the valve
+            // stops half the clearance above the membrane, at 10 % (Sec. 3.2: "causing the
+            // HPC actuator to stick at 10 % for closing steps").
             position_map: PositionMap::Arctan {
                 a1_pct: 50.0,
-                a2_pct_per_rad: 38.0,
-                a3_kpa: 62.0,
-                a4_kpa: 8.0,
+                a2_pct_per_rad: 80.0,
+                a3_kpa: 74.5,
+                a4_kpa: 35.3,
             },
             mass_kpa_s2_per_pct: 1.0e-4,
             damping_extend_kpa_s_per_pct: 0.007,
@@ -273,6 +279,25 @@ impl VacuumParams {
                 backlash: true,
             },
             ..Self::lpt()
+        }
+    }
+
+    /// The Coulomb level the rod sees: `fc_kpa` with the `coulomb-friction` effect on, else 0.
+    pub fn rod_friction_kpa(&self) -> f64 {
+        if self.effects.coulomb_friction {
+            self.fc_kpa
+        } else {
+            0.0
+        }
+    }
+
+    /// How far the valve lags the membrane in the direction of motion: half of
+    /// `backlash_pct` with the `backlash` effect on, else 0.
+    pub fn half_clearance_pct(&self) -> f64 {
+        if self.effects.backlash {
+            0.5 * self.backlash_pct
+        } else {
+            0.0
         }
     }
 
@@ -524,6 +549,15 @@ impl<R: Real> VacuumStaticModel<R> {
         let x = x_pct.clamp(R::ZERO, R::from_f64(100.0));
         self.maps.pressure_at(x) + (p_amb_kpa - self.p_amb_ref_kpa)
     }
+
+    /// |dp/dx| of eq. (8)/(9) at position `x_pct` (kPa of chamber pressure per % of
+    /// position): how much pressure one percent of stroke takes there. A position controller
+    /// that acts in pressure scales its gains with it, so its loop gain does not depend on how
+    /// steep the actuator's map is at the set-point.
+    pub fn pressure_per_position_kpa_per_pct(&self, x_pct: R) -> R {
+        let x = x_pct.clamp(R::ZERO, R::from_f64(100.0));
+        self.maps.pressure_slope_at(x)
+    }
 }
 
 /// (−1)^(k+1)/k!, k = 1..=16: the Taylor coefficients of 1 − e^(−x).
@@ -667,6 +701,18 @@ impl<R: Real> Maps<R> {
         }
     }
 
+    /// |d pressure_at / dx|: 1/|k| for eq. (8); (a4/a2)(1 + tan²θ) for eq. (9).
+    fn pressure_slope_at(&self, x: R) -> R {
+        match self.position_map {
+            PositionMapR::Linear { k_div, .. } => R::ONE.div_by(k_div).abs(),
+            PositionMapR::Arctan { a1, a2_div, a4, .. } => {
+                let lim = R::from_f64(THETA_MAX_RAD);
+                let t = (x - a1).div_by(a2_div).clamp(-lim, lim).tan();
+                (a4 + a4 * t * t).div_by(a2_div)
+            }
+        }
+    }
+
     /// Inverse of `position`: the map pressure that holds the membrane at `x` with no friction.
     fn pressure_at(&self, x: R) -> R {
         match self.position_map {
@@ -756,9 +802,9 @@ impl<R: Real> VacuumValveActuator<R> {
     pub fn new(p: &VacuumParams) -> Result<Self, VacuumParamError> {
         p.validate()?;
         let f = R::from_f64;
-        let fc = if p.effects.coulomb_friction { p.fc_kpa } else { 0.0 };
+        let fc = p.rod_friction_kpa();
         let sigma_over_fc = if fc > 0.0 { p.dahl_sigma_kpa_per_pct / fc } else { 0.0 };
-        let half_backlash = if p.effects.backlash { 0.5 * p.backlash_pct } else { 0.0 };
+        let half_backlash = p.half_clearance_pct();
         let rt = R_AIR_J_PER_KG_K * p.temp_amb_k;
         let maps = Maps::new(p);
         let p_amb_ref = f(p.p_amb_ref_kpa);

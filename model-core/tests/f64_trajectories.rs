@@ -217,7 +217,7 @@ fn f64_plant_trajectories_are_unchanged() {
         ("positioner", positioner_hash()),
     ];
     let want: [u64; 4] = [
-        0x3b50_02ef_ef33_ce44,
+        0x62d7_085f_8092_7eb1,
         0xc3ba_fcf2_892e_6cd1,
         0x45d4_b815_8692_c402,
         0x0283_a1a2_6ee0_46bb,

@@ -57,10 +57,16 @@ pub enum VacuumPositionMode {
 pub struct VacuumPositionConfig {
     /// The actuator model the feedforward inverts (static maps and U_ref).
     pub actuator: VacuumParams,
-    /// Proportional gain: kPa of pressure correction per % of position error.
-    pub kp_kpa_per_pct: f64,
-    /// Integral gain: kPa per (%·s).
+    /// Proportional loop gain: % of position the correction asks for per % of position
+    /// error. The correction is a pressure, kp·|dp/dx|·error with |dp/dx| the map's slope at
+    /// the set-point, so the loop gain is the same on a flat and on a steep part of the map.
+    pub kp_loop_gain: f64,
+    /// Integral gain: kPa per (%·s). Not scaled by the map's slope: the integral learns a
+    /// force the model lacks (friction, map errors), whose size in kPa does not depend on it.
     pub ki_kpa_per_pct_s: f64,
+    /// Share of the actuator model's rod friction and clearance fed forward in the direction
+    /// of the last position error outside the deadband (0: none, 1: all of it).
+    pub friction_compensation: f64,
     /// The integrator holds while |error| is within this band.
     pub integral_deadband_pct: f64,
     /// ... and while |error| is above this one (no windup during large moves).
@@ -78,19 +84,23 @@ pub struct VacuumPositionConfig {
 }
 
 impl VacuumPositionConfig {
-    /// Gains for the paper's actuators at the paper's 80 Hz duty update: the pressure-to-
-    /// position slope is 2 %/kPa (LPT) to 5 %/kPa (HPT mid-stroke), so kp = 0.3 kPa/% gives a
-    /// proportional loop gain of 0.6-1.5 and ki/kp = 5 /s stays below the pressure poles
-    /// (1/τ = 11..25 /s). The integrator runs for 0.3 % < |e| < 20 %: the deadband is well
-    /// inside the friction band (HPT: ±4 kPa is ±10 % of position at the ends), the zone wide
-    /// enough that the friction offset is always inside it. Integral limit ±(2·Fc + 5 kPa).
-    /// (Tuned in simulation against the presets: kp 0.5/ki 3 overshoots 10 % on the HPT's
-    /// steep part; a 5 % zone leaves the HPT stuck 6 % short.)
+    /// Gains for the paper's actuators at the paper's 80 Hz duty update: a proportional loop
+    /// gain of 0.6 (on the LPT's 2 %/kPa map 0.3 kPa/%; the HPT's map is 1.25-8 %/kPa over
+    /// its stroke, which a fixed kPa/% gain made a loop gain of 2.4 mid-stroke, 9 % overshoot)
+    /// and ki = 1.5 kPa/(%·s), whose zero (5 /s on the LPT) stays below the pressure poles
+    /// (1/τ = 11..25 /s). 80 % of the model's friction and clearance fed forward: the
+    /// integrator then learns only what the model lacks, and a slightly under-compensated rod
+    /// does not hunt (Dahl's friction builds up over the first σ/Fc of travel, so all of it
+    /// overshoots 2 % on the LPT). The integrator runs for 0.3 % < |e| < 20 %: the deadband
+    /// well inside the friction band, the zone wide enough that the friction offset is always
+    /// inside it. Integral limit ±(2·Fc + 5 kPa). (Tuned in simulation against the presets: a
+    /// 5 % zone leaves the HPT stuck 6 % short.)
     pub fn for_actuator(actuator: VacuumParams) -> Self {
         Self {
             actuator,
-            kp_kpa_per_pct: 0.3,
+            kp_loop_gain: 0.6,
             ki_kpa_per_pct_s: 1.5,
+            friction_compensation: 0.8,
             integral_deadband_pct: 0.3,
             integral_zone_pct: 20.0,
             integral_limit_kpa: 2.0 * actuator.fc_kpa + 5.0,
@@ -109,8 +119,9 @@ impl VacuumPositionConfig {
 pub enum VacuumPositionConfigError {
     Actuator(VacuumParamError),
     Compensator(PwmCompError),
-    KpKpaPerPct,
+    KpLoopGain,
     KiKpaPerPctS,
+    FrictionCompensation,
     IntegralDeadbandPct,
     IntegralZonePct,
     IntegralLimitKpa,
@@ -155,6 +166,9 @@ pub struct VacuumPositionOutput<R: Real> {
 pub struct VacuumPositionController<R: Real> {
     model: VacuumStaticModel<R>,
     comp: PwmCompensator<R>,
+    /// The actuator model has the supply-voltage effect: eq. (15) applies.
+    voltage_dependent: bool,
+    u_ref_v: R,
     kp: R,
     ki: R,
     deadband: R,
@@ -165,6 +179,13 @@ pub struct VacuumPositionController<R: Real> {
     setpoint_max: R,
     /// Integral pressure correction, kPa (positive = more vacuum).
     integral_kpa: R,
+    /// +1 while the valve is to open, −1 while it is to close, 0 before the first error
+    /// outside the deadband: the side friction and clearance act on.
+    direction: R,
+    /// Rod friction fed forward, kPa.
+    friction_ff_kpa: R,
+    /// Clearance fed forward: the membrane is asked this far beyond the set-point, %.
+    clearance_ff_pct: R,
 }
 
 impl<R: Real> VacuumPositionController<R> {
@@ -174,8 +195,11 @@ impl<R: Real> VacuumPositionController<R> {
         let comp = PwmCompensator::new(c.actuator.u_ref_v, c.u_min_v, c.duty_min_pct, c.duty_max_pct)
             .map_err(E::Compensator)?;
         let ok = |x: f64, hi: f64| x.is_finite() && (0.0..=hi).contains(&x);
-        if !ok(c.kp_kpa_per_pct, 100.0) {
-            return Err(E::KpKpaPerPct);
+        if !ok(c.kp_loop_gain, 100.0) {
+            return Err(E::KpLoopGain);
+        }
+        if !ok(c.friction_compensation, 1.5) {
+            return Err(E::FrictionCompensation);
         }
         if !ok(c.ki_kpa_per_pct_s, 1000.0) {
             return Err(E::KiKpaPerPctS);
@@ -200,15 +224,21 @@ impl<R: Real> VacuumPositionController<R> {
         Ok(Self {
             model,
             comp,
-            kp: f(c.kp_kpa_per_pct),
+            voltage_dependent: c.actuator.effects.supply_voltage,
+            u_ref_v: f(c.actuator.u_ref_v),
+            kp: f(c.kp_loop_gain),
             ki: f(c.ki_kpa_per_pct_s),
             deadband: f(c.integral_deadband_pct),
             zone: f(c.integral_zone_pct),
+
             integral_limit: f(c.integral_limit_kpa),
             pump_margin: f(c.pump_margin_kpa),
             setpoint_min: f(c.setpoint_min_pct),
             setpoint_max: f(c.setpoint_max_pct),
             integral_kpa: R::ZERO,
+            direction: R::ZERO,
+            friction_ff_kpa: f(c.friction_compensation * c.actuator.rod_friction_kpa()),
+            clearance_ff_pct: f(c.friction_compensation * c.actuator.half_clearance_pct()),
         })
     }
 
@@ -232,8 +262,11 @@ impl<R: Real> VacuumPositionController<R> {
     }
 
     fn duty_for_pressure(&self, p_kpa: R, p_amb_kpa: R, u_batt_v: R) -> Compensated<R> {
-        self.comp
-            .apply(self.model.duty_for_pressure_pct(p_kpa, p_amb_kpa), u_batt_v)
+        // A valve whose model has no supply-voltage effect (a unit calibrated from logs where
+        // the pressure did not follow the supply) gets its duty as the model's: compensating
+        // a dependence the valve does not have would move it by U/U_ref.
+        let u = if self.voltage_dependent { u_batt_v } else { self.u_ref_v };
+        self.comp.apply(self.model.duty_for_pressure_pct(p_kpa, p_amb_kpa), u)
     }
 
     /// One control period of length `dt_s`.
@@ -244,6 +277,7 @@ impl<R: Real> VacuumPositionController<R> {
         let pump_request = i.enabled && i.p_tank_kpa > p_tank_needed;
         if !i.enabled {
             self.integral_kpa = R::ZERO;
+            self.direction = R::ZERO;
             return VacuumPositionOutput {
                 duty_pct: R::ZERO,
                 mode: VacuumPositionMode::Off,
@@ -263,6 +297,7 @@ impl<R: Real> VacuumPositionController<R> {
             i.fault == VacuumPositionFault::PositionSensor || i.measured_x_pct.partial_cmp(&i.measured_x_pct).is_none();
         let (p_target, mode) = if sensor_bad {
             self.integral_kpa = R::ZERO;
+            self.direction = R::ZERO;
             (p_ff, VacuumPositionMode::OpenLoop(VacuumPositionFault::PositionSensor))
         } else if supply_low {
             // Frozen, not cleared: neither wound by the supply's error nor lost.
@@ -272,16 +307,31 @@ impl<R: Real> VacuumPositionController<R> {
             )
         } else {
             let error = setpoint - i.measured_x_pct;
-            // More position needs more vacuum: the correction lowers the pressure.
-            let unclamped = p_ff - self.kp * error - self.integral_kpa;
+            if error > self.deadband {
+                self.direction = R::ONE;
+            } else if error < -self.deadband {
+                self.direction = -R::ONE;
+            }
+            // Friction and clearance compensation: to open, the membrane leads the valve by
+            // the clearance and more vacuum overcomes the rod's friction; to close, the other
+            // way. (More position needs more vacuum: every correction lowers the pressure.)
+            let p_ff = if self.direction == R::ZERO {
+                p_ff
+            } else {
+                let ahead = setpoint + self.direction * self.clearance_ff_pct;
+                self.feedforward_pressure_kpa(ahead, i.p_amb_kpa) - self.direction * self.friction_ff_kpa
+            };
+            let kp = self.kp * self.model.pressure_per_position_kpa_per_pct(setpoint);
+            let ki = self.ki;
+            let unclamped = p_ff - kp * error - self.integral_kpa;
             let pinned_vacuum = unclamped <= lo && error > R::ZERO;
             let pinned_ambient = unclamped >= hi && error < R::ZERO;
             let in_zone = error.abs() > self.deadband && error.abs() < self.zone;
             if in_zone && !pinned_vacuum && !pinned_ambient && dt_s > R::ZERO {
                 self.integral_kpa =
-                    (self.integral_kpa + self.ki * error * dt_s).clamp(-self.integral_limit, self.integral_limit);
+                    (self.integral_kpa + ki * error * dt_s).clamp(-self.integral_limit, self.integral_limit);
             }
-            let p = p_ff - self.kp * error - self.integral_kpa;
+            let p = p_ff - kp * error - self.integral_kpa;
             (p, VacuumPositionMode::Control)
         };
         let p_reachable = p_target.clamp(lo, hi);
@@ -303,7 +353,7 @@ impl<R: Real> VacuumPositionController<R> {
 mod tests {
     use super::*;
     use crate::real::Q32;
-    use crate::vacuum::{VacuumInputs, VacuumValveActuator};
+    use crate::vacuum::{VacuumEffects, VacuumInputs, VacuumValveActuator};
 
     /// The paper's duty update rate: 80 Hz (Sec. 2.2).
     const PERIOD_S: f64 = 0.0125;
@@ -316,6 +366,12 @@ mod tests {
 
     impl<R: Real> Loop<R> {
         fn new(params: VacuumParams) -> Self {
+            Self::with(params, VacuumPositionConfig::for_actuator(params))
+        }
+
+        /// The plant `params` under a controller configured by `config` (whose actuator model
+        /// may differ from the plant).
+        fn with(params: VacuumParams, config: VacuumPositionConfig) -> Self {
             let mut plant = VacuumValveActuator::new(&params).unwrap();
             plant.settle(&VacuumInputs {
                 duty_pct: R::ZERO,
@@ -323,7 +379,7 @@ mod tests {
                 p_amb_kpa: R::from_f64(100.0),
                 p_tank_kpa: R::from_f64(25.0),
             });
-            let ctrl = VacuumPositionController::new(&VacuumPositionConfig::for_actuator(params)).unwrap();
+            let ctrl = VacuumPositionController::new(&config).unwrap();
             Self {
                 plant,
                 ctrl,
@@ -408,6 +464,93 @@ mod tests {
     }
 
     #[test]
+    fn the_gain_scale_is_the_maps_own_slope() {
+        // |dp/dx| against a central difference of the inverse map, on all three maps and over
+        // the stroke (the arctan's slope varies 6x over the HPT's stroke).
+        for p in [VacuumParams::lpt(), VacuumParams::hpt(), VacuumParams::hpc()] {
+            let m = VacuumStaticModel::<f64>::new(&p).unwrap();
+            for x in [2.0, 10.0, 30.0, 50.0, 70.0, 90.0, 98.0] {
+                let h = 1e-4;
+                let numeric =
+                    (m.pressure_for_position_kpa(x - h, 100.0) - m.pressure_for_position_kpa(x + h, 100.0)) / (2.0 * h);
+                let slope = m.pressure_per_position_kpa_per_pct(x);
+                assert!(
+                    (slope / numeric - 1.0).abs() < 1e-6,
+                    "{:?} at {x} %: {slope} vs {numeric}",
+                    p.position_map
+                );
+            }
+        }
+        // The HPT's steep middle takes the least pressure per percent (3.4x less than at 10 %).
+        let hpt = VacuumStaticModel::<f64>::new(&VacuumParams::hpt()).unwrap();
+        assert!(hpt.pressure_per_position_kpa_per_pct(50.0) * 3.0 < hpt.pressure_per_position_kpa_per_pct(10.0));
+    }
+
+    #[test]
+    fn friction_the_model_knows_is_fed_forward_and_the_rest_is_learnt() {
+        // The HPC with its friction and clearance: with the feedforward the integrator holds
+        // less than without it, and on a unit with 60 % more friction and twice the clearance
+        // than the model the loop still settles (the integrator takes the difference).
+        let p = VacuumParams::hpc();
+        let run_profile = |plant: VacuumParams, compensation: f64| {
+            let cfg = VacuumPositionConfig {
+                friction_compensation: compensation,
+                ..VacuumPositionConfig::for_actuator(p)
+            };
+            let mut l = Loop::<f64>::with(plant, cfg);
+            let mut worst: f64 = 0.0;
+            let mut integral: f64 = 0.0;
+            for setpoint in [30.0, 70.0, 45.0, 60.0] {
+                let (err, _) = l.run(setpoint, 12.0, VacuumPositionFault::None, 4.0, 1.0);
+                worst = worst.max(err);
+                integral = integral.max(l.ctrl.integral_kpa().abs());
+            }
+            (worst, integral)
+        };
+        let (err_ff, int_ff) = run_profile(p, 0.8);
+        let (err_pi, int_pi) = run_profile(p, 0.0);
+        extern crate std;
+        std::println!("HPC: with the feedforward error {err_ff:.3} %, |integral| <= {int_ff:.2} kPa; PI alone {err_pi:.3} %, {int_pi:.2} kPa");
+        // Measured: 0.44 % and 1.0 kPa with it, 0.68 % and 5.7 kPa without.
+        assert!(err_ff < 0.5, "{err_ff} (PI alone {err_pi})");
+        assert!(
+            int_ff < 0.6 * int_pi,
+            "integral {int_ff} with the feedforward, {int_pi} without"
+        );
+        let rough = VacuumParams {
+            fc_kpa: 1.6 * p.fc_kpa,
+            backlash_pct: 2.0 * p.backlash_pct,
+            ..p
+        };
+        let (err_rough, int_rough) = run_profile(rough, 0.8);
+        std::println!("HPC with 1.6x friction, 2x clearance: error {err_rough:.3} %, |integral| <= {int_rough:.2} kPa");
+        assert!(err_rough < 0.5, "{err_rough}");
+    }
+
+    #[test]
+    fn a_valve_without_the_supply_voltage_effect_is_not_compensated() {
+        let with = VacuumParams::hpt();
+        let without = VacuumParams {
+            effects: VacuumEffects {
+                supply_voltage: false,
+                ..with.effects
+            },
+            ..with
+        };
+        let duty = |p: VacuumParams, u: f64| {
+            let c = VacuumPositionController::<f64>::new(&VacuumPositionConfig::for_actuator(p)).unwrap();
+            c.feedforward(40.0, 100.0, u).1.duty_pct
+        };
+        // Eq. (15): duty·U constant with the effect; the model's own duty without it.
+        assert!((duty(with, 14.0) * 14.0 - duty(with, 12.0) * 12.0).abs() < 1e-9);
+        assert!((duty(without, 14.0) - duty(without, 10.0)).abs() < 1e-12);
+        assert!(
+            (duty(without, 14.0) - duty(with, 12.0)).abs() < 1e-9,
+            "U_ref is the model's"
+        );
+    }
+
+    #[test]
     fn position_sensor_fault_falls_back_to_feedforward() {
         let p = VacuumParams::lpt();
         let mut l = Loop::<f64>::new(p);
@@ -427,9 +570,13 @@ mod tests {
     fn disabled_vents_and_pump_demand_follows_the_needed_pressure() {
         let p = VacuumParams::hpt();
         let mut c = VacuumPositionController::<f64>::new(&VacuumPositionConfig::for_actuator(p)).unwrap();
+        // The Fig. 16 operating point is the HPT near 80 kPa: the position its map gives there.
+        let x_fig16 = VacuumStaticModel::<f64>::new(&p)
+            .unwrap()
+            .position_for_pressure_pct(80.0, 100.0);
         let mut i = VacuumPositionInputs {
-            setpoint_pct: 14.0,
-            measured_x_pct: 14.0,
+            setpoint_pct: x_fig16,
+            measured_x_pct: x_fig16,
             p_amb_kpa: 100.0,
             p_tank_kpa: 70.0,
             u_batt_v: 12.0,
@@ -441,12 +588,12 @@ mod tests {
             (o.duty_pct, o.mode, o.pump_request),
             (0.0, VacuumPositionMode::Off, false)
         );
-        // Sec. 5.3: at the Fig. 16 point (HPT near 80 kPa, x ≈ 14 %) a 70 kPa tank suffices.
+        // Sec. 5.3: at the Fig. 16 point a 70 kPa tank suffices.
         i.enabled = true;
         let o = c.step(&i, PERIOD_S);
         assert!((o.p_feedforward_kpa - 80.0).abs() < 1.0, "{}", o.p_feedforward_kpa);
         assert!(!o.pump_request && o.p_tank_needed_kpa > 70.0);
-        // Far open (x = 90 %) needs ~52 kPa: the same tank is too weak.
+        // Far open (x = 90 %) needs ~62 kPa: the same tank is too weak.
         i.setpoint_pct = 90.0;
         let o = c.step(&i, PERIOD_S);
         assert!(o.pump_request && o.limited);
@@ -476,9 +623,11 @@ mod tests {
                 (r[0] - reference[0]).abs(),
                 (r[1] - reference[1]).abs()
             );
-            // Measured: f32 2.3e-4 % position / 9.3e-5 % duty, Q32.32 1.0e-5 % / 3.1e-6 %.
+            // Measured: f32 1.8e-4 % position / 5.5e-4 % duty, Q32.32 6.9e-4 % / 2.6e-3 %
+            // (a direction decision of the friction compensation a step apart leaves a trace
+            // in the rod's friction state); the bound is 0.1 % of range.
             assert!(
-                (r[0] - reference[0]).abs() < 2e-3 && (r[1] - reference[1]).abs() < 2e-3,
+                (r[0] - reference[0]).abs() < 1e-2 && (r[1] - reference[1]).abs() < 1e-2,
                 "{r:?} vs {reference:?}"
             );
         }
@@ -487,10 +636,10 @@ mod tests {
     #[test]
     fn bad_configuration_is_named() {
         let mut c = VacuumPositionConfig::for_actuator(VacuumParams::lpt());
-        c.kp_kpa_per_pct = -1.0;
+        c.kp_loop_gain = -1.0;
         assert_eq!(
             VacuumPositionController::<f32>::new(&c).err(),
-            Some(VacuumPositionConfigError::KpKpaPerPct)
+            Some(VacuumPositionConfigError::KpLoopGain)
         );
         let mut c = VacuumPositionConfig::for_actuator(VacuumParams::lpt());
         c.setpoint_min_pct = 80.0;
