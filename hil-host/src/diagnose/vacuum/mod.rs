@@ -368,8 +368,11 @@ impl VacuumFamily {
                 Some(other) => {
                     let mut best: Option<(f64, VacuumModel)> = None;
                     for m in [rod, other] {
-                        let names: Vec<&'static str> =
-                            m.parameter_names(&[])?.into_iter().filter(|n| !is_pressure_param(n)).collect();
+                        let names: Vec<&'static str> = m
+                            .parameter_names(&[])?
+                            .into_iter()
+                            .filter(|n| !is_pressure_param(n))
+                            .collect();
                         if let Ok((fitted, r)) = self.fit_stage(&m, &names, data, Residuals::Position, &self.lsq) {
                             iterations += r.iterations;
                             if best.as_ref().is_none_or(|(c, _)| r.cost < *c) {
