@@ -329,7 +329,9 @@ impl VacuumFamily {
             // The shape is judged with the supply-voltage effect as well: where the supply
             // moves the pressure, a shape fitted without it bends to absorb the voltage and
             // the wrong shape can win (an HPC's cubic map lost to two lines on units with a
-            // hidden supply-voltage effect). The start keeps the baseline fit of the shape.
+            // hidden supply-voltage effect). The start keeps the better baseline fit of the
+            // shape: from the preset, or from the fit with the effect with the effect switched
+            // off (from the HPC preset alone the cubic ended at u0 95 %, 100x the cost).
             let sv = VacuumEffect::SupplyVoltage.name();
             let mut best: Option<(f64, VacuumModel)> = None;
             for start in valve_starts() {
@@ -343,20 +345,31 @@ impl VacuumFamily {
                     let (m, r) = self.fit_stage(m, &pressure_names, data, Residuals::Pressure, &self.lsq)?;
                     Ok((m, r.cost, r.iterations))
                 };
-                let Ok((m, cost, it)) = fit_pressure(&start, &[]) else {
-                    continue;
-                };
-                iterations += it;
-                let with_sv = fit_pressure(&start.with_effect(sv)?, &[sv]);
-                let judged = match with_sv {
-                    Ok((_, c, it)) => {
+                let mut baseline: Option<(VacuumModel, f64)> = None;
+                let mut judged = f64::INFINITY;
+                if let Ok((m, cost, it)) = fit_pressure(&start, &[]) {
+                    iterations += it;
+                    judged = cost;
+                    baseline = Some((m, cost));
+                }
+                if let Ok((with_sv, cost_sv, it)) = fit_pressure(&start.with_effect(sv)?, &[sv]) {
+                    iterations += it;
+                    judged = judged.min(cost_sv);
+                    let mut off = with_sv;
+                    off.effects = start.effects;
+                    off.voltage_gain = start.voltage_gain;
+                    if let Ok((m, cost, it)) = fit_pressure(&off, &[]) {
                         iterations += it;
-                        cost.min(c)
+                        judged = judged.min(cost);
+                        if baseline.as_ref().is_none_or(|(_, c)| cost < *c) {
+                            baseline = Some((m, cost));
+                        }
                     }
-                    Err(_) => cost,
-                };
-                if best.as_ref().is_none_or(|(c, _)| judged < *c) {
-                    best = Some((judged, m));
+                }
+                if let Some((m, _)) = baseline {
+                    if best.as_ref().is_none_or(|(c, _)| judged < *c) {
+                        best = Some((judged, m));
+                    }
                 }
             }
             let valve = best.ok_or("no valve map could be fitted to the logged pressure")?.1;
