@@ -158,6 +158,17 @@ type Calibrated = (
     crate::lsq::LsqResult,
 );
 
+/// The common start of every fit ([`VacuumFamily::prepared`]) and, where the band's centre
+/// could not tell the position map's shape, the other shape fitted to the logged position.
+#[derive(Clone, Copy, Debug)]
+struct Prepared {
+    model: VacuumModel,
+    iterations: usize,
+    other_rod: Option<VacuumModel>,
+    /// The chosen valve map as fitted to the pressure with the supply-voltage effect.
+    sv_valve: Option<VacuumModel>,
+}
+
 /// Family settings.
 #[derive(Debug)]
 pub struct VacuumFamily {
@@ -168,7 +179,7 @@ pub struct VacuumFamily {
     /// Solver settings for every stage.
     pub lsq: LsqOptions,
     /// The last prepared start, keyed by its estimation data: every fit starts from it.
-    cache: Mutex<Option<(u64, VacuumModel, usize)>>,
+    cache: Mutex<Option<(u64, Prepared)>>,
     /// The last baseline, same key: the pressure effects start their rod stage from it.
     baseline_cache: Mutex<Option<(u64, VacuumModel)>>,
 }
@@ -301,15 +312,17 @@ impl VacuumFamily {
     /// parameters fitted to the logged pressure (both shapes, the better kept) and the position
     /// map fitted to the centre of the (pressure, position) band. Without a pressure column: the
     /// whole baseline fitted from each preset start, the best kept.
-    fn prepared(&self, est: &Log, data: &EstData) -> Result<(VacuumModel, usize), String> {
+    fn prepared(&self, est: &Log, data: &EstData) -> Result<Prepared, String> {
         let key = fingerprint(est);
         if let Ok(guard) = self.cache.lock() {
-            if let Some((k, m, it)) = guard.as_ref() {
+            if let Some((k, p)) = guard.as_ref() {
                 if *k == key {
-                    return Ok((*m, *it));
+                    return Ok(*p);
                 }
             }
         }
+        let mut other_rod = None;
+        let mut sv_valve = None;
         let mut iterations = 0;
         let model;
         if data.p.is_none() {
@@ -333,7 +346,7 @@ impl VacuumFamily {
             // shape: from the preset, or from the fit with the effect with the effect switched
             // off (from the HPC preset alone the cubic ended at u0 95 %, 100x the cost).
             let sv = VacuumEffect::SupplyVoltage.name();
-            let mut best: Option<(f64, VacuumModel)> = None;
+            let mut best: Option<(f64, VacuumModel, Option<VacuumModel>)> = None;
             for start in valve_starts() {
                 let fit_pressure = |m: &VacuumModel, effects: &[&str]| -> Result<(VacuumModel, f64, usize), String> {
                     let names = m.parameter_names(effects)?;
@@ -347,6 +360,7 @@ impl VacuumFamily {
                 };
                 let mut baseline: Option<(VacuumModel, f64)> = None;
                 let mut judged = f64::INFINITY;
+                let mut valve_with_sv = None;
                 if let Ok((m, cost, it)) = fit_pressure(&start, &[]) {
                     iterations += it;
                     judged = cost;
@@ -355,6 +369,7 @@ impl VacuumFamily {
                 if let Ok((with_sv, cost_sv, it)) = fit_pressure(&start.with_effect(sv)?, &[sv]) {
                     iterations += it;
                     judged = judged.min(cost_sv);
+                    valve_with_sv = Some(with_sv);
                     let mut off = with_sv;
                     off.effects = start.effects;
                     off.voltage_gain = start.voltage_gain;
@@ -367,12 +382,13 @@ impl VacuumFamily {
                     }
                 }
                 if let Some((m, _)) = baseline {
-                    if best.as_ref().is_none_or(|(c, _)| judged < *c) {
-                        best = Some((judged, m));
+                    if best.as_ref().is_none_or(|(c, _, _)| judged < *c) {
+                        best = Some((judged, m, valve_with_sv));
                     }
                 }
             }
-            let valve = best.ok_or("no valve map could be fitted to the logged pressure")?.1;
+            let (_, valve, with_sv) = best.ok_or("no valve map could be fitted to the logged pressure")?;
+            sv_valve = with_sv;
             let (rod, it, other) = self.rod_map_guess(est, &data.io, &valve)?;
             iterations += it;
             model = match other {
@@ -380,6 +396,7 @@ impl VacuumFamily {
                 // logged position decides (the pressure model held, both from their guesses).
                 Some(other) => {
                     let mut best: Option<(f64, VacuumModel)> = None;
+                    let mut fitted_both = Vec::new();
                     for m in [rod, other] {
                         let names: Vec<&'static str> = m
                             .parameter_names(&[])?
@@ -388,20 +405,32 @@ impl VacuumFamily {
                             .collect();
                         if let Ok((fitted, r)) = self.fit_stage(&m, &names, data, Residuals::Position, &self.lsq) {
                             iterations += r.iterations;
+                            fitted_both.push(fitted);
                             if best.as_ref().is_none_or(|(c, _)| r.cost < *c) {
                                 best = Some((r.cost, fitted));
                             }
                         }
                     }
-                    best.map_or(rod, |(_, m)| m)
+                    let chosen = best.map_or(rod, |(_, m)| m);
+                    // The other shape stays a start of every extension: the baseline's choice
+                    // is made without the catalogue's physics, which can tip it (with a hidden
+                    // supply-voltage effect the baseline's rod fit is a poor judge).
+                    other_rod = fitted_both.into_iter().find(|m| m.rod_map != chosen.rod_map);
+                    chosen
                 }
                 None => rod,
             };
         }
+        let prepared = Prepared {
+            model,
+            iterations,
+            other_rod,
+            sv_valve,
+        };
         if let Ok(mut guard) = self.cache.lock() {
-            *guard = Some((key, model, iterations));
+            *guard = Some((key, prepared));
         }
-        Ok((model, iterations))
+        Ok(prepared)
     }
 
     /// Calibrates the baseline plus `effects` (empty: the baseline). With a logged pressure, in
@@ -420,15 +449,20 @@ impl VacuumFamily {
     /// their 95 % half-widths, the iterations and the final position-stage solver run.
     fn calibrate(&self, est: &Log, effects: &[&str], parent: Option<&Fit>) -> Result<Calibrated, String> {
         let data = self.est_data(est)?;
-        let (prepared, mut iterations) = self.prepared(est, &data)?;
+        let Prepared {
+            model: prepared,
+            mut iterations,
+            other_rod,
+            sv_valve,
+        } = self.prepared(est, &data)?;
         let is_pressure_effect = |e: &str| {
             matches!(
                 VacuumEffect::from_name(e),
                 Ok(VacuumEffect::SupplyVoltage | VacuumEffect::PressureDirection)
             )
         };
-        let names = prepared.parameter_names(effects)?;
-        // The parent model: the prepared shapes with the parent's effects on and its values.
+        // The parent model: the prepared shapes with the parent's effects on and its values
+        // (and the parent's position-map shape, which may be the other one).
         let parent_model = |new_neutral: bool| -> Result<VacuumModel, String> {
             let mut m = prepared;
             let Some((last, before)) = effects.split_last() else {
@@ -440,6 +474,11 @@ impl VacuumFamily {
             if let Some(f) = parent {
                 for (n, v) in &f.internal {
                     m.set(n, *v)?;
+                }
+                if f.internal.iter().any(|(n, _)| n == "a1_pct") {
+                    m.rod_map = RodMap::Arctan;
+                } else if f.internal.iter().any(|(n, _)| n == "lin_k_pct_per_kPa") {
+                    m.rod_map = RodMap::Linear;
                 }
             }
             if new_neutral {
@@ -459,13 +498,34 @@ impl VacuumFamily {
             // describe) and for a pressure effect too (a friction model takes a slow pressure
             // fall for a bent retract damping, and from its optimum the pressure effect gains
             // nothing).
-            let mut rod_from_prepared = parent_model(false)?;
-            for n in prepared.parameter_names(&[])? {
-                if !is_pressure_param(n) {
-                    rod_from_prepared.set(n, prepared.get(n))?;
+            let rod_from = |rod: &VacuumModel| -> Result<VacuumModel, String> {
+                let mut m = parent_model(false)?;
+                m.rod_map = rod.rod_map;
+                for n in rod.parameter_names(&[])? {
+                    if !is_pressure_param(n) {
+                        m.set(n, rod.get(n))?;
+                    }
+                }
+                Ok(m)
+            };
+            starts.push(rod_from(&prepared)?);
+            if let Some(other) = &other_rod {
+                starts.push(rod_from(other)?);
+            }
+            // With the supply-voltage effect also from the valve map fitted with it: the
+            // parent's map is bent by the voltage it lacked, and from it the pressure stage
+            // stopped in another minimum (an HPC's cubic at u0 56 % for the unit's 43 %).
+            if let (true, Some(v)) = (effects.contains(&VacuumEffect::SupplyVoltage.name()), &sv_valve) {
+                let mut m = parent_model(false)?;
+                if m.valve_map == v.valve_map {
+                    for n in v.parameter_names(&[VacuumEffect::SupplyVoltage.name()])? {
+                        if is_pressure_param(n) || n == "voltage_gain" {
+                            m.set(n, v.get(n))?;
+                        }
+                    }
+                    starts.push(m);
                 }
             }
-            starts.push(rod_from_prepared);
             if last == VacuumEffect::Backlash.name() {
                 let mut m = parent_model(false)?;
                 m.backlash_pct = 10.0;
@@ -477,6 +537,7 @@ impl VacuumFamily {
         let mut tried_neutral = false;
         loop {
             for start in std::mem::take(&mut starts) {
+                let names = start.parameter_names(effects)?;
                 let c = self.calibrate_from(&data, start, &names, effects.iter().any(|e| is_pressure_effect(e)))?;
                 iterations += c.3;
                 if best.as_ref().is_none_or(|b| c.4.cost < b.4.cost) {

@@ -222,7 +222,7 @@ fn map_shapes_are_picked_from_the_data() {
             assert_eq!(case.truth[0].0, preset);
             let fam = VacuumFamily::default();
             let data = fam.est_data(&est).unwrap();
-            let (m, _) = fam.prepared(&est, &data).unwrap();
+            let m = fam.prepared(&est, &data).unwrap().model;
             assert_eq!(m.valve_map, valve, "{preset} {effect}");
             // With friction the band of a linear map comes out bent (measured: a line misses
             // its centre by 1.5 %, an arctan by 0.7 %) and the arctan, which can mimic the
