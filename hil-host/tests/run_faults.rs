@@ -434,7 +434,7 @@ fn battery_sag_to_8_v_is_compensated_without_a_fault() {
     let (b, d, a) = (at(0.55), at(1.0), at(1.9));
     // After the recovery ramp the position loop (vacuum task: feedforward + PI) trims what the
     // ramp's 80 Hz lag moved through the rod's friction, so the duty does not simply return
-    // to its value before (as it did feedforward only): the valves move back towards their
+    // to its value before (as it did feedforward only): the valves end within 0.5 % of their
     // set-points (wastegate 40 %, HPT bypass 30 %).
     let (ramped, set) = (at(1.45), [40.0, 30.0]);
     for i in 0..2 {
@@ -444,8 +444,11 @@ fn battery_sag_to_8_v_is_compensated_without_a_fault() {
             "actuator {i}: duty·U {vb} before, {vd} in the sag"
         );
         let (e_ramped, e_after) = ((ramped.x_pct[i] - set[i]).abs(), (a.x_pct[i] - set[i]).abs());
+        // Measured (session 15, with the friction feedforward): wastegate 0.21 -> 0.04 %, HPT
+        // bypass 0.16 -> 0.25 % (inside the integrator's 0.3 % deadband); before it the ramp
+        // left about 1 % that the PI took back.
         assert!(
-            e_after < e_ramped - 0.3,
+            e_after < 0.5,
             "actuator {i} after recovery: {e_ramped} % off at 1.45 s, {e_after} % at 1.9 s"
         );
     }
