@@ -61,7 +61,7 @@ use std::borrow::Cow;
 use std::ops::Range;
 use std::sync::Mutex;
 
-use model_core::vacuum::VacuumParams;
+use model_core::vacuum::{VacuumParams, VacuumStaticModel};
 
 use super::catalogue::{Effect, VacuumEffect};
 use super::{Family, Fit};
@@ -309,10 +309,12 @@ impl VacuumFamily {
     /// new effect at its starting magnitude, and, for a mechanical effect, also from the
     /// band-centre map of the prepared start (the baseline's rod is bent by the hysteresis it
     /// could not describe); the clearance, whose cost is multimodal, also from a large
-    /// clearance (10 %). If every start ends above the parent's position cost, the parent with
-    /// the effect at its neutral value is refitted too: an extension never ends worse on the
-    /// estimation data than the model it extends. Returns the model, the fitted parameter names,
-    /// their 95 % half-widths, the iterations and the final position-stage solver run.
+    /// clearance (10 %); friction and clearance together also from Dahl's starting shape and
+    /// from the parent's dead band split between the two. If every start ends above the
+    /// parent's position cost, the parent with the effect at its neutral value is refitted
+    /// too: an extension never ends worse on the estimation data than the model it extends.
+    /// Returns the model, the fitted parameter names, their 95 % half-widths, the iterations
+    /// and the final position-stage solver run.
     fn calibrate(&self, est: &Log, effects: &[&str], parent: Option<&Fit>) -> Result<Calibrated, String> {
         let data = self.est_data(est)?;
         let Prepared {
@@ -396,6 +398,34 @@ impl VacuumFamily {
                 let mut m = parent_model(false)?;
                 m.backlash_pct = 10.0;
                 starts.push(m);
+            }
+            // Friction and clearance together: a friction fit without the clearance sharpens
+            // Dahl's presliding distance to its bound to mimic the clearance's dead band, and
+            // from there (a nearly discontinuous friction, a rough cost) the solver stops
+            // within a few steps; start the pair also from the friction's starting shape.
+            let (cf, bl) = (VacuumEffect::CoulombFriction.name(), VacuumEffect::Backlash.name());
+            if effects.contains(&cf) && effects.contains(&bl) {
+                let mut m = parent_model(false)?;
+                let shape = prepared.with_effect(cf)?;
+                m.dahl_x_pct = shape.dahl_x_pct;
+                starts.push(m);
+                // The parent's one effect took the whole dead band (friction 2·Fc/slope wide in
+                // position, the clearance its own width): also start from the band split half
+                // and half, at the map's slope mid-band.
+                let x_mid = data.x.iter().sum::<f64>() / data.x.len().max(1) as f64;
+                let parent_only = parent_model(true)?;
+                let slope = VacuumStaticModel::<f64>::new(&parent_only.to_params())
+                    .map(|s| s.pressure_per_position_kpa_per_pct(x_mid))
+                    .unwrap_or(0.0);
+                let band_pct = 2.0 * parent_only.fc_kpa / slope + parent_only.backlash_pct;
+                if slope > 0.0 && band_pct.is_finite() && band_pct > 0.0 {
+                    let (b_lo, b_hi) = bounds("backlash_pct");
+                    let (f_lo, f_hi) = bounds("fc_kPa");
+                    let mut split = m;
+                    split.backlash_pct = (0.5 * band_pct).clamp(b_lo, b_hi);
+                    split.fc_kpa = (0.25 * band_pct * slope).clamp(f_lo, f_hi);
+                    starts.push(split);
+                }
             }
         }
         let parent_cost = parent.map_or(f64::INFINITY, |f| f.est_cost);
