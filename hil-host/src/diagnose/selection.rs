@@ -382,6 +382,28 @@ pub(super) fn diagnose_fits(
             break;
         }
     }
+    // A cause added early whose effect the final model switched off (its parameters back at
+    // neutral within their 95 % intervals, the later causes describing what it took at first:
+    // a clearance taken for friction's dead band, then friction and the pressure's direction
+    // added and the clearance fitted to 0) is not named; the model is the same without it.
+    if selected.len() > 1 {
+        let off: Vec<&'static str> = selected
+            .iter()
+            .copied()
+            .filter(|c| family.is_off(c, &current))
+            .collect();
+        if !off.is_empty() && off.len() < selected.len() {
+            for c in &off {
+                evidence.push(format!(
+                    "`{c}` is not named: it was added in round {} but the final model fitted it back to its neutral value (the causes added after it describe what it took at first)",
+                    1 + selected.iter().position(|s| s == c).unwrap_or(0)
+                ));
+            }
+            selected.retain(|s| !off.contains(s));
+            current.effect = Fit::label(&selected);
+            current.effects = selected.iter().map(|s| s.to_string()).collect();
+        }
+    }
     let mut rounds = rounds.into_iter();
     let candidates = rounds.next().map(|r| r.candidates).unwrap_or_default();
     let rounds: Vec<Round> = rounds.collect();
@@ -398,6 +420,18 @@ pub(super) fn diagnose_fits(
         (&mut index, &mut total),
         &mut evidence,
     );
+
+    // A single cause next to outside physics: kept only if it still gains with the probe's
+    // physics fitted on the baseline too.
+    if let ([cause], Some(found)) = (selected.as_slice(), probes_found.first()) {
+        if let Some(sentence) =
+            probes::cause_not_needed(rules, cause, found, &baseline, fit_probe, (&mut index, &mut total))
+        {
+            evidence.push(sentence);
+            selected.clear();
+            current = baseline.clone();
+        }
+    }
 
     // The fits are done: what remains reads the validation log only.
     release_estimation();
@@ -446,7 +480,7 @@ pub(super) fn diagnose_fits(
     let explained = ratio <= rules.explained_ratio && material.is_empty() && probes_found.is_empty();
     let mut where_ = Vec::new();
     if !explained {
-        where_ = probes_found.iter().map(|(_, sentence)| sentence.clone()).collect();
+        where_ = probes_found.iter().map(|f| f.sentence.clone()).collect();
         where_.extend(locate(&rest, &e_ext, floor.rmse, dt_res));
         if where_.is_empty() {
             where_.push(format!(
@@ -475,7 +509,7 @@ pub(super) fn diagnose_fits(
             } else {
                 format!(
                     "; a probe finds {}",
-                    probes_found.iter().map(|(what, _)| *what).collect::<Vec<_>>().join(", ")
+                    probes_found.iter().map(|f| f.probe.what).collect::<Vec<_>>().join(", ")
                 )
             },
             if causes.is_empty() {

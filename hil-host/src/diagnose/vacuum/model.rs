@@ -58,6 +58,9 @@ pub struct VacuumModel {
     /// Dahl presliding distance Fc/σ.
     pub dahl_x_pct: f64,
     pub backlash_pct: f64,
+    /// A transport delay of the duty command, s: physics outside the catalogue, fitted only by
+    /// the `duty-delay` probe (0 in every catalogue model).
+    pub duty_delay_s: f64,
     pub u_ref_v: f64,
     pub p_amb_ref_kpa: f64,
     pub effects: VacuumEffects,
@@ -149,6 +152,7 @@ impl VacuumModel {
             fc_kpa: 0.0,
             dahl_x_pct: 0.3,
             backlash_pct: 0.0,
+            duty_delay_s: 0.0,
             u_ref_v: 12.0,
             p_amb_ref_kpa: 100.0,
             effects: VacuumEffects::NONE,
@@ -226,11 +230,28 @@ impl VacuumModel {
             io.u_batt[k]
         };
         VacuumInputs {
-            duty_pct: io.duty[k],
+            duty_pct: self.duty_at(io, k),
             u_batt_v,
             p_amb_kpa: io.p_amb[k],
             p_tank_kpa: io.p_tank[k],
         }
+    }
+
+    /// The duty the valve acts on at sample `k`: the logged one, or with a duty delay the one
+    /// `duty_delay_s` earlier, linear between samples (the first sample before the log).
+    fn duty_at(&self, io: &Inputs, k: usize) -> f64 {
+        if self.duty_delay_s <= 0.0 {
+            return io.duty[k];
+        }
+        let back = self.duty_delay_s / io.dt_s;
+        let t = k as f64 - back;
+        if t <= 0.0 {
+            return io.duty[0];
+        }
+        let i = t.floor() as usize;
+        let w = t - i as f64;
+        let next = io.duty[(i + 1).min(k)];
+        io.duty[i] + w * (next - io.duty[i])
     }
 
     /// The parameters a fit of this model's shapes and `effects` adjusts.
@@ -282,6 +303,7 @@ impl VacuumModel {
             "fc_kPa" => &mut self.fc_kpa,
             "dahl_x_pct" => &mut self.dahl_x_pct,
             "backlash_pct" => &mut self.backlash_pct,
+            "duty_delay_s" => &mut self.duty_delay_s,
             // Names come from `parameter_names`: an unknown one is no field.
             _ => return None,
         })
@@ -388,6 +410,9 @@ pub(super) fn effect_names(effect: &str) -> Result<Vec<&'static str>, String> {
         .collect())
 }
 
+/// The longest duty delay the `duty-delay` probe fits, s.
+pub(super) const DUTY_DELAY_MAX_S: f64 = 0.5;
+
 /// Bounds of each parameter: physical signs and generous ranges around the paper's actuators.
 pub(super) fn bounds(name: &str) -> (f64, f64) {
     match name {
@@ -410,6 +435,7 @@ pub(super) fn bounds(name: &str) -> (f64, f64) {
         "fc_kPa" => (0.0, 30.0),
         "dahl_x_pct" => (0.01, 10.0),
         "backlash_pct" => (0.0, 40.0),
+        "duty_delay_s" => (0.0, DUTY_DELAY_MAX_S),
         _ => (f64::NEG_INFINITY, f64::INFINITY),
     }
 }

@@ -81,7 +81,7 @@ fn parameters_round_trip_to_the_generators_plant() {
     let (d, u, pa, pt) = inputs(n);
     let io = Inputs {
         duty: &d,
-        u_batt: &u,
+        u_batt: u.clone(),
         p_amb: pa.clone(),
         p_tank: pt.clone(),
         dt_s: 0.01,
@@ -140,7 +140,7 @@ fn coarse_rod_step_stays_far_below_sensor_noise() {
     let (d, u, pa, pt) = inputs(n);
     let io = Inputs {
         duty: &d,
-        u_batt: &u,
+        u_batt: u.clone(),
         p_amb: pa.clone(),
         p_tank: pt.clone(),
         dt_s: 0.01,
@@ -320,10 +320,13 @@ fn supply_voltage_shows_in_the_residual_grouped_by_voltage() {
         "{:?}",
         d.evidence
     );
+    // The extended model's residual no longer depends on the voltage: the test passes and
+    // each group's mean is under a quarter of the position sensor's noise (0.2 %), where the
+    // baseline's were 2-18 %.
     let volts = val.col("u_batt_V").unwrap();
     let after = group_check("supply voltage", &d.extended.residual(), volts);
     assert!(
-        after.z < by_voltage.z / 4.0,
+        after.pass && after.groups.iter().all(|g| g.mean.abs() < 0.05),
         "extended {after:?} vs baseline {by_voltage:?}"
     );
 }
@@ -339,8 +342,8 @@ fn moving_average_keeps_levels_and_cuts_noise() {
 /// A friction fit of a unit with friction and clearance sharpens Dahl's presliding distance to
 /// its bound to mimic the clearance; the pair then stopped within a few solver steps at 1.5x
 /// the friction fit's validation error and the clearance was never named (seed 1000: 82 % of
-/// the error left at 10x the noise floor). From the friction's own shape and from the dead
-/// band split between the two it reaches the unit.
+/// the error left at 10x the noise floor). After a coarse global stage over the distance and
+/// the dead band's share between the two it reaches the unit.
 #[test]
 fn friction_and_clearance_together_are_fitted_from_the_friction_fit() {
     let (case, est, val) = case_logs("coulomb-friction+backlash", 1000);
@@ -354,4 +357,108 @@ fn friction_and_clearance_together_are_fitted_from_the_friction_fit() {
         assert!(rel.abs() < 0.05, "{name} {} against {}", got(name), truth(&case, name));
     }
     assert!(pair.rmse < 0.25 * parent.rmse, "{} against {}", pair.rmse, parent.rmse);
+}
+
+#[test]
+fn the_running_median_keeps_steps_and_plateaus_and_drops_noise() {
+    let dt = 0.01;
+    // A 12.8 V plateau with alternating 20 mV noise, a sag to 11.0 V for 0.3 s, and back.
+    let truth: Vec<f64> = (0..200)
+        .map(|k| if (80..110).contains(&k) { 11.0 } else { 12.8 })
+        .collect();
+    let logged: Vec<f64> = truth
+        .iter()
+        .enumerate()
+        .map(|(k, u)| u + if k % 3 == 0 { 0.02 } else { 0.0 })
+        .collect();
+    let m = moving_median(&logged, U_BATT_MEDIAN_S, dt);
+    let half = (0.5 * U_BATT_MEDIAN_S / dt).round() as usize;
+    for (k, (got, want)) in m.iter().zip(&truth).enumerate() {
+        // Within one noise step everywhere (a 9-sample mean would put 11.8 V at the sag's
+        // first sample), exact where the window lies on one plateau.
+        assert!((got - want).abs() <= 0.02 + 1e-12, "sample {k}: {got} against {want}");
+        let one_plateau = [80, 110].iter().all(|&edge| k + half < edge || k >= edge + half);
+        if one_plateau {
+            assert_eq!(got, want, "sample {k}");
+        }
+    }
+}
+
+/// The logged supply voltage's noise, replayed sample by sample, dithered the simulated duty;
+/// a rod with friction then crept where the unit's stood, the friction fit sharpened Dahl's
+/// presliding distance to its bound against the dither (seed 8919: 0.022 % for the unit's
+/// 0.234 %) and a clearance was named on top of it. With the voltage's running median the two
+/// effects are named, the unit's friction is found and nothing is left above the floor.
+#[test]
+fn supply_voltage_noise_does_not_dither_a_rod_with_friction() {
+    use crate::diagnose::{diagnose, Rules};
+    let (case, est, val) = case_logs("supply-voltage+coulomb-friction", 8919);
+    let d = diagnose(
+        &VacuumFamily::default(),
+        &est,
+        &val,
+        false,
+        &Rules::default(),
+        &mut |_| {},
+    )
+    .unwrap();
+    let mut causes = d.causes.clone();
+    causes.sort();
+    assert_eq!(causes, ["coulomb-friction", "supply-voltage"]);
+    assert_eq!(d.verdict, "explained", "{:?}", d.remainder.evidence);
+    let fc = d.extended.params.iter().find(|(n, _)| n == "fc_kPa").unwrap().1;
+    assert!((fc / truth(&case, "fc_kPa") - 1.0).abs() < 0.05, "fc {fc}");
+}
+
+/// Outside the catalogue: a transport delay of the duty. Friction takes part of its lag into a
+/// dead band and gained enough to be named (seed 111866: `coulomb-friction`, 80 ms delay); the
+/// duty-delay probe finds the delay, and with it fitted on the baseline too friction gains
+/// nothing, so no catalogue effect is named and the verdict says what is missing.
+#[test]
+fn a_duty_delay_is_found_by_its_probe_and_not_named_as_friction() {
+    use crate::diagnose::{diagnose, Rules};
+    let (case, est, val) = case_logs("duty-delay", 111_866);
+    let d = diagnose(
+        &VacuumFamily::default(),
+        &est,
+        &val,
+        false,
+        &Rules::default(),
+        &mut |_| {},
+    )
+    .unwrap();
+    assert!(d.causes.is_empty(), "{:?}", d.causes);
+    assert_eq!(d.verdict, "unexplained");
+    let said = d.remainder.evidence.join("\n");
+    let delay = truth(&case, "duty_delay_s");
+    let fitted: f64 = said
+        .split("duty_delay_s = ")
+        .nth(1)
+        .and_then(|t| t.split(')').next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("no fitted delay in: {said}"));
+    assert!((fitted / delay - 1.0).abs() < 0.1, "{fitted} s against {delay} s");
+    assert!(said.contains("transport delay of the duty"), "{said}");
+}
+
+/// A cause added first whose effect the final model fitted back to neutral is not named
+/// (seed 127704, pressure-direction + coulomb-friction: the clearance came first as friction's
+/// dead band, then friction and the pressure's direction, and the clearance ended at 0).
+#[test]
+fn a_cause_the_final_model_switched_off_is_not_named() {
+    use crate::diagnose::{diagnose, Rules};
+    let (_, est, val) = case_logs("pressure-direction+coulomb-friction", 127_704);
+    let d = diagnose(
+        &VacuumFamily::default(),
+        &est,
+        &val,
+        false,
+        &Rules::default(),
+        &mut |_| {},
+    )
+    .unwrap();
+    let mut causes = d.causes.clone();
+    causes.sort();
+    assert_eq!(causes, ["coulomb-friction", "pressure-direction"]);
+    assert_eq!(d.extended.effects.len(), 2);
 }
