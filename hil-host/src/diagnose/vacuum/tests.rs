@@ -205,6 +205,27 @@ fn case_logs(effect: &str, seed: u64) -> (crate::generate::Case, Log, Log) {
     (case, est, val)
 }
 
+/// The diagnosis of two logs with the default rules.
+fn diagnose_logs(est: &Log, val: &Log) -> crate::diagnose::Diagnosis {
+    use crate::diagnose::{diagnose, Rules};
+    diagnose(
+        &VacuumFamily::default(),
+        est,
+        val,
+        false,
+        &Rules::default(),
+        &mut |_| {},
+    )
+    .unwrap()
+}
+
+/// A generated case and its diagnosis.
+fn diagnosed(effect: &str, seed: u64) -> (crate::generate::Case, crate::diagnose::Diagnosis) {
+    let (case, est, val) = case_logs(effect, seed);
+    let d = diagnose_logs(&est, &val);
+    (case, d)
+}
+
 fn truth(case: &crate::generate::Case, name: &str) -> f64 {
     case.truth.iter().find(|(n, _)| n == name).map(|(_, v)| *v).unwrap()
 }
@@ -264,19 +285,10 @@ fn extended_fits_recover_the_hidden_magnitudes() {
 
 #[test]
 fn position_only_logs_are_diagnosed_too() {
-    use crate::diagnose::{diagnose, Rules};
     let (_, mut est, mut val) = case_logs("coulomb-friction", 77_001);
     est.columns.remove("p_act_kPa");
     val.columns.remove("p_act_kPa");
-    let d = diagnose(
-        &VacuumFamily::default(),
-        &est,
-        &val,
-        false,
-        &Rules::default(),
-        &mut |_| {},
-    )
-    .unwrap();
+    let d = diagnose_logs(&est, &val);
     assert_eq!(d.cause, "coulomb-friction");
     assert!(d.gain_pct > 50.0, "{}", d.gain_pct);
 }
@@ -286,18 +298,9 @@ fn position_only_logs_are_diagnosed_too() {
 /// is a regressor; the extended model's residual no longer depends on the voltage.
 #[test]
 fn supply_voltage_shows_in_the_residual_grouped_by_voltage() {
-    use crate::diagnose::{diagnose, Rules};
     use crate::residuals::group_check;
     let (_, est, val) = case_logs("supply-voltage", 2024);
-    let d = diagnose(
-        &VacuumFamily::default(),
-        &est,
-        &val,
-        false,
-        &Rules::default(),
-        &mut |_| {},
-    )
-    .unwrap();
+    let d = diagnose_logs(&est, &val);
     assert_eq!(d.cause, "supply-voltage");
     let names: Vec<&str> = d.cross.iter().map(|c| c.name.as_str()).collect();
     for input in [
@@ -391,17 +394,7 @@ fn the_running_median_keeps_steps_and_plateaus_and_drops_noise() {
 /// effects are named, the unit's friction is found and nothing is left above the floor.
 #[test]
 fn supply_voltage_noise_does_not_dither_a_rod_with_friction() {
-    use crate::diagnose::{diagnose, Rules};
-    let (case, est, val) = case_logs("supply-voltage+coulomb-friction", 8919);
-    let d = diagnose(
-        &VacuumFamily::default(),
-        &est,
-        &val,
-        false,
-        &Rules::default(),
-        &mut |_| {},
-    )
-    .unwrap();
+    let (case, d) = diagnosed("supply-voltage+coulomb-friction", 8919);
     let mut causes = d.causes.clone();
     causes.sort();
     assert_eq!(causes, ["coulomb-friction", "supply-voltage"]);
@@ -416,17 +409,7 @@ fn supply_voltage_noise_does_not_dither_a_rod_with_friction() {
 /// nothing, so no catalogue effect is named and the verdict says what is missing.
 #[test]
 fn a_duty_delay_is_found_by_its_probe_and_not_named_as_friction() {
-    use crate::diagnose::{diagnose, Rules};
-    let (case, est, val) = case_logs("duty-delay", 111_866);
-    let d = diagnose(
-        &VacuumFamily::default(),
-        &est,
-        &val,
-        false,
-        &Rules::default(),
-        &mut |_| {},
-    )
-    .unwrap();
+    let (case, d) = diagnosed("duty-delay", 111_866);
     assert!(d.causes.is_empty(), "{:?}", d.causes);
     assert_eq!(d.verdict, "unexplained");
     let said = d.remainder.evidence.join("\n");
@@ -446,17 +429,7 @@ fn a_duty_delay_is_found_by_its_probe_and_not_named_as_friction() {
 /// dead band, then friction and the pressure's direction, and the clearance ended at 0).
 #[test]
 fn a_cause_the_final_model_switched_off_is_not_named() {
-    use crate::diagnose::{diagnose, Rules};
-    let (_, est, val) = case_logs("pressure-direction+coulomb-friction", 127_704);
-    let d = diagnose(
-        &VacuumFamily::default(),
-        &est,
-        &val,
-        false,
-        &Rules::default(),
-        &mut |_| {},
-    )
-    .unwrap();
+    let (_, d) = diagnosed("pressure-direction+coulomb-friction", 127_704);
     let mut causes = d.causes.clone();
     causes.sort();
     assert_eq!(causes, ["coulomb-friction", "pressure-direction"]);
