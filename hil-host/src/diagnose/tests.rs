@@ -56,14 +56,19 @@ impl Family for Quadratic {
     }
 }
 
-#[test]
-fn progress_reports_every_fit_and_each_solver_iteration() {
-    let log = crate::log::parse_log(
+/// A log of two rows: the written-out families here ignore it (they make their own data).
+fn two_row_log() -> Log {
+    crate::log::parse_log(
         "p.csv",
         "# plant: positioner\nt_s,force_N,pos_m\n0,0,0\n0.001,1,0\n",
         None,
     )
-    .unwrap();
+    .unwrap()
+}
+
+#[test]
+fn progress_reports_every_fit_and_each_solver_iteration() {
+    let log = two_row_log();
     let mut seen: Vec<(String, usize, usize, usize, f64)> = Vec::new();
     let d = diagnose(&Quadratic, &log, &log, false, &Rules::default(), &mut |p: &Progress| {
         seen.push((p.fit.to_string(), p.index, p.total, p.iteration, p.elapsed_s))
@@ -177,12 +182,7 @@ impl Family for Masked {
 /// (`decoy`, a fifth of the everywhere signal), nothing was named.
 #[test]
 fn a_masked_pair_is_found_when_its_second_effect_gains_least_alone() {
-    let log = crate::log::parse_log(
-        "p.csv",
-        "# plant: positioner\nt_s,force_N,pos_m\n0,0,0\n0.001,1,0\n",
-        None,
-    )
-    .unwrap();
+    let log = two_row_log();
     let d = diagnose(&Masked, &log, &log, false, &Rules::default(), &mut |_| {}).unwrap();
     let by = |e: &str| d.candidates.iter().find(|c| c.fit.effect == e).unwrap();
     // The premise: no single effect is eligible, `near` gains most, `masked` alone loses.
