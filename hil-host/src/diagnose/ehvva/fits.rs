@@ -1,0 +1,189 @@
+//! The calibration problem of eqs. (16)-(20) and its restarts: the knobs fitted on the lift
+//! simulation error of a set of events, restarted where the trust region collapsed in a curved
+//! valley or where τp ended in the pilot-lag valley; and the edge delays that place td's start.
+
+use model_core::ehvva::EhvvaParams;
+
+use super::{apply_knobs, reference_values, simulate_all_on, Events, Knob, BASELINE_KNOBS};
+use crate::lsq::{solve, LsqOptions, LsqResult, StopReason};
+
+/// Fits `knobs` (starting at `x0`) on the lift simulation error of `set` by the trust-region
+/// solver: the calibration problem of eqs. (16)-(20), shared by `diagnose` and `identify`.
+pub fn calibrate(
+    base: &EhvvaParams,
+    knobs: &[Knob],
+    x0: &[f64],
+    set: &Events,
+    opts: &LsqOptions,
+) -> Result<LsqResult, String> {
+    calibrate_with(base, knobs, x0, set, opts, &|_| Ok(()))
+}
+
+/// [`calibrate`], restarted from its end when it stopped on a collapsed step or trust region,
+/// again while a restart lowers the cost by more than 0.1 %: in the unit fits' curved
+/// valleys (spring rate against preload, orifice areas against each other) the trust region
+/// shrinks on the way and a fresh one from the same point goes on. At most three runs.
+pub(super) fn calibrate_restarted(
+    base: &EhvvaParams,
+    knobs: &[Knob],
+    x0: &[f64],
+    set: &Events,
+    opts: &LsqOptions,
+) -> Result<LsqResult, String> {
+    let mut r = calibrate(base, knobs, x0, set, opts)?;
+    for _ in 0..2 {
+        if !matches!(r.stop, StopReason::StepConverged | StopReason::RegionCollapsed) {
+            break;
+        }
+        let again = calibrate(base, knobs, &r.x, set, opts)?;
+        let went_on = again.cost < 0.999 * r.cost;
+        if again.cost < r.cost {
+            r = LsqResult {
+                iterations: r.iterations + again.iterations,
+                evaluations: r.evaluations + again.evaluations,
+                initial_cost: r.initial_cost,
+                ..again
+            };
+        }
+        if !went_on {
+            break;
+        }
+    }
+    Ok(r)
+}
+
+/// The pilot lag's knob (τp at 6.5 MPa, 22 °C, [`BASELINE_KNOBS`]).
+pub(super) const TAU_P: &str = BASELINE_KNOBS[2].name;
+
+/// A fit whose τp ended further than this factor from the paper's value gets the τp profile
+/// start ([`with_tau_profile_start`]). Units differ from the paper's τp by tens of percent
+/// (the paper's own Table 2 spread, a generator's ±15 %); an end beyond 1.5x is more often the
+/// valley below than the unit.
+const TAU_P_PROFILE_RATIO: f64 = 1.5;
+
+/// `r`, or a better end from a second start: τp held at the paper's value while every other
+/// knob is fitted from `r`'s end, then everything released from there.
+///
+/// τp and td both set when the lift leaves its seat, and the cost has long valleys along
+/// their trade in which the solver stops far from the optimum: a baseline that absorbed a
+/// delay effect into τp (seed 88109's direction-delay unit: τp 0.41 ms, the unit's 0.098) hands
+/// its extensions a start on the wrong side, and the direction-delay fit stopped at 130x the
+/// optimum's cost (τp 0.23), which it reached from a start with τp at 0.08-0.10 but not at
+/// 0.11. With τp held, the rest settles without the trade (cost 0.13 at the paper's 0.105) and
+/// the released fit reaches the optimum. Done only where `r`'s τp ended far from the paper's,
+/// so a unit near the paper's pays nothing.
+pub(super) fn with_tau_profile_start(
+    knobs: &[Knob],
+    r: LsqResult,
+    set: &Events,
+    opts: &LsqOptions,
+) -> Result<LsqResult, String> {
+    let Some(i) = knobs.iter().position(|k| k.name == TAU_P) else {
+        return Ok(r);
+    };
+    let tau_ref = reference_values().2;
+    let ratio = r.x[i] / tau_ref;
+    if (1.0 / TAU_P_PROFILE_RATIO..=TAU_P_PROFILE_RATIO).contains(&ratio) {
+        return Ok(r);
+    }
+    let mut held_base = EhvvaParams::baseline();
+    (knobs[i].apply)(&mut held_base, tau_ref);
+    let others: Vec<Knob> = knobs
+        .iter()
+        .enumerate()
+        .filter(|(j, _)| *j != i)
+        .map(|(_, k)| *k)
+        .collect();
+    let x0: Vec<f64> =
+        r.x.iter()
+            .enumerate()
+            .filter(|(j, _)| *j != i)
+            .map(|(_, v)| *v)
+            .collect();
+    let held = calibrate_restarted(&held_base, &others, &x0, set, opts)?;
+    let mut x = held.x.clone();
+    x.insert(i, tau_ref);
+    let released = calibrate_restarted(&EhvvaParams::baseline(), knobs, &x, set, opts)?;
+    Ok(if released.cost < r.cost {
+        LsqResult {
+            iterations: r.iterations + held.iterations + released.iterations,
+            evaluations: r.evaluations + held.evaluations + released.evaluations,
+            initial_cost: r.initial_cost,
+            ..released
+        }
+    } else {
+        r
+    })
+}
+
+/// As [`calibrate`], with `derive` completing the parameters from the knobs before each
+/// simulation (`identify` sets td from the lift onset there).
+pub fn calibrate_with(
+    base: &EhvvaParams,
+    knobs: &[Knob],
+    x0: &[f64],
+    set: &Events,
+    opts: &LsqOptions,
+    derive: &(dyn Fn(&mut EhvvaParams) -> Result<(), String> + Sync),
+) -> Result<LsqResult, String> {
+    let measured = set.measured();
+    let lo: Vec<f64> = knobs.iter().map(|k| k.lo).collect();
+    let hi: Vec<f64> = knobs.iter().map(|k| k.hi).collect();
+    // The threads go to the events of each simulation, not to the Jacobian's columns: the
+    // solver's serial evaluations (start, trial steps) run on all of them too, and 4-5
+    // columns on 2 threads leave one idle every other round.
+    let residual = |x: &[f64], out: &mut [f64]| -> Result<(), String> {
+        let mut p = apply_knobs(base, knobs, x);
+        derive(&mut p)?;
+        simulate_all_on(&p, set, out, opts.threads)?;
+        for (o, y) in out.iter_mut().zip(&measured) {
+            *o -= y;
+        }
+        Ok(())
+    };
+    let serial = LsqOptions {
+        threads: 1,
+        ..opts.clone()
+    };
+    solve(residual, x0, &lo, &hi, set.samples, &serial).map_err(|e| format!("{}: {e}", set.file))
+}
+
+/// Times at which the lift crosses 1 % of the stroke after the rising edge and 99 % after the
+/// falling edge (first crossing, linearly interpolated), in ms from the respective edge. The
+/// lift is first smoothed by a centred moving average over ±0.25 ms: the first passage of a
+/// noisy signal through a level comes early where the lift leaves its stop slowly, and
+/// measured and simulated lifts are treated alike.
+pub fn edge_delays_ms(
+    lift: &[f64],
+    on_index: usize,
+    off_index: Option<usize>,
+    stroke_mm: f64,
+    dt_ms: f64,
+) -> (Option<f64>, Option<f64>) {
+    let half = ((0.25 / dt_ms).round() as usize).max(1);
+    let n = lift.len();
+    let mut prefix = vec![0.0; n + 1];
+    for (k, v) in lift.iter().enumerate() {
+        prefix[k + 1] = prefix[k] + v;
+    }
+    let lift: Vec<f64> = (0..n)
+        .map(|k| {
+            let (a, b) = (k.saturating_sub(half), (k + half + 1).min(n));
+            (prefix[b] - prefix[a]) / (b - a) as f64
+        })
+        .collect();
+    let cross = |from: usize, level: f64, rising: bool| -> Option<f64> {
+        (from.max(1)..lift.len()).find_map(|k| {
+            let (a, b) = (lift[k - 1], lift[k]);
+            let hit = if rising {
+                a < level && b >= level
+            } else {
+                a >= level && b < level
+            };
+            hit.then(|| (k - 1) as f64 + (level - a) / (b - a))
+        })
+    };
+    let open = cross(on_index, 0.01 * stroke_mm, true).map(|k| (k - on_index as f64) * dt_ms);
+    let close = off_index.and_then(|off| cross(off, 0.99 * stroke_mm, false).map(|k| (k - off as f64) * dt_ms));
+    (open, close)
+}
