@@ -12,7 +12,7 @@ use crate::ehvva::{EhvvaInputs, EhvvaLpv, EhvvaParams, EhvvaPlant, EhvvaReduced}
 use crate::evvt::{EvvtParams, EvvtPlant};
 use crate::positioner::{Positioner, PositionerParams};
 use crate::real::Real;
-use crate::vacuum::{VacuumInputs, VacuumParams, VacuumValveActuator};
+use crate::vacuum::{VacuumInputs, VacuumOutputs, VacuumParams, VacuumValveActuator};
 
 /// EHVVA steps (10 µs, pilot on) before the counted ones: 4 ms, mid-opening.
 pub const EHVVA_WARMUP_STEPS: u32 = 400;
@@ -164,9 +164,11 @@ impl<R: Real> PlantBench<R> {
             .step(self.evvt_cmd_rpm, engine_rpm, self.evvt_u_batt_v, self.evvt_dt_s)
     }
 
-    /// One 1 ms step of the HPT vacuum valve and actuator; the position in %.
-    pub fn step_vacuum(&mut self) -> R {
-        self.vacuum.step(&self.vacuum_in, self.vacuum_dt_s).x_pct
+    /// One 1 ms step of the HPT vacuum valve and actuator; all its outputs (a bench that kept
+    /// only the position let the compiler drop part of the flow to the tank, which the step
+    /// computes for the tank model only).
+    pub fn step_vacuum(&mut self) -> VacuumOutputs<R> {
+        self.vacuum.step(&self.vacuum_in, self.vacuum_dt_s)
     }
 
     /// EHVVA lift, velocity, Pmo, Ph, Pl; EVVT phase and phase rate; vacuum actuator

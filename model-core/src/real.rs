@@ -143,7 +143,7 @@ pub trait Real:
     fn ln(self) -> Self;
     /// Tangent of an angle in radians for |θ| <= 1.5 (callers keep it there: beyond, the
     /// result is finite but not promised to be accurate). By default the odd series at θ/4 and
-    /// two double-angle steps in `Self`; Q16.16 computes the same in Q2.30 integers.
+    /// two double-angle steps in `Self`; Q16.16 interpolates a table of cubic segments.
     fn tan(self) -> Self {
         tan_series(self)
     }

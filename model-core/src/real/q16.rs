@@ -207,7 +207,12 @@ impl Real for Q16 {
             };
         }
         let p = 31 - ud.leading_zeros();
-        let m = (((1u64 << (30 + p)) + u64::from(ud / 2)) / u64::from(ud)) as i32;
+        // The dividend's high word, 2^(p-2), is below ud >= 2^p: the quotient fits 32 bits and
+        // the two-digit long division applies, where the 64-bit division routine takes about
+        // 270 instructions (a divisor made at run time: a rate's first step). A constant
+        // divisor made this way is no longer folded by the compiler: the hot paths keep
+        // theirs in the state, made once.
+        let m = div_48_by_32((1u64 << (30 + p)) + u64::from(ud / 2), ud) as i32;
         Q16Divisor {
             m: if d.0 < 0 { -m } else { m },
             shift: 14 + p,
@@ -328,8 +333,12 @@ fn shift_round(y: i64, shift: i32) -> i32 {
     v.min(i64::from(i32::MAX)) as i32
 }
 
-/// sqrt of a raw Q16.16: normalised to a 32-bit radicand with an even shift, then the
-/// bit-by-bit integer square root (16 result bits, relative error < 2^-15).
+/// sqrt of a raw Q16.16: normalised to a 32-bit radicand `n` in [2^30, 2^32) with an even
+/// shift, its integer root (in [2^15, 2^16]) by two Newton steps on the hardware's 32-bit
+/// division from the best straight line through sqrt on that range (relative error < 3.1 %,
+/// then < 5e-4, < 1.2e-7), corrected to the exact floor and rounded once: below 1.0 the
+/// correctly rounded root, above it 16 result bits (relative error < 2^-16). The bit-by-bit
+/// root it replaces took 16 rounds of about 7 instructions.
 fn q16_sqrt(x: i32) -> i32 {
     if x <= 0 {
         return 0;
@@ -338,23 +347,24 @@ fn q16_sqrt(x: i32) -> i32 {
     let lz = x.leading_zeros() as i32; // >= 1
     let s = lz & !1;
     let n = (x as u32) << s;
-    let mut rem = n;
-    let mut root: u32 = 0;
-    let mut bit: u32 = 1 << 30;
-    while bit != 0 {
-        if rem >= root + bit {
-            rem -= root + bit;
-            root = (root >> 1) + bit;
-        } else {
-            root >>= 1;
-        }
-        bit >>= 2;
+    // 2^15 (0.686 + 0.34375 n/2^30): within 3.1 % of sqrt(n) on the range.
+    let mut r = 22_479 + (((n >> 15) * 11) >> 5);
+    // r > 2^14 and n < 2^32 keep n / r < 2^18 and the sum within 32 bits. Integer Newton
+    // steps end at or above floor(sqrt(n)) whatever the start.
+    r = (r + n / r) >> 1;
+    r = (r + n / r) >> 1;
+    // At most one above the floor here (2^16 · 1.2e-7 < 1); r·r fits 32 bits below 2^16.
+    while r >= 1 << 16 || r * r > n {
+        r -= 1;
     }
-    // Round: the next bit of the root is 1 when rem > root.
-    if rem > root {
-        root += 1;
+    let shift = (16 - s) / 2;
+    // Round to nearest once: below 1.0 (a right shift) the floor root shifted with rounding
+    // is the rounded result; above, the root itself is rounded (its next bit is 1 when
+    // n - r² > r) and scaled up exactly.
+    if shift >= 0 && n - r * r > r {
+        r += 1;
     }
-    shift_round(i64::from(root), (16 - s) / 2)
+    shift_round(i64::from(r), shift)
 }
 
 /// exp of a raw Q16.16: `2^k · e^r`, `|r| <= ln2/2` in Q2.30, Taylor polynomial to r^7
@@ -510,37 +520,78 @@ fn q16_atan(x: i32) -> i32 {
     }
 }
 
-/// tan of a raw Q16.16 for |x| <= 1.5 rad (larger |x| is taken as 1.5 rad): [`tan_series`]'s
-/// steps in Q2.30 (products of a few instructions, without Q16.16's saturation checks, and 14
-/// more bits), the odd function on |x|. z = |x|/4 <= 0.375, t = tan z <= 0.394 by the series to
-/// z¹⁵, then tan 4z = 4t(1 − t²)/(1 − 6t² + t⁴), whose denominator is cos 4z / cos⁴ z, at
-/// least 0.09 here, in one 48-by-32-bit division rounded to nearest (error well under the
-/// result's LSB; the series in Q16.16 had up to 8.2e-4 relative, see vacuum.rs's
-/// `series_helpers_match_libm`).
+/// The step of Q16.16's tangent table, 2^-7 rad: a segment's index is the angle's raw bits
+/// shifted right by 9.
+const TAN_STEP_RAD: f64 = 1.0 / 128.0;
+/// Segments of the table: [0, 1.5] rad (the range the arctan spring uses, [`q16_tan`]).
+const TAN_SEGMENTS: usize = 192;
+/// Fraction bits of the table's coefficients: Q5.26 holds tan(1.5) = 14.1 with room.
+const TAN_COEFF_FRAC: i32 = 26;
+
+/// sin x and cos x for |x| <= 1.6 by their Taylor series to the 40th power (the last term
+/// below 1e-40): the table's values, in f64 at compile time.
+const fn sin_cos_series(x: f64) -> (f64, f64) {
+    let (mut sin, mut cos) = (0.0, 0.0);
+    let (mut term_sin, mut term_cos) = (x, 1.0);
+    let mut k = 0;
+    while k < 20 {
+        sin += term_sin;
+        cos += term_cos;
+        let n = 2.0 * k as f64;
+        term_sin *= -x * x / ((n + 2.0) * (n + 3.0));
+        term_cos *= -x * x / ((n + 1.0) * (n + 2.0));
+        k += 1;
+    }
+    (sin, cos)
+}
+
+/// `v` in Q5.26, rounded to nearest (const: `f64::round` is not).
+const fn q5_26(v: f64) -> i32 {
+    let s = v * (1u32 << TAN_COEFF_FRAC) as f64;
+    (if s >= 0.0 { s + 0.5 } else { s - 0.5 }) as i32
+}
+
+/// Per segment the cubic Hermite interpolant of tan through both ends with their slopes
+/// 1 + tan², as coefficients of u in [0, 1] (c0 + u(c1 + u(c2 + u c3))), Q5.26.
+const TAN_TABLE: [[i32; 4]; TAN_SEGMENTS] = {
+    let mut table = [[0; 4]; TAN_SEGMENTS];
+    let h = TAN_STEP_RAD;
+    let mut i = 0;
+    while i < TAN_SEGMENTS {
+        let (s0, c0) = sin_cos_series(i as f64 * h);
+        let (s1, c1) = sin_cos_series((i + 1) as f64 * h);
+        let (t0, t1) = (s0 / c0, s1 / c1);
+        let (d0, d1) = (h * (1.0 + t0 * t0), h * (1.0 + t1 * t1));
+        table[i] = [
+            q5_26(t0),
+            q5_26(d0),
+            q5_26(3.0 * (t1 - t0) - 2.0 * d0 - d1),
+            q5_26(2.0 * (t0 - t1) + d0 + d1),
+        ];
+        i += 1;
+    }
+    table
+};
+
+/// tan of a raw Q16.16 angle, |x| limited to 1.5 rad (tan 14.1; the vacuum actuator's
+/// arctan spring keeps its angle there): a cubic Hermite table of 192 segments of 2^-7 rad
+/// (3 KiB of constants computed at compile time), three products a call. Error relative to
+/// max(1, |tan|) below 8.1e-6: the interpolant's, largest at 1.5 rad where tan's fourth
+/// derivative is, and the rounding. The series with two double-angle steps and a long
+/// division it replaces took about 150 instructions on the Cortex-M4, and a vacuum rod
+/// step takes one a sub-step.
 fn q16_tan(x: i32) -> i32 {
     const LIM: u32 = 98_304; // 1.5 · 2^16
     let a = x.unsigned_abs().min(LIM);
-    // z = a/4 in Q2.30: a · 2^14 / 4.
-    let z = (a << 12) as i32;
-    let z2 = mul30(z, z);
-    // The series' coefficients in Q2.30, from z¹⁴'s to 1 (the exact fractions, rounded), in
-    // Horner's scheme written out (as a loop it is not unrolled in the size-optimised
-    // firmware: ~5 instructions an iteration).
-    let mut s = 1_563_190;
-    s = 3_857_018 + mul30(z2, s);
-    s = 9_516_827 + mul30(z2, s);
-    s = 23_482_185 + mul30(z2, s);
-    s = 57_947_971 + mul30(z2, s);
-    s = 143_165_577 + mul30(z2, s);
-    s = 357_913_941 + mul30(z2, s);
-    s = 1_073_741_824 + mul30(z2, s);
-    let t = mul30(z, s);
-    let t2 = mul30(t, t);
-    // num <= 1.33 and den in [0.09, 1], both Q2.30.
-    let num = mul30(t, (1 << 30) - t2) << 2;
-    let den = (1 << 30) - 6 * t2 + mul30(t2, t2);
-    // num / den in Q16.16: (num · 2^16 + den/2) / den, num · 2^16 < 2^47.
-    let q = div_48_by_32((u64::from(num as u32) << 16) + u64::from(den as u32 / 2), den as u32) as i32;
+    // Segment index and the position in it, u in Q2.30 (a = LIM is the last segment's end).
+    let i = ((a >> 9) as usize).min(TAN_SEGMENTS - 1);
+    let u = ((a - ((i as u32) << 9)) << 21) as i32;
+    let c = TAN_TABLE[i];
+    let mut p = c[2] + mul30(u, c[3]);
+    p = c[1] + mul30(u, p);
+    p = c[0] + mul30(u, p);
+    // Q5.26 to Q16.16, rounded.
+    let q = (p + (1 << 9)) >> 10;
     if x < 0 {
         -q
     } else {

@@ -325,3 +325,65 @@ fn q16_sin_within_one_and_a_half_lsb_over_the_range() {
         k += 4099;
     }
 }
+
+/// Q16.16's square root is rounded to nearest below 1.0 (the root of the raw value's 2^16
+/// multiple) and within half a unit of its 16th significant bit above (the root of a 32-bit
+/// radicand): over every 4 099th positive raw value, around each power of two and at the ends
+/// of the range, against the exact integer root.
+#[test]
+fn q16_sqrt_is_the_rounded_root() {
+    let isqrt = |n: u64| -> u64 {
+        let mut r = libm::sqrt(n as f64) as u64;
+        while r * r > n {
+            r -= 1;
+        }
+        while (r + 1) * (r + 1) <= n {
+            r += 1;
+        }
+        r
+    };
+    extern crate std;
+    let mut xs: std::vec::Vec<i32> = (1..=i32::MAX).step_by(4_099).collect();
+    for k in 0..31 {
+        for d in [-1i64, 0, 1] {
+            let v = (1i64 << k) + d;
+            if v > 0 && v <= i64::from(i32::MAX) {
+                xs.push(v as i32);
+            }
+        }
+    }
+    xs.extend([i32::MAX, i32::MAX - 1, 1, 2, 3]);
+    for x in xs {
+        let got = Q16::from_bits(x).sqrt().to_bits();
+        let n = (x as u64) << 16;
+        let r = isqrt(n);
+        if x < 1 << 16 {
+            let want = if n - r * r > r { r + 1 } else { r };
+            assert_eq!(got as u64, want, "sqrt of raw {x}");
+        } else {
+            // The unit of the 16th significant bit: the root has 17-24 bits here.
+            let unit = 1u64 << (64 - r.leading_zeros() - 16);
+            let exact = libm::sqrt(n as f64);
+            assert!(
+                (f64::from(got) - exact).abs() <= 0.5 * unit as f64 + 1e-6,
+                "sqrt of raw {x}: {got} vs {exact}"
+            );
+        }
+    }
+}
+
+/// Q16.16's tabulated tangent over every angle it takes, 0 to 1.5 rad and their negatives:
+/// within 1e-5 of tan relative to max(1, |tan|) (the table's interpolant and the result's
+/// half LSB), odd, and saturated at 1.5 rad beyond.
+#[test]
+fn q16_tan_over_every_angle() {
+    let mut worst = 0.0f64;
+    for raw in 0..=98_304i32 {
+        let want = libm::tan(f64::from(raw) / 65536.0);
+        let got = Q16::from_bits(raw).tan();
+        worst = worst.max((got.to_f64() - want).abs() / want.abs().max(1.0));
+        assert_eq!(Q16::from_bits(-raw).tan(), -got, "tan is odd at raw {raw}");
+    }
+    assert!(worst < 1e-5, "worst relative error {worst}");
+    assert_eq!(Q16::from_f64(2.0).tan(), Q16::from_f64(1.5).tan());
+}

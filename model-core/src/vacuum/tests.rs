@@ -18,6 +18,20 @@ fn psi_reference(ratio: f64) -> f64 {
     libm::sqrt(7.0 * (libm::pow(r, 10.0 / 7.0) - libm::pow(r, 12.0 / 7.0)))
 }
 
+/// Ψ² as the fixed-point form evaluates it, in f64, within the polynomial's stated error of
+/// the exact Ψ² over [Π_crit, 1].
+#[test]
+fn psi_squared_polynomial_is_within_its_stated_error() {
+    let mut worst = 0.0f64;
+    for i in 0..=2000 {
+        let ratio = P_CRIT + (1.0 - P_CRIT) * i as f64 / 2000.0;
+        let w = (2.0 * ratio - P_CRIT - 1.0) / (1.0 - P_CRIT);
+        let poly = PSI_SQ_POLY.iter().rev().fold(0.0, |s, c| c + w * s);
+        worst = worst.max((poly - psi_reference(ratio).powi(2)).abs());
+    }
+    assert!(worst < 4.5e-7, "largest error {worst}");
+}
+
 fn check_psi<R: Real>(tol: f64) {
     for i in 0..=40 {
         let ratio = i as f64 / 40.0;
@@ -38,6 +52,9 @@ fn orifice_flow_follows_eq3_and_chokes() {
     check_psi::<f64>(1e-12);
     check_psi::<f32>(2e-5);
     check_psi::<Q32>(1e-6);
+    // Q16.16: near Π = 1, where Ψ² is a few LSB, Ψ is their root (measured 3.5e-4 with the
+    // polynomial, 1.5e-3 with ln and exp in Q16.16).
+    check_psi::<Q16>(5e-4);
     let c = 1e3 / libm::sqrt(R_AIR_J_PER_KG_K * 293.0);
     // Choked: independent of the downstream pressure below 52.8 kPa for 100 kPa upstream.
     let choked = orifice_flow_mg_s(100.0, 30.0, 0.02, c);
@@ -54,7 +71,7 @@ fn orifice_flow_follows_eq3_and_chokes() {
 
 #[test]
 fn series_helpers_match_libm() {
-    // Error of tan relative to max(1, |tan|): the double-angle steps amplify rounding
+    // Error of tan relative to max(1, |tan|): the floats' double-angle steps amplify rounding
     // near 1.5 rad (tan = 14), where the arctan spring is steepest.
     let mut tan_err = [0.0f64; 4];
     for i in -300..=300 {
@@ -81,7 +98,7 @@ fn series_helpers_match_libm() {
     }
     extern crate std;
     std::println!("tan error f64/f32/Q32/Q16 {tan_err:?}, 1 - exp(-x) error {exp_err:?}");
-    // Measured: tan 1.8e-9 / 1.1e-6 / 2.6e-8 / 7.6e-6 (Q16.16's own Q2.30 tan, half an
+    // Measured: tan 1.8e-9 / 1.1e-6 / 2.6e-8 / 7.6e-6 (Q16.16's Hermite table, half an
     // LSB; the generic series in Q16.16 had 8.2e-4), 1 − e^(−x) 1e-20 / 1.9e-8 / 3.2e-10 /
     // 9.1e-6.
     assert!(
