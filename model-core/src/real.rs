@@ -71,6 +71,9 @@ pub trait Real:
     const IS_FLOAT: bool;
     /// The largest magnitude the type holds (fixed point saturates there).
     const RANGE_ABS: f64;
+    /// The spacing of a fixed-point type's values (Q16.16: 2^-16), 0 for the floats, whose
+    /// spacing is relative. A constant given to a fixed-point model is off by up to half of it.
+    const ABS_RESOLUTION: f64;
 
     /// Converts a constant (parameters, table values). Out-of-range values saturate.
     fn from_f64(x: f64) -> Self;
@@ -216,6 +219,7 @@ impl Real for f32 {
     const NAME: &'static str = "f32";
     const IS_FLOAT: bool = true;
     const RANGE_ABS: f64 = f32::MAX as f64;
+    const ABS_RESOLUTION: f64 = 0.0;
     type Divisor = f32;
     #[inline(always)]
     fn divisor(d: Self) -> Self {
@@ -284,6 +288,7 @@ impl Real for f64 {
     const NAME: &'static str = "f64";
     const IS_FLOAT: bool = true;
     const RANGE_ABS: f64 = f64::MAX;
+    const ABS_RESOLUTION: f64 = 0.0;
     type Divisor = f64;
     #[inline(always)]
     fn divisor(d: Self) -> Self {

@@ -542,6 +542,30 @@ fn one_minus_exp_neg<R: Real>(x: R) -> R {
     }
 }
 
+/// Eq. (4)'s 1 − e^(−dt/τ) for a step `dt_s` and τ as a divisor, with the power of two it is
+/// held times. The floats: the value, shift 0. Fixed point: a 1 ms step on τ = 40 ms is
+/// 0.0248, and Q16.16's LSB is 6e-4 of it, a time-constant error that left the chamber
+/// pressure 0.004 kPa off f64's and the rod, whose force balance is a few kPa, 0.3 % of its
+/// stroke (until session 18). Below 1/2 it is computed and held times 2^k in [1/2, 1):
+/// x·2^k = (dt·2^k)/τ, times (1 − e^(−x))/x from the series at x.
+fn scaled_decay<R: Real>(dt_s: R, tau_div: R::Divisor) -> (R, i32) {
+    let x = dt_s.div_by(tau_div);
+    let half = R::from_f64(0.5);
+    if R::IS_FLOAT || x >= half || x <= R::ZERO {
+        return (one_minus_exp_neg(x), 0);
+    }
+    let (mut k, mut coarse) = (0, x);
+    while k < 14 && coarse < half {
+        coarse = coarse.mul_pow2(1);
+        k += 1;
+    }
+    let x_scaled = dt_s.mul_pow2(k).div_by(tau_div);
+    const C: [f64; 16] = ONE_MINUS_EXP_NEG_COEFFS;
+    // x < 1/2: the series' terms to x⁸/9! (below 1e-8), each product in range.
+    let over_x = horner_in_range!(R, x; C[0], C[1], C[2], C[3], C[4], C[5], C[6], C[7], C[8]);
+    (x_scaled.mul_in_range(over_x), k)
+}
+
 /// `x > 0`, false for NaN too (so a NaN step or area does nothing).
 fn positive<R: Real>(x: R) -> bool {
     x > R::ZERO
@@ -549,9 +573,19 @@ fn positive<R: Real>(x: R) -> bool {
 
 /// Number of substeps of at most `h_max_s` in `dt_s`. The ratio is shrunk by 1e-6 first so
 /// that a step that is a whole multiple of `h_max_s` in decimal (0.001 s as f32 is
-/// 0.0010000000475) gets the same count in every number type.
+/// 0.0010000000475) gets the same count in every number type, and by half the type's
+/// spacing over `h_max_s` for fixed point, whose step is the requested one rounded to that
+/// spacing (1 ms in Q16.16 is 66·2^-16 s, 0.7 % long: 3 sub-steps of 0.5 ms where f32 takes 2,
+/// until session 18). A sub-step may then exceed `h_max_s` by that rounding.
 fn substeps<R: Real>(dt_s: R, h_max_s: f64) -> f64 {
-    libm::ceil(dt_s.to_f64() / h_max_s * (1.0 - 1e-6)).clamp(1.0, MAX_SUBSTEPS)
+    let ratio = dt_s.to_f64() / h_max_s * (1.0 - 1e-6);
+    // (A term of 0 for the floats would still cost them a soft-float division on the target.)
+    let rounding = if R::ABS_RESOLUTION > 0.0 {
+        0.5 * R::ABS_RESOLUTION / h_max_s
+    } else {
+        0.0
+    };
+    libm::ceil(ratio - rounding).clamp(1.0, MAX_SUBSTEPS)
 }
 
 /// Saturation of eq. (2)/(5): between the tank (lowest reachable) and ambient pressure.
@@ -566,8 +600,9 @@ pub struct VacuumValveActuator<R: Real> {
     maps: Maps<R>,
     effects: VacuumEffects,
     u_ref_v: R::Divisor,
-    tau_rise_s: R,
-    tau_fall_s: R,
+    /// τ of eq. (4) rising and falling, as divisors (a rate's first step divides the step by them).
+    tau_rise_div: R::Divisor,
+    tau_fall_div: R::Divisor,
     p_amb_ref_kpa: R,
     inv_mass: R,
     damping_extend: R,
@@ -595,6 +630,9 @@ pub struct VacuumValveActuator<R: Real> {
     decay_dt_s: R,
     decay_rise: R,
     decay_fall: R,
+    /// Fixed point: `decay_rise`, `decay_fall` are held times 2^shift ([`scaled_decay`]),
+    /// 0 for the floats.
+    decay_shift: [i32; 2],
     /// `decay_dt_s` as a divisor (the evacuation flow divides by the step).
     decay_dt_div: R::Divisor,
     /// The rod substeps of a step of `rods_dt_s` (0: none yet): their number, as `R` and as a
@@ -606,6 +644,13 @@ pub struct VacuumValveActuator<R: Real> {
     rods_n_div: R::Divisor,
     rods_h_s: R,
     rods_damping_div: [R::Divisor; 2],
+    /// Fixed point only (the floats keep their operations and bits): 1/n and h/m, products
+    /// where the floats divide by n and multiply by h, then 1/m, every sub-step.
+    rods_inv_n: R,
+    rods_h_over_mass: R,
+    /// Fixed point: (h/m)/(1 + h·b/m) per direction, and b (extending, retracting) times 2^10.
+    rods_gain: [R; 2],
+    damping_x1024: [R; 2],
 }
 
 /// Longest rod step [`VacuumValveActuator::with_rod_step_s`] accepts: the semi-implicit
@@ -629,8 +674,8 @@ impl<R: Real> VacuumValveActuator<R> {
             maps,
             effects: p.effects,
             u_ref_v: R::divisor(f(p.u_ref_v)),
-            tau_rise_s: f(p.tau_rise_s),
-            tau_fall_s: f(p.tau_fall_s),
+            tau_rise_div: R::divisor(f(p.tau_rise_s)),
+            tau_fall_div: R::divisor(f(p.tau_fall_s)),
             p_amb_ref_kpa: p_amb_ref,
             inv_mass: f(1.0 / p.mass_kpa_s2_per_pct),
             damping_extend: f(p.damping_extend_kpa_s_per_pct),
@@ -653,11 +698,19 @@ impl<R: Real> VacuumValveActuator<R> {
             decay_dt_s: R::ZERO,
             decay_rise: R::ZERO,
             decay_fall: R::ZERO,
+            decay_shift: [0; 2],
             decay_dt_div: R::divisor(R::ONE),
             rods_dt_s: R::ZERO,
             rods_n: 0,
             rods_n_div: R::divisor(R::ONE),
             rods_h_s: R::ZERO,
+            rods_inv_n: R::ONE,
+            rods_h_over_mass: R::ZERO,
+            rods_gain: [R::ZERO; 2],
+            damping_x1024: [
+                f(p.damping_extend_kpa_s_per_pct * 1024.0),
+                f(p.damping_retract_kpa_s_per_pct * 1024.0),
+            ],
             rods_damping_div: [R::divisor(R::ONE); 2],
         })
     }
@@ -780,19 +833,40 @@ impl<R: Real> VacuumValveActuator<R> {
         let p_old = self.p_act_kpa;
         let p_new = self.pressure_towards(p_stat, dt_s);
         if dt_s != self.rods_dt_s {
-            let n = substeps(dt_s, self.rod_step_max_s);
-            let n_r = R::from_f64(n);
-            let h = dt_s / n_r;
-            self.rods_dt_s = dt_s;
-            self.rods_n = n as u32;
+            let n = substeps(dt_s, self.rod_step_max_s) as u32;
+            // A whole count (at most MAX_SUBSTEPS) converts exactly from an integer; from f64
+            // it was soft-float arithmetic in fixed point. The floats' divisor is the count
+            // itself, so their h is dt/n as before.
+            let n_r = R::from_i32(n as i32);
             self.rods_n_div = R::divisor(n_r);
+            let h = dt_s.div_by(self.rods_n_div);
+            self.rods_dt_s = dt_s;
+            self.rods_n = n;
             self.rods_h_s = h;
-            self.rods_damping_div = [
-                R::divisor(R::ONE + h * self.damping_extend * self.inv_mass),
-                R::divisor(R::ONE + h * self.damping_retract * self.inv_mass),
-            ];
+            self.rods_inv_n = R::ONE.div_by(self.rods_n_div);
+            self.rods_h_over_mass = h * self.inv_mass;
+            if R::IS_FLOAT {
+                self.rods_damping_div = [
+                    R::divisor(R::ONE + h * self.damping_extend * self.inv_mass),
+                    R::divisor(R::ONE + h * self.damping_retract * self.inv_mass),
+                ];
+            } else {
+                // h/m first: h·b is below Q16.16's LSB (0.5 ms · 0.006 kPa·s/% = 3e-6), and
+                // the damping vanished (the rod ran up to twice as fast as in f64 until
+                // session 18); h/m is of order 1-10. One division each, no divisor kept.
+                let hm = self.rods_h_over_mass;
+                self.rods_gain = [
+                    hm / (R::ONE + self.damping_extend * hm),
+                    hm / (R::ONE + self.damping_retract * hm),
+                ];
+            }
         }
-        let dp_step = (p_new - p_old).div_by(self.rods_n_div);
+        let dp_step = if R::IS_FLOAT {
+            (p_new - p_old).div_by(self.rods_n_div)
+        } else {
+            // |p_new − p_old| is below the pressures' span and 1/n <= 1.
+            (p_new - p_old).mul_in_range(self.rods_inv_n)
+        };
         let hundred = R::from_f64(100.0);
         let mut p_sub = p_old;
         for _ in 0..self.rods_n {
@@ -818,16 +892,22 @@ impl<R: Real> VacuumValveActuator<R> {
         // Eq. (4), exact for a constant target: p += (p_stat − p)(1 − e^(−dt/τ)).
         if dt_s != self.decay_dt_s {
             self.decay_dt_s = dt_s;
-            self.decay_rise = one_minus_exp_neg(dt_s / self.tau_rise_s);
-            self.decay_fall = one_minus_exp_neg(dt_s / self.tau_fall_s);
+            let (rise, rise_shift) = scaled_decay(dt_s, self.tau_rise_div);
+            let (fall, fall_shift) = scaled_decay(dt_s, self.tau_fall_div);
+            (self.decay_rise, self.decay_fall, self.decay_shift) = (rise, fall, [rise_shift, fall_shift]);
             self.decay_dt_div = R::divisor(dt_s);
         }
-        let decay = if self.effects.pressure_direction && p_stat < p_old {
-            self.decay_fall
+        let (decay, shift) = if self.effects.pressure_direction && p_stat < p_old {
+            (self.decay_fall, self.decay_shift[1])
         } else {
-            self.decay_rise
+            (self.decay_rise, self.decay_shift[0])
         };
-        self.p_act_kpa = p_old + (p_stat - p_old) * decay;
+        self.p_act_kpa = if R::IS_FLOAT {
+            p_old + (p_stat - p_old) * decay
+        } else {
+            // |p_stat − p_old| is below the pressures' span, the scaled decay below 1.
+            p_old + (p_stat - p_old).mul_in_range(decay).mul_pow2(-shift)
+        };
         self.p_act_kpa
     }
 
@@ -839,8 +919,17 @@ impl<R: Real> VacuumValveActuator<R> {
         let b = if self.v_pct_s >= R::ZERO { 0 } else { 1 };
         let drive = dp_membrane_kpa - spring - self.friction_kpa;
         // Damping implicit: stable for any b.
-        // (1 + h·b/m prepared once per step length.)
-        let mut v = (self.v_pct_s + h * drive * self.inv_mass).div_by(self.rods_damping_div[b]);
+        let mut v = if R::IS_FLOAT {
+            // (1 + h·b/m prepared once per step length.)
+            (self.v_pct_s + h * drive * self.inv_mass).div_by(self.rods_damping_div[b])
+        } else {
+            // The same step as v + (h/m)(drive − b·v)/(1 + h·b/m), so that the velocity the
+            // damping settles at, drive/b, carries b's precision, not that of h·b/m (0.03
+            // for the HPT, whose error in Q16.16 left the moving rod 0.5 %/s fast):
+            // b·v from b held times 2^10.
+            let damping = (self.v_pct_s * self.damping_x1024[b]).mul_pow2(-10);
+            self.v_pct_s + (drive - damping) * self.rods_gain[b]
+        };
         let mut x_new = x + h * v;
         // The membrane's stops lie half the clearance beyond the valve's travel: x_pct is
         // measured on the valve, whose 0 and 100 % are its own seat and stop, so a unit with

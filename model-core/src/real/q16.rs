@@ -191,6 +191,7 @@ impl Real for Q16 {
     const NAME: &'static str = "Q16.16";
     const IS_FLOAT: bool = false;
     const RANGE_ABS: f64 = 32768.0;
+    const ABS_RESOLUTION: f64 = 1.0 / 65536.0;
     type Divisor = Q16Divisor;
     /// `m = round(2^(30+p) / |d|)` with p the index of |d|'s leading one, so m is in
     /// [2^29, 2^30] (carrying d's sign) and `x / d = x · m / 2^(14+p)`: relative error below

@@ -84,6 +84,7 @@ impl Real for Q32 {
     const NAME: &'static str = "Q32.32";
     const IS_FLOAT: bool = false;
     const RANGE_ABS: f64 = 2147483648.0;
+    const ABS_RESOLUTION: f64 = 1.0 / 4294967296.0;
     type Divisor = Q32;
     fn divisor(d: Self) -> Self {
         d
