@@ -217,6 +217,7 @@ impl<R: Real, const N: usize> EhvvaFull<R, N> {
                 p_high: inputs.p_supply_mpa,
                 p_low: inputs.p_back_mpa,
                 seat_velocity: None,
+                p_carry_x1024: [R::ZERO; 2],
             },
             pilot_history: DelayLine::new(R::ZERO),
             main_p_history: DelayLine::new(inputs.p_back_mpa),
