@@ -444,7 +444,6 @@ mod tests {
 #[cfg(test)]
 mod envelope_tests {
     use super::*;
-    use crate::ehvva::EhvvaPlant;
     use crate::real::Q16;
 
     proptest::proptest! {
@@ -454,36 +453,13 @@ mod envelope_tests {
         /// the stroke. Measured on a 3x3x3 grid of the corners, both lifts: 0.25 % at most
         /// (5.5 MPa, 4 MPa back pressure, 100 °C); issue #14 asks 0.1 %.
         #[test]
-        fn q16_lpv_lift_tracks_f64_over_the_envelope(
-            p_supply in 5.5f64..8.0,
-            p_back in 1.0f64..4.0,
-            temp in -20.0f64..100.0,
-            lift_high: bool,
-            snubber_on: bool,
-            on_steps in 800usize..2000,
-        ) {
-            let p = EhvvaParams::paper_default();
-            let q = Q16::from_f64;
-            let qi = EhvvaInputs::<Q16> { p_supply_mpa: q(p_supply), p_back_mpa: q(p_back), temp_c: q(temp), lift_high, snubber_on };
-            let fi = EhvvaInputs::<f64> {
-                p_supply_mpa: qi.p_supply_mpa.to_f64(),
-                p_back_mpa: qi.p_back_mpa.to_f64(),
-                temp_c: qi.temp_c.to_f64(),
-                lift_high,
-                snubber_on,
-            };
-            let dt_ms = q(0.01).to_f64();
-            let mut mf = EhvvaLpv::<f64>::new(&p, &fi, dt_ms).unwrap();
-            let mut mq = EhvvaLpv::<Q16>::new(&p, &qi, dt_ms).unwrap();
-            let stroke = if lift_high { p.lift_high_mm } else { p.lift_low_mm };
-            let mut worst: f64 = 0.0;
-            for k in 0..on_steps + 2600 {
-                let u = (100..100 + on_steps).contains(&k);
-                let yf = mf.step(u, &fi);
-                let yq = mq.step(u, &qi).to_f64();
-                worst = worst.max((yf - yq).abs());
-            }
-            proptest::prop_assert!(worst <= 0.003 * stroke, "lift {} % of the stroke off", 100.0 * worst / stroke);
+        fn q16_lpv_lift_tracks_f64_over_the_envelope(c in crate::ehvva::envelope::cases()) {
+            let dev = crate::ehvva::envelope::q16_lift_deviation(
+                c,
+                |p, i, dt| EhvvaLpv::<f64>::new(p, i, dt).unwrap(),
+                |p, i, dt| EhvvaLpv::<Q16>::new(p, i, dt).unwrap(),
+            );
+            proptest::prop_assert!(dev <= 0.003, "{c:?}: lift {} % of the stroke off", 100.0 * dev);
         }
     }
 }

@@ -94,6 +94,8 @@
 //! - The top snubber acts only while closing: its check valve opens at valve opening (Sec. 2).
 //! - Eq. (4) and the main valve of eq. (9): see [`full`] for how the delays t0, t1 are placed.
 
+#[cfg(test)]
+pub(crate) mod envelope;
 pub mod event;
 pub mod full;
 pub mod lpv;
