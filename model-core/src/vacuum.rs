@@ -146,8 +146,7 @@ fn one_minus_exp_neg<R: Real>(x: R) -> R {
     if x < R::ONE {
         const C: [f64; 16] = ONE_MINUS_EXP_NEG_COEFFS;
         if !crate::real::resolves::<R>(1e-6) {
-            let s = horner_in_range!(R, x; C[0], C[1], C[2], C[3], C[4], C[5], C[6], C[7], C[8]);
-            return x.mul_in_range(s);
+            return x.mul_in_range(one_minus_exp_neg_over_x_coarse(x));
         }
         let s = horner!(R, x; C[0], C[1], C[2], C[3], C[4], C[5], C[6], C[7], C[8], C[9], C[10], C[11],
             C[12], C[13], C[14], C[15]);
@@ -157,12 +156,18 @@ fn one_minus_exp_neg<R: Real>(x: R) -> R {
     }
 }
 
+/// (1 − e^(−x))/x for 0 <= x < 1 in a type that does not resolve 1e-6 (fixed point): the
+/// series' terms to x⁸/9! (below 1e-8 for x < 1/2, 3e-6 below 1), each product in range.
+fn one_minus_exp_neg_over_x_coarse<R: Real>(x: R) -> R {
+    const C: [f64; 16] = ONE_MINUS_EXP_NEG_COEFFS;
+    horner_in_range!(R, x; C[0], C[1], C[2], C[3], C[4], C[5], C[6], C[7], C[8])
+}
+
 /// Eq. (4)'s 1 − e^(−dt/τ) for a step `dt_s` and τ as a divisor, with the power of two it is
 /// held times. The floats: the value, shift 0. Fixed point: a 1 ms step on τ = 40 ms is
-/// 0.0248, and Q16.16's LSB is 6e-4 of it, a time-constant error that left the chamber
-/// pressure 0.004 kPa off f64's and the rod, whose force balance is a few kPa, 0.3 % of its
-/// stroke (until session 18). Below 1/2 it is computed and held times 2^k in [1/2, 1):
-/// x·2^k = (dt·2^k)/τ, times (1 − e^(−x))/x from the series at x.
+/// 0.0248, and Q16.16's LSB is 6e-4 of it, a time-constant error (the HPT's chamber pressure
+/// 5.8e-3 kPa off f64's at most, 2.1e-3 since session 18). Below 1/2 it is computed and held
+/// times 2^k in [1/2, 1): x·2^k = (dt·2^k)/τ, times (1 − e^(−x))/x from the series at x.
 fn scaled_decay<R: Real>(dt_s: R, tau_div: R::Divisor) -> (R, i32) {
     let x = dt_s.div_by(tau_div);
     let half = R::from_f64(0.5);
@@ -175,10 +180,7 @@ fn scaled_decay<R: Real>(dt_s: R, tau_div: R::Divisor) -> (R, i32) {
         k += 1;
     }
     let x_scaled = dt_s.mul_pow2(k).div_by(tau_div);
-    const C: [f64; 16] = ONE_MINUS_EXP_NEG_COEFFS;
-    // x < 1/2: the series' terms to x⁸/9! (below 1e-8), each product in range.
-    let over_x = horner_in_range!(R, x; C[0], C[1], C[2], C[3], C[4], C[5], C[6], C[7], C[8]);
-    (x_scaled.mul_in_range(over_x), k)
+    (x_scaled.mul_in_range(one_minus_exp_neg_over_x_coarse(x)), k)
 }
 
 /// `x > 0`, false for NaN too (so a NaN step or area does nothing).
@@ -539,9 +541,8 @@ impl<R: Real> VacuumValveActuator<R> {
             (self.v_pct_s + h * drive * self.inv_mass).div_by(self.rods_damping_div[b])
         } else {
             // The same step as v + (h/m)(drive − b·v)/(1 + h·b/m), so that the velocity the
-            // damping settles at, drive/b, carries b's precision, not that of h·b/m (0.03
-            // for the HPT, whose error in Q16.16 left the moving rod 0.5 %/s fast):
-            // b·v from b held times 2^10.
+            // damping settles at, drive/b, carries b's precision (b·v from b held times
+            // 2^10), not that of h·b/m (0.03 for the HPT, 1.5e-5 absolute in Q16.16).
             let damping = (self.v_pct_s * self.damping_x1024[b]).mul_pow2(-10);
             self.v_pct_s + (drive - damping) * self.rods_gain[b]
         };

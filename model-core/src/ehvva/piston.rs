@@ -316,17 +316,21 @@ impl<R: Real> Piston<R> {
             m.p_low += h * dpl;
         } else {
             let h_x1024 = h.mul_pow2(10);
-            for (p, (rate, carry)) in [&mut m.p_high, &mut m.p_low]
-                .into_iter()
-                .zip([dph, dpl].into_iter().zip(m.p_carry_x1024.iter_mut()))
-            {
-                let total = *carry + h_x1024 * rate;
-                let whole = total.mul_pow2(-10);
-                *carry = total - whole.mul_pow2(10);
-                *p += whole;
-            }
+            let [carry_high, carry_low] = &mut m.p_carry_x1024;
+            add_carried(&mut m.p_high, carry_high, h_x1024 * dph);
+            add_carried(&mut m.p_low, carry_low, h_x1024 * dpl);
         }
     }
+}
+
+/// `p += increment_x1024 / 2^10` with what `p` cannot take yet below its LSB kept in `carry`
+/// (times 2^10) for the next call.
+#[inline(always)]
+fn add_carried<R: Real>(p: &mut R, carry: &mut R, increment_x1024: R) {
+    let total = *carry + increment_x1024;
+    let whole = total.mul_pow2(-10);
+    *carry = total - whole.mul_pow2(10);
+    *p += whole;
 }
 
 /// The moving state the models share: lift (mm), velocity (mm/ms = m/s), accumulator

@@ -43,8 +43,6 @@ mod fits;
 mod knobs;
 
 pub use events::*;
-#[cfg(test)]
-use fits::TAU_P;
 pub use fits::{calibrate, calibrate_with, edge_delays_ms};
 use fits::{calibrate_restarted, with_tau_profile_start};
 pub use knobs::*;

@@ -1,3 +1,4 @@
+use super::fits::TAU_P;
 use super::*;
 use crate::generate::ehvva as gen;
 
