@@ -134,6 +134,15 @@ pub trait Real:
         self * Self::from_f64(pow2_f64(exp))
     }
 
+    /// `self · rhs · 2^-exp` (`exp` in 0..=16) for a factor held times 2^exp because the type
+    /// would round it too coarsely (a 5 µs sub-step is 327.5 LSB of Q16.16: 0.15 % off). The
+    /// floats multiply and scale, exactly as `(self * rhs).mul_pow2(-exp)`; Q16.16 shifts its
+    /// 64-bit product by 16 + exp and rounds once, at the cost of `*`, saturating as `*` does.
+    #[inline(always)]
+    fn mul_shr(self, rhs: Self, exp: u32) -> Self {
+        (self * rhs).mul_pow2(-(exp as i32))
+    }
+
     /// Square root; 0 for negative arguments (never NaN).
     fn sqrt(self) -> Self;
     /// Exponential; saturates instead of overflowing.

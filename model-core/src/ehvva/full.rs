@@ -36,7 +36,7 @@
 
 use super::event::EhvvaPlant;
 use super::params::{EhvvaError, EhvvaInputs, EhvvaParams};
-use super::piston::{stops, Moving, Piston};
+use super::piston::{stops, Moving, Piston, SubLsb, SubStep};
 use super::reduced::{check_step, directional, DEFAULT_DELAY_SAMPLES};
 use super::tables::EhvvaTables;
 use crate::delay::DelayLine;
@@ -106,7 +106,7 @@ pub struct EhvvaFull<R: Real, const N: usize = DEFAULT_DELAY_SAMPLES> {
     lag_close_per_mpa: R,
     dt: R,
     inv_dt: R,
-    h: R,
+    h: SubStep<R>,
     substeps: usize,
     // States.
     current: R,
@@ -204,7 +204,7 @@ impl<R: Real, const N: usize> EhvvaFull<R, N> {
             lag_close_per_mpa: r(v.dynamic_lag_close_ms_per_mpa),
             dt: r(dt_ms),
             inv_dt: r(1.0 / dt_ms),
-            h: r(dt_ms / substeps as f64),
+            h: SubStep::new(dt_ms / substeps as f64),
             substeps,
             current: R::ZERO,
             xp: R::ZERO,
@@ -217,7 +217,7 @@ impl<R: Real, const N: usize> EhvvaFull<R, N> {
                 p_high: inputs.p_supply_mpa,
                 p_low: inputs.p_back_mpa,
                 seat_velocity: None,
-                p_carry_x1024: [R::ZERO; 2],
+                carry_x1024: SubLsb::ZERO,
             },
             pilot_history: DelayLine::new(R::ZERO),
             main_p_history: DelayLine::new(inputs.p_back_mpa),
@@ -301,17 +301,19 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaFull<R, N> {
             back += inv_n;
 
             // Eq. (3): coil current (implicit Euler) and magnet force.
-            let hl = self.h * self.inv_inductance;
+            let hl = self.h.h * self.inv_inductance;
             self.current = (self.current + hl * u_volts) / (R::ONE + hl * self.coil_resistance);
             let f_mag = self.force_const * self.current * self.current / (R::ONE + self.xp * self.inv_force_gap);
             // Eq. (2): pilot spool.
-            let (xp, vp) = self.pilot.step(self.xp, self.vp, f_mag, R::ZERO, self.h);
+            let (xp, vp) = self.pilot.step(self.xp, self.vp, f_mag, R::ZERO, self.h.h);
             self.xp = xp;
             self.vp = vp;
             // Eqs. (4), (9): main spool pushed by the delayed pilot pressure, damped by the
             // pilot orifice it fills and empties through.
             let quad = self.main_quad / cd2;
-            let (xm, vm) = self.main.step(self.xm, self.vm, self.main_area * p_pilot, quad, self.h);
+            let (xm, vm) = self
+                .main
+                .step(self.xm, self.vm, self.main_area * p_pilot, quad, self.h.h);
             self.xm = xm;
             self.vm = vm;
             // Eq. (9) line 5 with eq. (5): main valve metering in series with the top snubber.

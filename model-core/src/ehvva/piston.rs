@@ -202,15 +202,32 @@ impl<R: Real> Piston<R> {
     /// One semi-implicit velocity step: the static force explicitly, friction and the quadratic
     /// orifice damping implicitly (linearised about the current |v|), so the stiff snubber
     /// damping cannot make the step unstable whatever the orifice area.
-    pub fn velocity_step(&self, vel: R, force: R, quad_gain: R, h: R) -> R {
+    ///
+    /// The floats only; fixed point takes [`Self::motion_step_fixed`].
+    pub fn velocity_step(&self, vel: R, force: R, quad_gain: R, h: SubStep<R>) -> R {
         let damping = self.friction + quad_gain * vel.abs();
-        let accel = if R::IS_FLOAT {
-            h.step_times(self.accel_per_newton, force)
-        } else {
-            // |force| < 2^15 / 5.6 N (the pressure force on the top area at 10 MPa is 608 N).
-            h * (force * self.accel_per_newton_x1024).mul_pow2(-10)
-        };
-        (vel + accel) / (R::ONE + h.step_times(self.accel_per_newton, damping))
+        let accel = h.h.step_times(self.accel_per_newton, force);
+        (vel + accel) / (R::ONE + h.h.step_times(self.accel_per_newton, damping))
+    }
+
+    /// Fixed point's [`Self::velocity_step`] and lift update, unclamped: the same scheme as
+    /// the increment `(a − c·v)/(1 + c)` with a = h·F/m and c = h·damping/m, formed times 2^10
+    /// and added with what lies below the LSB carried. Near its terminal velocity the piston's
+    /// velocity relaxes by less than an LSB a sub-step (c ≈ 2e-4 at 1.5 m/s), and rounded each
+    /// sub-step it stalled up to 0.5 LSB/c off (the velocity 0.4 % low at 5.5 MPa supply, 4 MPa
+    /// back pressure); the lift's increment h·v, the same each sub-step at a steady velocity,
+    /// rounded the same way each time. 1/m and h each held times 2^10.
+    fn motion_step_fixed(&self, m: &mut Moving<R>, force: R, quad_gain: R, h: SubStep<R>) -> (R, R) {
+        let damping = self.friction + quad_gain * m.vel.abs();
+        // F/m (mm/ms²) and damping/m (1/ms), then times h·2^10: a few tens at most for any
+        // force and velocity of the envelope (c·2^10 reaches 32 768 only near 500 m/s).
+        let a_x1024 = h.h_x1024 * force.mul_shr(self.accel_per_newton_x1024, 10);
+        let c_x1024 = h.h_x1024 * damping.mul_shr(self.accel_per_newton_x1024, 10);
+        let dv_x1024 = (a_x1024 - c_x1024 * m.vel) / (R::ONE + c_x1024.mul_pow2(-10));
+        let (mut vel, mut lift) = (m.vel, m.lift);
+        add_carried(&mut vel, &mut m.carry_x1024.vel, dv_x1024);
+        add_carried(&mut lift, &mut m.carry_x1024.lift, h.h_x1024 * vel);
+        (lift, vel)
     }
 
     /// End stops of eq. (1): the seat at 0 and the lift sleeve at S stop the piston at once.
@@ -271,9 +288,28 @@ impl<R: Real> Piston<R> {
     /// velocity (semi-implicit), position and end stops, then eqs. (7)-(8) with the new
     /// velocity. A seat impact is reported only for a landing, not for the seat holding a
     /// piston already at rest on it.
-    pub fn advance(&self, m: &mut Moving<R>, force: R, quad_gain: R, h: R, stroke: R, p_supply_set: R, p_back_set: R) {
-        let vel = self.velocity_step(m.vel, force, quad_gain, h);
-        let (lift, vel, impact) = Piston::stops(m.lift + h * vel, vel, stroke);
+    pub fn advance(
+        &self,
+        m: &mut Moving<R>,
+        force: R,
+        quad_gain: R,
+        h: SubStep<R>,
+        stroke: R,
+        p_supply_set: R,
+        p_back_set: R,
+    ) {
+        let (free_lift, free_vel) = if R::IS_FLOAT {
+            let vel = self.velocity_step(m.vel, force, quad_gain, h);
+            (m.lift + h.times(vel), vel)
+        } else {
+            self.motion_step_fixed(m, force, quad_gain, h)
+        };
+        let (lift, vel, impact) = Piston::stops(free_lift, free_vel, stroke);
+        if !R::IS_FLOAT && lift != free_lift {
+            // On a stop: nothing below the LSB of a motion that ended.
+            m.carry_x1024.vel = R::ZERO;
+            m.carry_x1024.lift = R::ZERO;
+        }
         if impact.is_some() && m.lift > R::ZERO {
             m.seat_velocity = impact;
         }
@@ -294,7 +330,7 @@ impl<R: Real> Piston<R> {
 
     /// One sub-step of a piston [`Self::held_at_stop`]: only the accumulators move, as in
     /// [`Self::advance`] with the velocity 0.
-    pub fn advance_held(&self, m: &mut Moving<R>, h: R, p_supply_set: R, p_back_set: R) {
+    pub fn advance_held(&self, m: &mut Moving<R>, h: SubStep<R>, p_supply_set: R, p_back_set: R) {
         m.vel = R::ZERO;
         self.advance_accumulators(m, h, p_supply_set, p_back_set);
     }
@@ -308,17 +344,15 @@ impl<R: Real> Piston<R> {
     /// (until session 18). The increment is formed times 2^10 and what the pressure cannot
     /// take yet is carried to the next sub-step.
     #[inline(always)]
-    fn advance_accumulators(&self, m: &mut Moving<R>, h: R, p_supply_set: R, p_back_set: R) {
+    fn advance_accumulators(&self, m: &mut Moving<R>, h: SubStep<R>, p_supply_set: R, p_back_set: R) {
         let dph = self.p_high_rate(m.p_high, p_supply_set, m.vel);
         let dpl = self.p_low_rate(m.p_low, p_back_set, m.vel);
         if R::IS_FLOAT {
-            m.p_high += h * dph;
-            m.p_low += h * dpl;
+            m.p_high += h.h * dph;
+            m.p_low += h.h * dpl;
         } else {
-            let h_x1024 = h.mul_pow2(10);
-            let [carry_high, carry_low] = &mut m.p_carry_x1024;
-            add_carried(&mut m.p_high, carry_high, h_x1024 * dph);
-            add_carried(&mut m.p_low, carry_low, h_x1024 * dpl);
+            add_carried(&mut m.p_high, &mut m.carry_x1024.p_high, h.h_x1024 * dph);
+            add_carried(&mut m.p_low, &mut m.carry_x1024.p_low, h.h_x1024 * dpl);
         }
     }
 }
@@ -326,11 +360,43 @@ impl<R: Real> Piston<R> {
 /// `p += increment_x1024 / 2^10` with what `p` cannot take yet below its LSB kept in `carry`
 /// (times 2^10) for the next call.
 #[inline(always)]
-fn add_carried<R: Real>(p: &mut R, carry: &mut R, increment_x1024: R) {
+pub(crate) fn add_carried<R: Real>(p: &mut R, carry: &mut R, increment_x1024: R) {
     let total = *carry + increment_x1024;
     let whole = total.mul_pow2(-10);
     *carry = total - whole.mul_pow2(10);
     *p += whole;
+}
+
+/// A sub-step's length h (ms) as the models multiply by it. Fixed point also holds h times
+/// 2^10: the target's 10 µs step cut in two is 327.5 LSB of Q16.16, and rounded to 328 the
+/// piston and accumulators ran 0.15 % fast against the model's own delay lines (the lift up to
+/// 0.2 % of the stroke off f64's at 5.5 MPa supply, 4 MPa back pressure; until session 19).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SubStep<R> {
+    /// h, ms.
+    pub h: R,
+    /// Fixed point: h times 2^10 (≤ 5.12 for h ≤ 5 µs); the floats do not use it.
+    pub h_x1024: R,
+}
+
+impl<R: Real> SubStep<R> {
+    /// `h_ms` (at most [`super::reduced::MAX_SUBSTEP_MS`]) in the model's number type.
+    pub fn new(h_ms: f64) -> Self {
+        Self {
+            h: R::from_f64(h_ms),
+            h_x1024: R::from_f64(h_ms * 1024.0),
+        }
+    }
+
+    /// h·x: the floats' product; fixed point's from h times 2^10, rounded once.
+    #[inline(always)]
+    pub fn times(self, x: R) -> R {
+        if R::IS_FLOAT {
+            self.h * x
+        } else {
+            self.h_x1024.mul_shr(x, 10)
+        }
+    }
 }
 
 /// The moving state the models share: lift (mm), velocity (mm/ms = m/s), accumulator
@@ -342,9 +408,29 @@ pub struct Moving<R> {
     pub p_high: R,
     pub p_low: R,
     pub seat_velocity: Option<R>,
-    /// Fixed point: what the accumulator pressures gained below their LSB, times 2^10
-    /// ([`Piston::advance_accumulators`]); 0 for the floats.
-    pub p_carry_x1024: [R; 2],
+    /// Fixed point: what the states gained below their LSB ([`Piston::advance`]); 0 for the
+    /// floats.
+    pub carry_x1024: SubLsb<R>,
+}
+
+/// What each integrated state of [`Moving`] gained below its LSB, times 2^10 (fixed point's
+/// increments too small for the state's type, added later: `add_carried`).
+#[derive(Clone, Copy, Debug)]
+pub struct SubLsb<R> {
+    pub p_high: R,
+    pub p_low: R,
+    pub vel: R,
+    pub lift: R,
+}
+
+impl<R: Real> SubLsb<R> {
+    /// Nothing carried.
+    pub const ZERO: Self = Self {
+        p_high: R::ZERO,
+        p_low: R::ZERO,
+        vel: R::ZERO,
+        lift: R::ZERO,
+    };
 }
 
 #[cfg(test)]
@@ -365,7 +451,7 @@ mod tests {
             p_high: R::from_f64(ph),
             p_low: R::from_f64(pl),
             seat_velocity: None,
-            p_carry_x1024: [R::ZERO; 2],
+            carry_x1024: SubLsb::ZERO,
         };
         let (force, set_high, set_low) = (R::from_f64(force), R::from_f64(6.0), R::from_f64(2.0));
         if !piston.held_at_stop(&m0, force, stroke) {
@@ -376,12 +462,12 @@ mod tests {
             &mut full,
             force,
             R::from_f64(quad_gain),
-            R::from_f64(h),
+            SubStep::new(h),
             stroke,
             set_high,
             set_low,
         );
-        piston.advance_held(&mut held, R::from_f64(h), set_high, set_low);
+        piston.advance_held(&mut held, SubStep::new(h), set_high, set_low);
         Some(
             full.lift == held.lift
                 && full.vel == held.vel

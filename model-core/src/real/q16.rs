@@ -276,6 +276,21 @@ impl Real for Q16 {
             Q16((self.0 >> n) + ((self.0 >> (n - 1)) & 1))
         }
     }
+    #[inline(always)]
+    fn mul_shr(self, rhs: Self, exp: u32) -> Self {
+        debug_assert!(exp <= 16, "mul_shr: exponent {exp} outside 0..=16");
+        // As `*` with the result's bits 16 + exp.. of the product: it fits when the bits from
+        // 47 + exp up all equal its sign (|p| < 2^62, so neither the rounding nor the shifts
+        // overflow).
+        let p = i64::from(self.0) * i64::from(rhs.0) + (1 << (15 + exp));
+        let hi = (p >> (32 + exp)) as i32;
+        let r = (p >> (16 + exp)) as i32;
+        if (hi >> 15) != (r >> 31) {
+            Q16(((self.0 ^ rhs.0) >> 31) ^ i32::MAX)
+        } else {
+            Q16(r)
+        }
+    }
     fn step_times(self, k: Self, x: Self) -> Self {
         // |k| < 1 where this is used (a reciprocal mass in m/s per ms per N), so k·x cannot
         // overflow where x does not.

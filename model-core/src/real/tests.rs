@@ -18,6 +18,22 @@ proptest! {
     }
 
     #[test]
+    fn mul_shr_rounds_the_exact_product_once(a in any::<i32>(), b in any::<i32>(), exp in 0u32..=16, x in -1e3f64..1e3, y in -1e3f64..1e3) {
+        // Q16.16: the exact a·b·2^-(16+exp) rounded to nearest (halves up), saturated to the
+        // type's range, over every pair of values; the floats as the product then the scaling.
+        let (qa, qb) = (Q16::from_bits(a), Q16::from_bits(b));
+        let exact = (i128::from(a) * i128::from(b) + (1i128 << (15 + exp))) >> (16 + exp);
+        let want = exact.clamp(i128::from(i32::MIN), i128::from(i32::MAX)) as i32;
+        let got = qa.mul_shr(qb, exp).to_bits();
+        prop_assert_eq!(got, want, "{} * {} >> {}", a, b, exp);
+        prop_assert_eq!(x.mul_shr(y, exp).to_bits(), (x * y).mul_pow2(-(exp as i32)).to_bits());
+        // With no scaling it is `*`.
+        if exp == 0 {
+            prop_assert_eq!(qa.mul_shr(qb, 0), qa * qb);
+        }
+    }
+
+    #[test]
     fn mul_in_range_gives_the_bits_of_the_product_within_the_range(
         a in any::<i32>(),
         w in -65535i32..=65536,
