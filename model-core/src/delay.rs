@@ -69,7 +69,8 @@ impl<R: Real, const N: usize> DelayLine<R, N> {
         }
         // The sample before, one place back in the ring.
         let older = self.buf[(at + N - 1) % N];
-        newer + frac * (older - newer)
+        // frac in [0, 1): its product with any value is in range.
+        newer + frac.mul_in_range(older - newer)
     }
 
     /// The sample `delay_s` seconds ago for a line pushed every `dt_s` seconds.

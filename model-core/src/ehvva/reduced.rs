@@ -154,7 +154,8 @@ impl<R: Real, const N: usize> EhvvaReduced<R, N> {
         self.p_mo = if R::IS_FLOAT {
             (self.p_mo + lag * p_in) * inv_1_plus_lag
         } else {
-            self.p_mo * inv_1_plus_lag + lag * p_in
+            // Both weights in [0, 1]: the products are in range for any pressure.
+            self.p_mo.mul_in_range(inv_1_plus_lag) + lag.mul_in_range(p_in)
         };
         // Eq. (12) first line, with eqs. (5)-(6) as damping.
         let force = self.piston.static_force(p_top, self.m.p_low, self.m.lift);
