@@ -17,9 +17,6 @@ pub(crate) struct Piston<R: Real> {
     pub area_bottom: R,
     /// 1/(1000·me): N → mm/ms².
     pub accel_per_newton: R,
-    /// Fixed point: `accel_per_newton` times 2^10 (0.0055 holds 358 LSB of Q16.16, 1.4e-3
-    /// off: the piston's acceleration by the force that much off).
-    accel_per_newton_x1024: R,
     pub spring: R,
     pub preload: R,
     pub friction: R,
@@ -49,9 +46,6 @@ pub(crate) struct Piston<R: Real> {
     inv_a2_bottom_open: R,
     inv_cap_high: R,
     inv_cap_low: R,
-    /// Fixed point: 1/C times 2^10 (1/3500 mm³/MPa holds 19 LSB of Q16.16, 1.6 % off).
-    inv_cap_high_x1024: R,
-    inv_cap_low_x1024: R,
     pump: R,
     relief_high: R,
     /// Pump flow / relief gain, MPa: how far below the set-point the relief cracks. Divided
@@ -70,7 +64,6 @@ impl<R: Real> Piston<R> {
             area_top: r(p.area_top_mm2),
             area_bottom: r(p.area_bottom_mm2),
             accel_per_newton: r(1.0 / (1000.0 * p.mass_kg)),
-            accel_per_newton_x1024: r(1.024 / p.mass_kg),
             spring: r(p.spring_n_per_mm),
             preload: r(p.spring_preload_mm),
             friction: r(p.friction_n_per_m_s),
@@ -93,8 +86,6 @@ impl<R: Real> Piston<R> {
             inv_a2_bottom_open: R::ZERO,
             inv_cap_high: r(1.0 / p.cap_high_mm3_per_mpa),
             inv_cap_low: r(1.0 / p.cap_low_mm3_per_mpa),
-            inv_cap_high_x1024: r(1024.0 / p.cap_high_mm3_per_mpa),
-            inv_cap_low_x1024: r(1024.0 / p.cap_low_mm3_per_mpa),
             pump: r(p.pump_flow_mm3_per_ms),
             relief_high: r(p.relief_high_mm3_per_ms_mpa),
             pump_over_relief_high: r(p.pump_flow_mm3_per_ms / p.relief_high_mm3_per_ms_mpa),
@@ -219,10 +210,10 @@ impl<R: Real> Piston<R> {
     /// rounded the same way each time. 1/m and h each held times 2^10.
     fn motion_step_fixed(&self, m: &mut Moving<R>, force: R, quad_gain: R, h: SubStep<R>) -> (R, R) {
         let damping = self.friction + quad_gain * m.vel.abs();
-        // F/m (mm/ms²) and damping/m (1/ms), then times h·2^10: a few tens at most for any
-        // force and velocity of the envelope (c·2^10 reaches 32 768 only near 500 m/s).
-        let a_x1024 = h.h_x1024 * force.mul_shr(self.accel_per_newton_x1024, 10);
-        let c_x1024 = h.h_x1024 * damping.mul_shr(self.accel_per_newton_x1024, 10);
+        // h·F/m and h·damping/m times 2^10, one product each (h/m held times 2^20): a few
+        // tens at most for any force and velocity of the envelope.
+        let a_x1024 = force.mul_shr(h.h_per_kn_x2p20, 10);
+        let c_x1024 = damping.mul_shr(h.h_per_kn_x2p20, 10);
         let num_x1024 = a_x1024 - c_x1024 * m.vel;
         let c = c_x1024.mul_pow2(-10);
         // 1/(1 + c) as 1 − c + c² − c³ + c⁴ where c < 1/16 (most of a stroke: c ≈ 2e-4 at
@@ -270,14 +261,15 @@ impl<R: Real> Piston<R> {
     /// set so the steady state with the valve at rest is exactly the set-point.
     #[inline(always)]
     pub fn p_high_rate(&self, p_high: R, p_set: R, vel: R) -> R {
+        self.p_high_net_flow(p_high, p_set, vel) * self.inv_cap_high
+    }
+
+    /// The net flow into the supply accumulator, mm³/ms: dPh/dt times its capacity.
+    #[inline(always)]
+    fn p_high_net_flow(&self, p_high: R, p_set: R, vel: R) -> R {
         let crack = p_set - self.pump_over_relief_high;
         let relief = self.relief_high * (p_high - crack).max(R::ZERO);
-        let net_flow = self.pump - relief - self.area_top * vel.max(R::ZERO);
-        if R::IS_FLOAT {
-            net_flow * self.inv_cap_high
-        } else {
-            (net_flow * self.inv_cap_high_x1024).mul_pow2(-10)
-        }
+        self.pump - relief - self.area_top * vel.max(R::ZERO)
     }
 
     /// dPl/dt of eq. (7): the bottom chamber pushes Ab·v into the back-pressure line while
@@ -285,13 +277,14 @@ impl<R: Real> Piston<R> {
     /// two chambers); relief above and check-valve make-up below the set-point.
     #[inline(always)]
     pub fn p_low_rate(&self, p_low: R, p_set: R, vel: R) -> R {
+        self.p_low_net_flow(p_low, p_set, vel) * self.inv_cap_low
+    }
+
+    /// The net flow into the back-pressure accumulator, mm³/ms.
+    #[inline(always)]
+    fn p_low_net_flow(&self, p_low: R, p_set: R, vel: R) -> R {
         let inflow = self.area_bottom * vel.max(R::ZERO) + (self.area_top - self.area_bottom) * (-vel).max(R::ZERO);
-        let net_flow = inflow - self.relief_low * (p_low - p_set);
-        if R::IS_FLOAT {
-            net_flow * self.inv_cap_low
-        } else {
-            (net_flow * self.inv_cap_low_x1024).mul_pow2(-10)
-        }
+        inflow - self.relief_low * (p_low - p_set)
     }
 
     /// One sub-step `h` of the piston and both accumulators, the part the reduced (eq. (12))
@@ -356,14 +349,23 @@ impl<R: Real> Piston<R> {
     /// take yet is carried to the next sub-step.
     #[inline(always)]
     fn advance_accumulators(&self, m: &mut Moving<R>, h: SubStep<R>, p_supply_set: R, p_back_set: R) {
-        let dph = self.p_high_rate(m.p_high, p_supply_set, m.vel);
-        let dpl = self.p_low_rate(m.p_low, p_back_set, m.vel);
         if R::IS_FLOAT {
-            m.p_high += h.h * dph;
-            m.p_low += h.h * dpl;
+            m.p_high += h.h * self.p_high_rate(m.p_high, p_supply_set, m.vel);
+            m.p_low += h.h * self.p_low_rate(m.p_low, p_back_set, m.vel);
         } else {
-            add_carried(&mut m.p_high, &mut m.carry_x1024.p_high, h.h_x1024 * dph);
-            add_carried(&mut m.p_low, &mut m.carry_x1024.p_low, h.h_x1024 * dpl);
+            // h·flow/C times 2^10, one product each (h/C held times 2^20).
+            let flow_high = self.p_high_net_flow(m.p_high, p_supply_set, m.vel);
+            let flow_low = self.p_low_net_flow(m.p_low, p_back_set, m.vel);
+            add_carried(
+                &mut m.p_high,
+                &mut m.carry_x1024.p_high,
+                flow_high.mul_shr(h.h_per_cap_high_x2p20, 10),
+            );
+            add_carried(
+                &mut m.p_low,
+                &mut m.carry_x1024.p_low,
+                flow_low.mul_shr(h.h_per_cap_low_x2p20, 10),
+            );
         }
     }
 }
@@ -382,20 +384,35 @@ pub(crate) fn add_carried<R: Real>(p: &mut R, carry: &mut R, increment_x1024: R)
 /// 2^10: the target's 10 µs step cut in two is 327.5 LSB of Q16.16, and rounded to 328 the
 /// piston and accumulators ran 0.15 % fast against the model's own delay lines (the lift up to
 /// 0.2 % of the stroke off f64's at 5.5 MPa supply, 4 MPa back pressure; until session 19).
+///
+/// Fixed point also holds the sub-step's products with the piston's and accumulators'
+/// constants, times 2^20, so that each increment is one product of a state-dependent force
+/// or flow: h/(1000·m) (N → mm/ms a sub-step; 0.005 ms over 0.2 kg is 2.5e-5, 2 LSB of
+/// Q16.16) and h/C (mm³/ms → MPa a sub-step, 1.4e-6), each a few tens times 2^20.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct SubStep<R> {
     /// h, ms.
     pub h: R,
     /// Fixed point: h times 2^10 (≤ 5.12 for h ≤ 5 µs); the floats do not use it.
     pub h_x1024: R,
+    /// Fixed point: h/(1000·me) times 2^20 (the floats do not use it).
+    pub h_per_kn_x2p20: R,
+    /// Fixed point: h/Ch and h/Cl times 2^20.
+    pub h_per_cap_high_x2p20: R,
+    pub h_per_cap_low_x2p20: R,
 }
 
 impl<R: Real> SubStep<R> {
-    /// `h_ms` (at most [`super::reduced::MAX_SUBSTEP_MS`]) in the model's number type.
-    pub fn new(h_ms: f64) -> Self {
+    /// `h_ms` (at most [`super::reduced::MAX_SUBSTEP_MS`]) in the model's number type, with
+    /// its products with the mass and capacities of `p`.
+    pub fn new(h_ms: f64, p: &EhvvaParams) -> Self {
+        let x2p20 = 1024.0 * 1024.0 * h_ms;
         Self {
             h: R::from_f64(h_ms),
             h_x1024: R::from_f64(h_ms * 1024.0),
+            h_per_kn_x2p20: R::from_f64(x2p20 / (1000.0 * p.mass_kg)),
+            h_per_cap_high_x2p20: R::from_f64(x2p20 / p.cap_high_mm3_per_mpa),
+            h_per_cap_low_x2p20: R::from_f64(x2p20 / p.cap_low_mm3_per_mpa),
         }
     }
 
@@ -473,12 +490,12 @@ mod tests {
             &mut full,
             force,
             R::from_f64(quad_gain),
-            SubStep::new(h),
+            SubStep::new(h, &p),
             stroke,
             set_high,
             set_low,
         );
-        piston.advance_held(&mut held, SubStep::new(h), set_high, set_low);
+        piston.advance_held(&mut held, SubStep::new(h, &p), set_high, set_low);
         Some(
             full.lift == held.lift
                 && full.vel == held.vel

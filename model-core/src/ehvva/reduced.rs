@@ -100,7 +100,7 @@ impl<R: Real, const N: usize> EhvvaReduced<R, N> {
             tables,
             dt: R::from_f64(dt_ms),
             inv_dt: R::from_f64(1.0 / dt_ms),
-            h: SubStep::new(dt_ms / substeps as f64),
+            h: SubStep::new(dt_ms / substeps as f64, params),
             substeps,
             inv_substeps: R::from_f64(1.0 / substeps as f64),
             p_mo: inputs.p_back_mpa,
