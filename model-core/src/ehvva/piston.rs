@@ -261,15 +261,10 @@ impl<R: Real> Piston<R> {
     /// set so the steady state with the valve at rest is exactly the set-point.
     #[inline(always)]
     pub fn p_high_rate(&self, p_high: R, p_set: R, vel: R) -> R {
-        self.p_high_net_flow(p_high, p_set, vel) * self.inv_cap_high
-    }
-
-    /// The net flow into the supply accumulator, mm³/ms: dPh/dt times its capacity.
-    #[inline(always)]
-    fn p_high_net_flow(&self, p_high: R, p_set: R, vel: R) -> R {
         let crack = p_set - self.pump_over_relief_high;
         let relief = self.relief_high * (p_high - crack).max(R::ZERO);
-        self.pump - relief - self.area_top * vel.max(R::ZERO)
+        let net_flow = self.pump - relief - self.area_top * vel.max(R::ZERO);
+        net_flow * self.inv_cap_high
     }
 
     /// dPl/dt of eq. (7): the bottom chamber pushes Ab·v into the back-pressure line while
@@ -277,14 +272,9 @@ impl<R: Real> Piston<R> {
     /// two chambers); relief above and check-valve make-up below the set-point.
     #[inline(always)]
     pub fn p_low_rate(&self, p_low: R, p_set: R, vel: R) -> R {
-        self.p_low_net_flow(p_low, p_set, vel) * self.inv_cap_low
-    }
-
-    /// The net flow into the back-pressure accumulator, mm³/ms.
-    #[inline(always)]
-    fn p_low_net_flow(&self, p_low: R, p_set: R, vel: R) -> R {
         let inflow = self.area_bottom * vel.max(R::ZERO) + (self.area_top - self.area_bottom) * (-vel).max(R::ZERO);
-        inflow - self.relief_low * (p_low - p_set)
+        let net_flow = inflow - self.relief_low * (p_low - p_set);
+        net_flow * self.inv_cap_low
     }
 
     /// One sub-step `h` of the piston and both accumulators, the part the reduced (eq. (12))
@@ -353,19 +343,25 @@ impl<R: Real> Piston<R> {
             m.p_high += h.h * self.p_high_rate(m.p_high, p_supply_set, m.vel);
             m.p_low += h.h * self.p_low_rate(m.p_low, p_back_set, m.vel);
         } else {
-            // h·flow/C times 2^10, one product each (h/C held times 2^20).
-            let flow_high = self.p_high_net_flow(m.p_high, p_supply_set, m.vel);
-            let flow_low = self.p_low_net_flow(m.p_low, p_back_set, m.vel);
+            // The flows of `p_high_rate` and `p_low_rate`, each term times h/C·2^10
+            // (`SubStep`): one product a term, and only the velocity's direction's.
+            let crack = p_supply_set - self.pump_over_relief_high;
+            let relief_high = (m.p_high - crack).max(R::ZERO).mul_shr(h.relief_high_x2p20, 10);
+            let relief_low = (m.p_low - p_back_set).mul_shr(h.relief_low_x2p20, 10);
+            let (drawn_high, pushed_low) = if m.vel > R::ZERO {
+                (
+                    m.vel.mul_shr(h.area_top_high_x2p20, 10),
+                    m.vel.mul_shr(h.area_bottom_low_x2p20, 10),
+                )
+            } else {
+                (R::ZERO, (-m.vel).mul_shr(h.area_net_low_x2p20, 10))
+            };
             add_carried(
                 &mut m.p_high,
                 &mut m.carry_x1024.p_high,
-                flow_high.mul_shr(h.h_per_cap_high_x2p20, 10),
+                h.pump_high_x1024 - relief_high - drawn_high,
             );
-            add_carried(
-                &mut m.p_low,
-                &mut m.carry_x1024.p_low,
-                flow_low.mul_shr(h.h_per_cap_low_x2p20, 10),
-            );
+            add_carried(&mut m.p_low, &mut m.carry_x1024.p_low, pushed_low - relief_low);
         }
     }
 }
@@ -397,9 +393,15 @@ pub(crate) struct SubStep<R> {
     pub h_x1024: R,
     /// Fixed point: h/(1000·me) times 2^20 (the floats do not use it).
     pub h_per_kn_x2p20: R,
-    /// Fixed point: h/Ch and h/Cl times 2^20.
-    pub h_per_cap_high_x2p20: R,
-    pub h_per_cap_low_x2p20: R,
+    /// Fixed point: the accumulators' flow terms times h/C·2^20: the pump's (times 2^10 only:
+    /// a constant increment), the relief valves' gains, the piston areas' (At and Ab opening,
+    /// At − Ab closing).
+    pub pump_high_x1024: R,
+    pub relief_high_x2p20: R,
+    pub area_top_high_x2p20: R,
+    pub relief_low_x2p20: R,
+    pub area_bottom_low_x2p20: R,
+    pub area_net_low_x2p20: R,
 }
 
 impl<R: Real> SubStep<R> {
@@ -407,12 +409,17 @@ impl<R: Real> SubStep<R> {
     /// its products with the mass and capacities of `p`.
     pub fn new(h_ms: f64, p: &EhvvaParams) -> Self {
         let x2p20 = 1024.0 * 1024.0 * h_ms;
+        let (high, low) = (p.cap_high_mm3_per_mpa, p.cap_low_mm3_per_mpa);
         Self {
             h: R::from_f64(h_ms),
             h_x1024: R::from_f64(h_ms * 1024.0),
             h_per_kn_x2p20: R::from_f64(x2p20 / (1000.0 * p.mass_kg)),
-            h_per_cap_high_x2p20: R::from_f64(x2p20 / p.cap_high_mm3_per_mpa),
-            h_per_cap_low_x2p20: R::from_f64(x2p20 / p.cap_low_mm3_per_mpa),
+            pump_high_x1024: R::from_f64(x2p20 / 1024.0 * p.pump_flow_mm3_per_ms / high),
+            relief_high_x2p20: R::from_f64(x2p20 * p.relief_high_mm3_per_ms_mpa / high),
+            area_top_high_x2p20: R::from_f64(x2p20 * p.area_top_mm2 / high),
+            relief_low_x2p20: R::from_f64(x2p20 * p.relief_low_mm3_per_ms_mpa / low),
+            area_bottom_low_x2p20: R::from_f64(x2p20 * p.area_bottom_mm2 / low),
+            area_net_low_x2p20: R::from_f64(x2p20 * (p.area_top_mm2 - p.area_bottom_mm2) / low),
         }
     }
 
