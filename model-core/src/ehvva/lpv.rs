@@ -309,8 +309,9 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaLpv<R, N> {
                     // The same update as the increment h(rate + a_rr x)/(1 − h a_rr), formed
                     // times 2^10 with what lies below the LSB carried: near its steady value
                     // a row relaxes by less than an LSB a sub-step and, rounded each time,
-                    // stalled (the velocity's terminal value, the lift 0.37 % of the stroke
-                    // off f64's at 5.5 MPa). The position row has no diagonal: no division.
+                    // stalled (the velocity short of its terminal value: with the sub-step
+                    // held exactly, the lift 0.37 % of the stroke off f64's at 5.5 MPa). The
+                    // position row has no diagonal: no division.
                     let inc_x1024 = if a[row][row] == R::ZERO {
                         self.h.h_x1024 * rate
                     } else {

@@ -207,7 +207,7 @@ impl<R: Real> Piston<R> {
     /// velocity relaxes by less than an LSB a sub-step (c ≈ 2e-4 at 1.5 m/s), and rounded each
     /// sub-step it stalled up to 0.5 LSB/c off (the velocity 0.4 % low at 5.5 MPa supply, 4 MPa
     /// back pressure); the lift's increment h·v, the same each sub-step at a steady velocity,
-    /// rounded the same way each time. 1/m and h each held times 2^10.
+    /// rounded the same way each time. h and h/m held times 2^10 and 2^20 ([`SubStep`]).
     fn motion_step_fixed(&self, m: &mut Moving<R>, force: R, quad_gain: R, h: SubStep<R>) -> (R, R) {
         let damping = self.friction + quad_gain * m.vel.abs();
         // h·F/m and h·damping/m times 2^10, one product each (h/m held times 2^20): a few
@@ -383,8 +383,8 @@ pub(crate) fn add_carried<R: Real>(p: &mut R, carry: &mut R, increment_x1024: R)
 ///
 /// Fixed point also holds the sub-step's products with the piston's and accumulators'
 /// constants, times 2^20, so that each increment is one product of a state-dependent force
-/// or flow: h/(1000·m) (N → mm/ms a sub-step; 0.005 ms over 0.2 kg is 2.5e-5, 2 LSB of
-/// Q16.16) and h/C (mm³/ms → MPa a sub-step, 1.4e-6), each a few tens times 2^20.
+/// or flow: h/(1000·m) (N → mm/ms a sub-step; 0.005 ms over 0.2 kg is 2.5e-5, under 2 LSB
+/// of Q16.16) and h/C (mm³/ms → MPa a sub-step, 1.4e-6), each a few tens times 2^20.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct SubStep<R> {
     /// h, ms.
