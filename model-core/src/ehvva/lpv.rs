@@ -303,8 +303,8 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaLpv<R, N> {
                     }
                 }
                 if R::IS_FLOAT {
-                    let num = self.x[row] + self.h.times(rate);
-                    self.x[row] = num / (R::ONE - self.h.times(a[row][row]));
+                    let num = self.x[row] + self.h.h * rate;
+                    self.x[row] = num / (R::ONE - self.h.h * a[row][row]);
                 } else {
                     // The same update as the increment h(rate + a_rr x)/(1 − h a_rr), formed
                     // times 2^10 with what lies below the LSB carried: near its steady value

@@ -195,10 +195,10 @@ impl<R: Real> Piston<R> {
     /// damping cannot make the step unstable whatever the orifice area.
     ///
     /// The floats only; fixed point takes [`Self::motion_step_fixed`].
-    pub fn velocity_step(&self, vel: R, force: R, quad_gain: R, h: SubStep<R>) -> R {
+    pub fn velocity_step(&self, vel: R, force: R, quad_gain: R, h: R) -> R {
         let damping = self.friction + quad_gain * vel.abs();
-        let accel = h.h.step_times(self.accel_per_newton, force);
-        (vel + accel) / (R::ONE + h.h.step_times(self.accel_per_newton, damping))
+        let accel = h.step_times(self.accel_per_newton, force);
+        (vel + accel) / (R::ONE + h.step_times(self.accel_per_newton, damping))
     }
 
     /// Fixed point's [`Self::velocity_step`] and lift update, unclamped: the same scheme as
@@ -293,8 +293,8 @@ impl<R: Real> Piston<R> {
         p_back_set: R,
     ) {
         let (free_lift, free_vel) = if R::IS_FLOAT {
-            let vel = self.velocity_step(m.vel, force, quad_gain, h);
-            (m.lift + h.times(vel), vel)
+            let vel = self.velocity_step(m.vel, force, quad_gain, h.h);
+            (m.lift + h.h * vel, vel)
         } else {
             self.motion_step_fixed(m, force, quad_gain, h)
         };
@@ -420,16 +420,6 @@ impl<R: Real> SubStep<R> {
             relief_low_x2p20: R::from_f64(x2p20 * p.relief_low_mm3_per_ms_mpa / low),
             area_bottom_low_x2p20: R::from_f64(x2p20 * p.area_bottom_mm2 / low),
             area_net_low_x2p20: R::from_f64(x2p20 * (p.area_top_mm2 - p.area_bottom_mm2) / low),
-        }
-    }
-
-    /// h·x: the floats' product; fixed point's from h times 2^10, rounded once.
-    #[inline(always)]
-    pub fn times(self, x: R) -> R {
-        if R::IS_FLOAT {
-            self.h * x
-        } else {
-            self.h_x1024.mul_shr(x, 10)
         }
     }
 }
