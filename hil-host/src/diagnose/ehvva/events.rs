@@ -5,6 +5,7 @@
 use std::collections::hash_map::DefaultHasher;
 use std::hash::{Hash, Hasher};
 
+use model_core::ehvva::reduced::MAX_SUBSTEP_MS;
 use model_core::ehvva::{EhvvaInputs, EhvvaParams, EhvvaPlant, EhvvaReduced};
 
 use crate::log::Log;
@@ -54,7 +55,15 @@ pub struct Events {
     /// Samples in the log (the events cover it from the first one's start).
     pub samples: usize,
     pub file: String,
+    /// The model's longest sub-step in these events' simulations, ms:
+    /// [`MAX_SUBSTEP_MS`](model_core::ehvva::reduced::MAX_SUBSTEP_MS) (the model's accuracy),
+    /// or [`COARSE_SUBSTEP_MS`] for a fit's first approach ([`Events::coarse`]).
+    pub max_substep_ms: f64,
 }
+
+/// The sub-step of a fit's first approach ([`Events::coarse`]): five times the model's, so
+/// a 20 kHz sample takes two sub-steps instead of ten.
+pub const COARSE_SUBSTEP_MS: f64 = 0.025;
 
 fn median(v: &mut [f64]) -> f64 {
     v.sort_by(f64::total_cmp);
@@ -160,7 +169,17 @@ impl Events {
             events,
             samples: n,
             file: log.file.clone(),
+            max_substep_ms: MAX_SUBSTEP_MS,
         })
+    }
+
+    /// The same events simulated with the sub-step of a fit's first approach
+    /// ([`COARSE_SUBSTEP_MS`]).
+    pub fn coarse(&self) -> Events {
+        Events {
+            max_substep_ms: COARSE_SUBSTEP_MS,
+            ..self.clone()
+        }
     }
 
     /// Samples before the first event: the log began while the valve was still moving (e.g. a
@@ -200,6 +219,7 @@ impl Events {
             events,
             samples: at,
             file: self.file.clone(),
+            max_substep_ms: self.max_substep_ms,
         }
     }
 
@@ -297,7 +317,7 @@ fn unsettled_prefix(u: &[f64], lift: &[f64], first_on: usize, pre: usize) -> usi
 /// included: where the spring cannot hold the valve on its seat against the back pressure
 /// ((At − Ab)·Pl > ks·ds) the valve leaves the seat before the command, as on the bench.
 pub fn simulate_event(params: &EhvvaParams, ev: &Event, dt_ms: f64, out: &mut [f64]) -> Result<(), String> {
-    simulate_events(params, core::slice::from_ref(ev), dt_ms, ev.start, out)
+    simulate_events(params, core::slice::from_ref(ev), dt_ms, MAX_SUBSTEP_MS, ev.start, out)
 }
 
 /// How many events [`simulate_events`] steps side by side.
@@ -311,10 +331,11 @@ struct Lane<'a> {
 }
 
 impl<'a> Lane<'a> {
-    fn new(params: &EhvvaParams, ev: &'a Event, dt_ms: f64) -> Result<Self, String> {
+    fn new(params: &EhvvaParams, ev: &'a Event, dt_ms: f64, max_substep_ms: f64) -> Result<Self, String> {
         Ok(Self {
             ev,
-            model: EhvvaReduced::new(params, &ev.inputs, dt_ms).map_err(|e| format!("{e:?}"))?,
+            model: EhvvaReduced::with_max_substep(params, &ev.inputs, dt_ms, max_substep_ms)
+                .map_err(|e| format!("{e:?}"))?,
             seated_for: 0,
         })
     }
@@ -348,6 +369,7 @@ fn simulate_events(
     params: &EhvvaParams,
     events: &[Event],
     dt_ms: f64,
+    max_substep_ms: f64,
     base: usize,
     out: &mut [f64],
 ) -> Result<(), String> {
@@ -357,7 +379,7 @@ fn simulate_events(
         let mut lanes = Vec::with_capacity(LANES);
         let mut outs: Vec<&mut [f64]> = Vec::with_capacity(LANES);
         for ev in group {
-            lanes.push(Lane::new(params, ev, dt_ms)?);
+            lanes.push(Lane::new(params, ev, dt_ms, max_substep_ms)?);
             let gap = ev
                 .start
                 .checked_sub(rest_from)
@@ -383,7 +405,7 @@ fn simulate_events(
 /// ([`Events::skipped`]) are set to 0, as [`Events::measured`] has them.
 pub fn simulate_all(params: &EhvvaParams, set: &Events, out: &mut [f64]) -> Result<(), String> {
     out[..set.skipped()].fill(0.0);
-    simulate_events(params, &set.events, set.dt_ms, 0, out)
+    simulate_events(params, &set.events, set.dt_ms, set.max_substep_ms, 0, out)
 }
 
 /// As [`simulate_all`], with the events shared among `threads` threads: they are independent
@@ -414,7 +436,9 @@ pub fn simulate_all_on(params: &EhvvaParams, set: &Events, out: &mut [f64], thre
     std::thread::scope(|s| {
         let handles: Vec<_> = runs
             .into_iter()
-            .map(|(events, o)| s.spawn(move || simulate_events(params, events, set.dt_ms, events[0].start, o)))
+            .map(|(events, o)| {
+                s.spawn(move || simulate_events(params, events, set.dt_ms, set.max_substep_ms, events[0].start, o))
+            })
             .collect();
         handles
             .into_iter()

@@ -8,7 +8,13 @@ use super::{apply_knobs, reference_values, simulate_all_on, Events, Knob, BASELI
 use crate::lsq::{solve, LsqOptions, LsqResult, StopReason};
 
 /// Fits `knobs` (starting at `x0`) on the lift simulation error of `set` by the trust-region
-/// solver: the calibration problem of eqs. (16)-(20), shared by `diagnose` and `identify`.
+/// solver: the calibration problem of eqs. (16)-(20), in two stages. The approach runs on the
+/// model with five times its sub-step ([`Events::coarse`]: a fifth of the sub-steps, a third
+/// of the time), whose optimum lies near the model's own; the fit then goes on from there on
+/// the model as it is, and ends where that one stops (same solver, same tolerances). Most of
+/// a fit's iterations are its approach, from a start far from the optimum; the second stage
+/// takes a few. A first stage that fails (its model diverging from the start) leaves the
+/// whole fit to the second.
 pub fn calibrate(
     base: &EhvvaParams,
     knobs: &[Knob],
@@ -16,7 +22,17 @@ pub fn calibrate(
     set: &Events,
     opts: &LsqOptions,
 ) -> Result<LsqResult, String> {
-    calibrate_with(base, knobs, x0, set, opts, &|_| Ok(()))
+    let approach = calibrate_with(base, knobs, x0, &set.coarse(), opts, &|_| Ok(()));
+    let start = approach.as_ref().map_or(x0, |a| &a.x[..]);
+    let r = calibrate_with(base, knobs, start, set, opts, &|_| Ok(()))?;
+    Ok(match approach {
+        Ok(a) => LsqResult {
+            iterations: a.iterations + r.iterations,
+            evaluations: a.evaluations + r.evaluations,
+            ..r
+        },
+        Err(_) => r,
+    })
 }
 
 /// [`calibrate`], restarted from its end when it stopped on a collapsed step or trust region,
@@ -35,7 +51,8 @@ pub(super) fn calibrate_restarted(
         if !matches!(r.stop, StopReason::StepConverged | StopReason::RegionCollapsed) {
             break;
         }
-        let again = calibrate(base, knobs, &r.x, set, opts)?;
+        // From where the last run stopped: no second approach.
+        let again = calibrate_with(base, knobs, &r.x, set, opts, &|_| Ok(()))?;
         let went_on = again.cost < 0.999 * r.cost;
         if again.cost < r.cost {
             r = LsqResult {

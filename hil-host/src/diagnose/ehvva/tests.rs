@@ -307,3 +307,31 @@ fn logs_without_events_or_too_slow_are_refused_by_name() {
     est.dt_s = 1e-3;
     assert!(Events::from_log(&est).unwrap_err().contains("0.1 ms or less"));
 }
+
+/// A fit's approach on the coarse model ([`Events::coarse`]) ends where the fit on the model
+/// alone ends: the paper's four knobs on a unit's log, from the onset-matched start, reach the
+/// same cost and values either way; the coarse simulation itself differs from the model's.
+#[test]
+fn the_approach_on_the_coarse_model_ends_at_the_models_own_optimum() {
+    let f = EhvvaFamily::default();
+    let (est, _, _) = logs("none", 5);
+    let set = Events::from_log(&est).unwrap();
+    let x0 = f.baseline_start(&set).unwrap();
+    let p = EhvvaParams::baseline();
+    let fine_only = calibrate_with(&p, &BASELINE_KNOBS, &x0, &set, &f.lsq, &|_| Ok(())).unwrap();
+    let two_stage = calibrate(&p, &BASELINE_KNOBS, &x0, &set, &f.lsq).unwrap();
+    assert!(
+        (two_stage.cost / fine_only.cost - 1.0).abs() < 1e-3,
+        "cost {} vs {}",
+        two_stage.cost,
+        fine_only.cost
+    );
+    for (k, (a, b)) in BASELINE_KNOBS.iter().zip(two_stage.x.iter().zip(&fine_only.x)) {
+        assert!((a / b - 1.0).abs() < 0.01, "{}: {a} vs {b}", k.name);
+    }
+    let pp = apply_knobs(&p, &BASELINE_KNOBS, &fine_only.x);
+    let (mut fine, mut coarse) = (vec![0.0; set.samples], vec![0.0; set.samples]);
+    simulate_all(&pp, &set, &mut fine).unwrap();
+    simulate_all(&pp, &set.coarse(), &mut coarse).unwrap();
+    assert!(fine != coarse, "the coarse sub-step did not reach the model");
+}
