@@ -389,7 +389,8 @@ pub(crate) fn add_carried<R: Real>(p: &mut R, carry: &mut R, increment_x1024: R)
 pub(crate) struct SubStep<R> {
     /// h, ms.
     pub h: R,
-    /// Fixed point: h times 2^10 (≤ 5.12 for h ≤ 5 µs); the floats do not use it.
+    /// Fixed point: h times 2^10 (5.12 at the model's 5 µs, 102.4 at the longest sub-step a
+    /// caller may ask for, 0.1 ms); the floats do not use it.
     pub h_x1024: R,
     /// Fixed point: h/(1000·me) times 2^20 (the floats do not use it).
     pub h_per_kn_x2p20: R,
@@ -405,7 +406,8 @@ pub(crate) struct SubStep<R> {
 }
 
 impl<R: Real> SubStep<R> {
-    /// `h_ms` (at most [`super::reduced::MAX_SUBSTEP_MS`]) in the model's number type, with
+    /// `h_ms` ([`super::reduced::MAX_SUBSTEP_MS`] or shorter; at most
+    /// [`super::reduced::MAX_STEP_MS`] for a coarse approach) in the model's number type, with
     /// its products with the mass and capacities of `p`.
     pub fn new(h_ms: f64, p: &EhvvaParams) -> Self {
         let x2p20 = 1024.0 * 1024.0 * h_ms;
