@@ -134,6 +134,50 @@ pub trait Real:
         self * Self::from_f64(pow2_f64(exp))
     }
 
+    /// `a₀·b₀ + a₁·b₁ + …` over `terms` (at least one), left to right: the floats' bits of
+    /// that expression (write a difference as the sum with a negated factor: IEEE's `x + (−y)`
+    /// is `x − y`). Fixed point sums the exact products and rounds and saturates once, where
+    /// each product alone would round and saturate (on the Cortex-M4, 11 instructions a
+    /// product; here one multiply-accumulate a term and one saturation). Fixed point's
+    /// contract: every product below 2^29 in magnitude (one factor of each pair a unit
+    /// constant below 2^13, the other any value of Q16.16), so the exact sum of four cannot
+    /// overflow its accumulator; debug builds check it.
+    #[inline(always)]
+    fn sum_of_products<const K: usize>(terms: [(Self, Self); K]) -> Self {
+        // Unrolled by hand with constant indices: at the firmware's size-optimised level a
+        // loop over the array stayed a loop through the stack.
+        const { assert!(K >= 1 && K <= 4, "sum_of_products: one to four terms") };
+        let mut sum = terms[0].0 * terms[0].1;
+        if K > 1 {
+            sum += terms[1].0 * terms[1].1;
+        }
+        if K > 2 {
+            sum += terms[2].0 * terms[2].1;
+        }
+        if K > 3 {
+            sum += terms[3].0 * terms[3].1;
+        }
+        sum
+    }
+    /// [`Real::sum_of_products`] where the caller has proven the sum within the type's range
+    /// (weights in [0, 1] that add up to at most 1, times values): rounded once, not
+    /// saturated; debug builds assert the claim.
+    #[inline(always)]
+    fn sum_of_products_in_range<const K: usize>(terms: [(Self, Self); K]) -> Self {
+        Self::sum_of_products(terms)
+    }
+
+    /// `self · 2^-exp` rounded to the type (`whole`, as [`Real::mul_pow2`] gives it) and what
+    /// that rounding left, `self − whole · 2^exp` (`rest`), for a constant `exp` in 0..=16:
+    /// an increment held times 2^exp split into the part a state can take now and the part
+    /// carried to the next step. The rest is exact (|rest| ≤ 2^(exp−1) LSB), so Q16.16 forms
+    /// it in wrapping arithmetic even where `whole · 2^exp` alone would leave the range.
+    #[inline(always)]
+    fn split_pow2(self, exp: u32) -> (Self, Self) {
+        let whole = self.mul_pow2(-(exp as i32));
+        (whole, self - whole.mul_pow2(exp as i32))
+    }
+
     /// `self · rhs · 2^-exp` (`exp` in 0..=16) for a factor held times 2^exp because the type
     /// would round it too coarsely (a 5 µs sub-step is 327.5 LSB of Q16.16: 0.15 % off). The
     /// floats multiply and scale, exactly as `(self * rhs).mul_pow2(-exp)`; Q16.16 shifts its
@@ -141,6 +185,16 @@ pub trait Real:
     #[inline(always)]
     fn mul_shr(self, rhs: Self, exp: u32) -> Self {
         (self * rhs).mul_pow2(-(exp as i32))
+    }
+
+    /// [`Real::mul_shr`] where `|rhs| < 2^exp`, so that the product is below `|self|` and in
+    /// range whatever `self` is (a constant of a sub-step held times 2^exp because it is a
+    /// fraction of an LSB, times a force or a pressure): the bits of `mul_shr` there, without
+    /// its saturation test (7 of Q16.16's 13 instructions on the Cortex-M4); debug builds
+    /// assert the claim. The caller's constructor refuses a constant that breaks it.
+    #[inline(always)]
+    fn mul_shr_in_range(self, rhs: Self, exp: u32) -> Self {
+        self.mul_shr(rhs, exp)
     }
 
     /// Square root; 0 for negative arguments (never NaN).

@@ -125,6 +125,31 @@ impl Div for Q16 {
     }
 }
 
+/// Σ aₖ·bₖ times 2^32 plus half of Q16.16's LSB (2^15): the exact sum, ready to be shifted
+/// by 16 and rounded once. Each product is below 2^61 by the callers' contract
+/// ([`Real::sum_of_products`]), so four cannot overflow; debug builds check every addition.
+#[inline(always)]
+fn exact_sum_of_products<const K: usize>(terms: [(Q16, Q16); K]) -> i64 {
+    const { assert!(K >= 1 && K <= 4, "sum_of_products: one to four terms") };
+    // Unrolled by hand (constant indices): a loop stays a loop at the firmware's opt-level.
+    let term = |k: usize| {
+        let p = i64::from(terms[k].0 .0) * i64::from(terms[k].1 .0);
+        debug_assert!(p.unsigned_abs() < 1 << 61, "sum_of_products: a term above 2^29");
+        p
+    };
+    let mut sum: i64 = (1 << 15) + term(0);
+    if K > 1 {
+        sum = sum.wrapping_add(term(1));
+    }
+    if K > 2 {
+        sum = sum.wrapping_add(term(2));
+    }
+    if K > 3 {
+        sum = sum.wrapping_add(term(3));
+    }
+    sum
+}
+
 /// `n / d` truncated for `n < 2^48` and `d > 0`, or `2^32` when the quotient does not fit 32
 /// bits: long division in two base-2^16 digits (Knuth's algorithm D for a two-digit divisor),
 /// each digit estimated by one 32-bit hardware division and corrected at most twice.
@@ -155,7 +180,13 @@ fn div_48_by_32(n: u64, d: u32) -> u64 {
         // The remainder, below d: exact in wrapping arithmetic.
         (q, ((top << 16) | next).wrapping_sub(q.wrapping_mul(d)))
     };
-    let (q1, r1) = digit(n1, n0 >> 16);
+    // A quotient below 2^16 (a fraction's: τ/(τ + h)) has no high digit: n1 < dh puts
+    // n1·2^16 + the next 16 bits below d, so the high digit is 0 and that is its remainder.
+    let (q1, r1) = if n1 < dh {
+        (0, (n1 << 16) | (n0 >> 16))
+    } else {
+        digit(n1, n0 >> 16)
+    };
     let (q0, _) = digit(r1, n0 & 0xFFFF);
     (u64::from(q1) << 16) | u64::from(q0)
 }
@@ -277,6 +308,34 @@ impl Real for Q16 {
         }
     }
     #[inline(always)]
+    fn sum_of_products<const K: usize>(terms: [(Self, Self); K]) -> Self {
+        let sum = exact_sum_of_products(terms);
+        // As `*`'s test: bits 16..47 fit when bits 47..63 all equal the sign; else the limit
+        // of the sum's sign.
+        let hi = (sum >> 32) as i32;
+        let r = (sum >> 16) as i32;
+        if (hi >> 15) != (r >> 31) {
+            Q16((hi >> 31) ^ i32::MAX)
+        } else {
+            Q16(r)
+        }
+    }
+    #[inline(always)]
+    fn sum_of_products_in_range<const K: usize>(terms: [(Self, Self); K]) -> Self {
+        let p = exact_sum_of_products(terms) >> 16;
+        debug_assert!(
+            p == i64::from(p as i32),
+            "sum_of_products_in_range leaves the Q16.16 range"
+        );
+        Q16(p as i32)
+    }
+    #[inline(always)]
+    fn split_pow2(self, exp: u32) -> (Self, Self) {
+        let whole = self.mul_pow2(-(exp as i32));
+        // self − whole·2^exp is in [−2^(exp−1), 2^(exp−1)]: exact modulo 2^32.
+        (whole, Q16(self.0.wrapping_sub(whole.0.wrapping_shl(exp))))
+    }
+    #[inline(always)]
     fn mul_shr(self, rhs: Self, exp: u32) -> Self {
         debug_assert!(exp <= 16, "mul_shr: exponent {exp} outside 0..=16");
         // As `*` with the result's bits 16 + exp.. of the product: it fits when the bits from
@@ -290,6 +349,17 @@ impl Real for Q16 {
         } else {
             Q16(r)
         }
+    }
+    #[inline(always)]
+    fn mul_shr_in_range(self, rhs: Self, exp: u32) -> Self {
+        debug_assert!(exp <= 16, "mul_shr_in_range: exponent {exp} outside 0..=16");
+        debug_assert!(
+            u64::from(rhs.0.unsigned_abs()) < 1 << (16 + exp),
+            "mul_shr_in_range: |{}| is not below 2^{exp}",
+            rhs.to_f64()
+        );
+        let p = i64::from(self.0) * i64::from(rhs.0) + (1 << (15 + exp));
+        Q16((p >> (16 + exp)) as i32)
     }
     fn step_times(self, k: Self, x: Self) -> Self {
         // |k| < 1 where this is used (a reciprocal mass in m/s per ms per N), so k·x cannot

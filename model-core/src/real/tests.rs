@@ -18,6 +18,62 @@ proptest! {
     }
 
     #[test]
+    fn mul_shr_in_range_is_mul_shr_where_the_factor_is_below_2_to_exp(a in any::<i32>(), b in any::<i32>(), exp in 0u32..=16) {
+        // Any value times a factor below 2^exp, shifted by exp: in range, the bits of mul_shr.
+        let b = (i64::from(b) % (1i64 << (16 + exp))) as i32;
+        let (qa, qb) = (Q16::from_bits(a), Q16::from_bits(b));
+        prop_assert_eq!(qa.mul_shr_in_range(qb, exp), qa.mul_shr(qb, exp), "{} * {} >> {}", a, b, exp);
+    }
+
+    #[test]
+    fn split_pow2_gives_the_rounded_part_and_the_exact_rest(a in any::<i32>(), exp in 0u32..=16, x in -1e6f64..1e6) {
+        // Q16.16: whole is mul_pow2's rounding, whole·2^exp + rest is the value exactly and the
+        // rest is at most half of 2^exp LSB, at the range's ends too (whole·2^exp alone may
+        // leave the range there).
+        let q = Q16::from_bits(a);
+        let (whole, rest) = q.split_pow2(exp);
+        prop_assert_eq!(whole, q.mul_pow2(-(exp as i32)));
+        prop_assert_eq!(i64::from(whole.to_bits()) * (1 << exp) + i64::from(rest.to_bits()), i64::from(a));
+        prop_assert!(rest.to_bits().unsigned_abs() <= (1u32 << exp) / 2 + u32::from(exp == 0));
+        // The floats: the product and the difference as written.
+        let (w, r) = x.split_pow2(exp);
+        prop_assert_eq!(w.to_bits(), x.mul_pow2(-(exp as i32)).to_bits());
+        prop_assert_eq!(r.to_bits(), (x - w.mul_pow2(exp as i32)).to_bits());
+    }
+
+    #[test]
+    fn sum_of_products_rounds_and_saturates_the_exact_sum_once(
+        a in proptest::array::uniform4(any::<i32>()),
+        c in proptest::array::uniform4(-(1i32 << 29)..(1 << 29)),
+        x in proptest::array::uniform4(-1e3f64..1e3),
+    ) {
+        // Q16.16 with each pair's one factor below 2^13 (the contract): the exact sum of the
+        // products times 2^-16 rounded to nearest (halves up) and clamped to the range, for
+        // two, three and four terms.
+        let q = |k: usize| (Q16::from_bits(a[k]), Q16::from_bits(c[k]));
+        let want = |n: usize| {
+            let exact: i128 = (0..n).map(|k| i128::from(a[k]) * i128::from(c[k])).sum();
+            ((exact + (1 << 15)) >> 16).clamp(i128::from(i32::MIN), i128::from(i32::MAX)) as i32
+        };
+        prop_assert_eq!(Q16::sum_of_products([q(0), q(1)]).to_bits(), want(2));
+        prop_assert_eq!(Q16::sum_of_products([q(0), q(1), q(2)]).to_bits(), want(3));
+        prop_assert_eq!(Q16::sum_of_products([q(0), q(1), q(2), q(3)]).to_bits(), want(4));
+        // In range (weights in [0, 1] adding up to 1): the same rounding.
+        let w = Q16::from_bits(c[0].rem_euclid(1 << 16));
+        let pair = [(Q16::from_bits(a[0]), w), (Q16::from_bits(a[1]), Q16::ONE - w)];
+        let exact = i128::from(a[0]) * i128::from(w.to_bits()) + i128::from(a[1]) * i128::from((Q16::ONE - w).to_bits());
+        prop_assert_eq!(Q16::sum_of_products_in_range(pair).to_bits(), ((exact + (1 << 15)) >> 16) as i32);
+        // The floats: the bits of the expression written left to right, a difference as the
+        // sum with a negated factor.
+        prop_assert_eq!(f64::sum_of_products([(x[0], x[1]), (-x[2], x[3])]).to_bits(), (x[0] * x[1] - x[2] * x[3]).to_bits());
+        let (y, z) = (x[0] as f32, x[1] as f32);
+        prop_assert_eq!(
+            f32::sum_of_products([(y, z), (z, y), (-y, y)]).to_bits(),
+            (y * z + z * y - y * y).to_bits()
+        );
+    }
+
+    #[test]
     fn mul_shr_rounds_the_exact_product_once(a in any::<i32>(), b in any::<i32>(), exp in 0u32..=16, x in -1e3f64..1e3, y in -1e3f64..1e3) {
         // Q16.16: the exact a·b·2^-(16+exp) rounded to nearest (halves up), saturated to the
         // type's range, over every pair of values; the floats as the product then the scaling.
