@@ -76,3 +76,47 @@ pub(crate) fn q16_lift_deviation<F: EhvvaPlant<f64>, Q: EhvvaPlant<Q16>>(
     }
     worst / p.stroke_mm(c.lift_high)
 }
+
+/// The corners' grid the tests' comments quote: supply 5.5/6.75/8 MPa, back pressure
+/// 1/2.5/4 MPa, -20/40/100 °C, both lifts and switch states, 8 and 20 ms events.
+pub(crate) fn grid() -> impl Iterator<Item = Case> {
+    (0..3 * 3 * 3 * 8).map(|i| Case {
+        p_supply_mpa: [5.5, 6.75, 8.0][i % 3],
+        p_back_mpa: [1.0, 2.5, 4.0][i / 3 % 3],
+        temp_c: [-20.0, 40.0, 100.0][i / 9 % 3],
+        lift_high: i / 27 % 2 == 1,
+        snubber_on: i / 54 % 2 == 1,
+        on_steps: [800, 2000][i / 108 % 2],
+    })
+}
+
+/// Prints the largest Q16.16-vs-f64 lift deviation of both models over [`grid`] (the numbers
+/// the property tests' comments quote): `cargo test --release -p model-core --features std
+/// --lib q16_deviation_on_the_corners_grid -- --ignored --nocapture`.
+#[cfg(feature = "std")]
+#[test]
+#[ignore]
+fn q16_deviation_on_the_corners_grid() {
+    use crate::ehvva::{EhvvaLpv, EhvvaReduced};
+    let worst = |dev: &dyn Fn(Case) -> f64| grid().map(dev).fold(0.0f64, f64::max);
+    let reduced = worst(&|c| {
+        q16_lift_deviation(
+            c,
+            |p, i, dt| EhvvaReduced::<f64>::new(p, i, dt).unwrap(),
+            |p, i, dt| EhvvaReduced::<Q16>::new(p, i, dt).unwrap(),
+        )
+    });
+    let lpv = worst(&|c| {
+        q16_lift_deviation(
+            c,
+            |p, i, dt| EhvvaLpv::<f64>::new(p, i, dt).unwrap(),
+            |p, i, dt| EhvvaLpv::<Q16>::new(p, i, dt).unwrap(),
+        )
+    });
+    std::println!(
+        "largest lift deviation, % of the stroke: reduced {:.4}, LPV {:.4}",
+        100.0 * reduced,
+        100.0 * lpv
+    );
+    assert!(reduced <= 0.001 && lpv <= 0.001);
+}

@@ -204,7 +204,7 @@ impl<R: Real, const N: usize> EhvvaFull<R, N> {
             lag_close_per_mpa: r(v.dynamic_lag_close_ms_per_mpa),
             dt: r(dt_ms),
             inv_dt: r(1.0 / dt_ms),
-            h: SubStep::new(dt_ms / substeps as f64, params),
+            h: SubStep::new(dt_ms / substeps as f64, params)?,
             substeps,
             current: R::ZERO,
             xp: R::ZERO,

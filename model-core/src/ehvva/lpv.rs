@@ -177,7 +177,7 @@ impl<R: Real, const N: usize> EhvvaLpv<R, N> {
             preload,
             dt: R::from_f64(dt_ms),
             inv_dt: R::from_f64(1.0 / dt_ms),
-            h: SubStep::new(dt_ms / substeps as f64, params),
+            h: SubStep::new(dt_ms / substeps as f64, params)?,
             substeps,
             inv_substeps: R::ONE / R::from_f64(substeps as f64),
             x: [inputs.p_back_mpa, preload, R::ZERO],

@@ -58,6 +58,29 @@ pub(crate) struct Piston<R: Real> {
 impl<R: Real> Piston<R> {
     pub fn new(p: &EhvvaParams) -> Result<Self, EhvvaError> {
         p.validate()?;
+        if !R::IS_FLOAT {
+            // The fixed-point force and damping sum exact products of these with any state
+            // (`Real::sum_of_products`): each factor below 2^13.
+            let half_rho = 0.5 * p.density_kg_m3 * 1e-6;
+            for (v, name) in [
+                (p.area_top_mm2, "area_top_mm2"),
+                (p.area_bottom_mm2, "area_bottom_mm2"),
+                (p.spring_n_per_mm, "spring_n_per_mm"),
+                // ρ/2·A³ of the orifice damping (95 for the paper's top area).
+                (
+                    half_rho * p.area_top_mm2 * p.area_top_mm2 * p.area_top_mm2,
+                    "area_top_mm2",
+                ),
+                (
+                    half_rho * p.area_bottom_mm2 * p.area_bottom_mm2 * p.area_bottom_mm2,
+                    "area_bottom_mm2",
+                ),
+            ] {
+                if v >= 8192.0 {
+                    return Err(EhvvaError::InvalidParameter(name));
+                }
+            }
+        }
         let r = R::from_f64;
         let half_rho = 0.5 * p.density_kg_m3 * 1e-6;
         let mut piston = Self {
@@ -168,26 +191,70 @@ impl<R: Real> Piston<R> {
     }
 
     /// [`Self::quadratic_gain`] with 1/Cd² given: Cd is constant over a step, so a model that
-    /// sub-steps divides once per step instead of once per sub-step.
+    /// sub-steps divides once per step instead of once per sub-step. Inlined: as a call of
+    /// its own, about 15 instructions a sub-step on the target went to the call.
+    #[inline(always)]
     pub(crate) fn quadratic_gain_inv_cd2(&self, inv_cd2: R, lift: R, vel: R, stroke: R, switch_on: bool) -> R {
         let closing = vel < R::ZERO;
-        let top = self.half_rho_at3 * self.inv_a2_top(lift, closing, switch_on);
-        let bottom = self.half_rho_ab3 * self.inv_a2_bottom(lift, stroke);
-        (top + bottom) * inv_cd2
+        // The floats' ρ/2·At³/Aorit² + ρ/2·Ab³/Aorib²; fixed point rounds and saturates once
+        // (both ρ/2·A³ below 2^13, `Piston::new`).
+        R::sum_of_products([
+            (self.half_rho_at3, self.inv_a2_top(lift, closing, switch_on)),
+            (self.half_rho_ab3, self.inv_a2_bottom(lift, stroke)),
+        ]) * inv_cd2
+    }
+
+    /// Fixed point's damping gains at one temperature, ρ/2·At³/Cd² and ρ/2·Ab³/Cd², for
+    /// [`Self::quadratic_gain_at`]: Cd changes with the oil temperature only, so the product
+    /// by 1/Cd² is made when it changes, not once a sub-step. Refused where a gain would
+    /// reach 2^13 (`Real::sum_of_products`'s contract): `inv_cd2_max` is the largest 1/Cd²
+    /// the tables give.
+    pub(crate) fn damping_gains(&self, inv_cd2: R) -> DampingGains<R> {
+        DampingGains {
+            top: self.half_rho_at3 * inv_cd2,
+            bottom: self.half_rho_ab3 * inv_cd2,
+        }
+    }
+
+    /// Whether [`Self::damping_gains`] stay below 2^13 for every 1/Cd² up to `inv_cd2_max`.
+    pub(crate) fn check_damping_gains(&self, inv_cd2_max: f64) -> Result<(), EhvvaError> {
+        if self.half_rho_at3.to_f64() * inv_cd2_max < 8192.0 && self.half_rho_ab3.to_f64() * inv_cd2_max < 8192.0 {
+            Ok(())
+        } else {
+            Err(EhvvaError::InvalidParameter("tables.cd"))
+        }
+    }
+
+    /// Fixed point's [`Self::quadratic_gain_inv_cd2`] with the gains of [`Self::damping_gains`]:
+    /// one sum of two exact products, rounded and saturated once.
+    #[inline(always)]
+    pub(crate) fn quadratic_gain_at(&self, gains: DampingGains<R>, lift: R, vel: R, stroke: R, switch_on: bool) -> R {
+        let closing = vel < R::ZERO;
+        R::sum_of_products([
+            (gains.top, self.inv_a2_top(lift, closing, switch_on)),
+            (gains.bottom, self.inv_a2_bottom(lift, stroke)),
+        ])
     }
 
     /// As [`Self::quadratic_gain`] with the top orifice's 1/Aorit² given (the ninth-order model
     /// meters the main valve by its spool position).
     pub fn quadratic_gain_with(&self, cd: R, inv_a2_top: R, lift: R, stroke: R) -> R {
-        let top = self.half_rho_at3 * inv_a2_top;
-        let bottom = self.half_rho_ab3 * self.inv_a2_bottom(lift, stroke);
-        (top + bottom) / (cd * cd)
+        R::sum_of_products([
+            (self.half_rho_at3, inv_a2_top),
+            (self.half_rho_ab3, self.inv_a2_bottom(lift, stroke)),
+        ]) / (cd * cd)
     }
 
     /// Pressure, spring and seat-free force on the piston (eq. (1) right side without the
     /// velocity terms): At·P̃mo − Ab·Pl − ks(L + ds).
     pub fn static_force(&self, p_top: R, p_low: R, lift: R) -> R {
-        self.area_top * p_top - self.area_bottom * p_low - self.spring * (lift + self.preload)
+        // The floats' At·P̃mo − Ab·Pl − ks(L + ds); fixed point rounds and saturates once (the
+        // areas and the spring rate below 2^13, `Piston::new`).
+        R::sum_of_products([
+            (self.area_top, p_top),
+            (-self.area_bottom, p_low),
+            (-self.spring, lift + self.preload),
+        ])
     }
 
     /// One semi-implicit velocity step: the static force explicitly, friction and the quadratic
@@ -212,16 +279,23 @@ impl<R: Real> Piston<R> {
         let damping = self.friction + quad_gain * m.vel.abs();
         // h·F/m and h·damping/m times 2^10, one product each (h/m held times 2^20): a few
         // tens at most for any force and velocity of the envelope.
-        let a_x1024 = force.mul_shr(h.h_per_kn_x2p20, 10);
-        let c_x1024 = damping.mul_shr(h.h_per_kn_x2p20, 10);
+        let a_x1024 = force.mul_shr_in_range(h.h_per_kn_x2p20, 10);
+        let c_x1024 = damping.mul_shr_in_range(h.h_per_kn_x2p20, 10);
         let num_x1024 = a_x1024 - c_x1024 * m.vel;
         let c = c_x1024.mul_pow2(-10);
-        // 1/(1 + c) as 1 − c + c² − c³ + c⁴ where c < 1/16 (most of a stroke: c ≈ 2e-4 at
-        // 1.5 m/s off the snubbers) and the type is coarse (the next term, c⁵ < 1e-6, below
-        // Q16.16's resolution): four products in range (c < 1, each factor in [0, 1]) for a
-        // long division. Otherwise, and in Q32.32, the division.
+        // 1/(1 + c) as 1 − c + c² − … where c < 1/16 (most of a stroke: c ≈ 2e-4 at 1.5 m/s
+        // off the snubbers) and the type is coarse: the terms up to the first below a quarter
+        // of Q16.16's LSB (2^-18): 1 − c for c < 2^-9, to c² for c < 2^-6, to c⁴ for c < 2^-4;
+        // products in range (c < 1, each factor in [0, 1]) for a long division. Otherwise,
+        // and in Q32.32, the division.
         let dv_x1024 = if !crate::real::resolves::<R>(1e-6) && c_x1024 < R::ONE.mul_pow2(6) {
-            let inv = R::ONE - c.mul_in_range(R::ONE - c.mul_in_range(R::ONE - c.mul_in_range(R::ONE - c)));
+            let inv = if c_x1024 < R::ONE.mul_pow2(1) {
+                R::ONE - c
+            } else if c_x1024 < R::ONE.mul_pow2(4) {
+                R::ONE - c.mul_in_range(R::ONE - c)
+            } else {
+                R::ONE - c.mul_in_range(R::ONE - c.mul_in_range(R::ONE - c.mul_in_range(R::ONE - c)))
+            };
             num_x1024.mul_in_range(inv)
         } else {
             num_x1024 / (R::ONE + c)
@@ -238,6 +312,13 @@ impl<R: Real> Piston<R> {
     pub fn stops(lift: R, vel: R, stroke: R) -> (R, R, Option<R>) {
         stops(lift, vel, stroke)
     }
+}
+
+/// The orifice damping's gains at one oil temperature ([`Piston::damping_gains`]).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct DampingGains<R> {
+    top: R,
+    bottom: R,
 }
 
 /// End stops at 0 and `max` for any sliding part (piston eq. (1), spools eq. (2)): clamps the
@@ -298,17 +379,24 @@ impl<R: Real> Piston<R> {
         } else {
             self.motion_step_fixed(m, force, quad_gain, h)
         };
-        let (lift, vel, impact) = Piston::stops(free_lift, free_vel, stroke);
-        if !R::IS_FLOAT && lift != free_lift {
-            // On a stop: nothing below the LSB of a motion that ended.
-            m.carry_x1024.vel = R::ZERO;
-            m.carry_x1024.lift = R::ZERO;
+        if free_lift > R::ZERO && free_lift < stroke {
+            // Between the stops (most sub-steps of a motion): what `stops` would return, without
+            // its tuple and option (on the target a dozen stores and loads a sub-step).
+            m.lift = free_lift;
+            m.vel = free_vel;
+        } else {
+            let (lift, vel, impact) = Piston::stops(free_lift, free_vel, stroke);
+            if !R::IS_FLOAT && lift != free_lift {
+                // On a stop: nothing below the LSB of a motion that ended.
+                m.carry_x1024.vel = R::ZERO;
+                m.carry_x1024.lift = R::ZERO;
+            }
+            if impact.is_some() && m.lift > R::ZERO {
+                m.seat_velocity = impact;
+            }
+            m.lift = lift;
+            m.vel = vel;
         }
-        if impact.is_some() && m.lift > R::ZERO {
-            m.seat_velocity = impact;
-        }
-        m.lift = lift;
-        m.vel = vel;
         self.advance_accumulators(m, h, p_supply_set, p_back_set);
     }
 
@@ -346,15 +434,18 @@ impl<R: Real> Piston<R> {
             // The flows of `p_high_rate` and `p_low_rate`, each term times h/C·2^10
             // (`SubStep`): one product a term, and only the velocity's direction's.
             let crack = p_supply_set - self.pump_over_relief_high;
-            let relief_high = (m.p_high - crack).max(R::ZERO).mul_shr(h.relief_high_x2p20, 10);
-            let relief_low = (m.p_low - p_back_set).mul_shr(h.relief_low_x2p20, 10);
+            // Each constant below 2^10 (`SubStep::new`): every product in range.
+            let relief_high = (m.p_high - crack)
+                .max(R::ZERO)
+                .mul_shr_in_range(h.relief_high_x2p20, 10);
+            let relief_low = (m.p_low - p_back_set).mul_shr_in_range(h.relief_low_x2p20, 10);
             let (drawn_high, pushed_low) = if m.vel > R::ZERO {
                 (
-                    m.vel.mul_shr(h.area_top_high_x2p20, 10),
-                    m.vel.mul_shr(h.area_bottom_low_x2p20, 10),
+                    m.vel.mul_shr_in_range(h.area_top_high_x2p20, 10),
+                    m.vel.mul_shr_in_range(h.area_bottom_low_x2p20, 10),
                 )
             } else {
-                (R::ZERO, (-m.vel).mul_shr(h.area_net_low_x2p20, 10))
+                (R::ZERO, (-m.vel).mul_shr_in_range(h.area_net_low_x2p20, 10))
             };
             add_carried(
                 &mut m.p_high,
@@ -370,9 +461,8 @@ impl<R: Real> Piston<R> {
 /// (times 2^10) for the next call.
 #[inline(always)]
 pub(crate) fn add_carried<R: Real>(p: &mut R, carry: &mut R, increment_x1024: R) {
-    let total = *carry + increment_x1024;
-    let whole = total.mul_pow2(-10);
-    *carry = total - whole.mul_pow2(10);
+    let (whole, rest) = (*carry + increment_x1024).split_pow2(10);
+    *carry = rest;
     *p += whole;
 }
 
@@ -409,10 +499,32 @@ impl<R: Real> SubStep<R> {
     /// `h_ms` ([`super::reduced::MAX_SUBSTEP_MS`] or shorter; at most
     /// [`super::reduced::MAX_STEP_MS`] for a coarse approach) in the model's number type, with
     /// its products with the mass and capacities of `p`.
-    pub fn new(h_ms: f64, p: &EhvvaParams) -> Self {
+    ///
+    /// Fixed point takes the products held times 2^20 by a force or pressure with
+    /// [`Real::mul_shr_in_range`], which needs each below 2^10 (h/m, h/C and the flow gains
+    /// a fraction of an LSB a sub-step, as they are for any valve the model's sub-step can
+    /// resolve: 29 for h/(1000 m) at 5 µs and 0.183 kg); a parameter that breaks it is refused
+    /// by name.
+    pub fn new(h_ms: f64, p: &EhvvaParams) -> Result<Self, EhvvaError> {
         let x2p20 = 1024.0 * 1024.0 * h_ms;
         let (high, low) = (p.cap_high_mm3_per_mpa, p.cap_low_mm3_per_mpa);
-        Self {
+        if !R::IS_FLOAT {
+            for (v, name) in [
+                (x2p20 / (1000.0 * p.mass_kg), "mass_kg"),
+                (
+                    x2p20 * p.relief_high_mm3_per_ms_mpa / high,
+                    "relief_high_mm3_per_ms_mpa",
+                ),
+                (x2p20 * p.area_top_mm2 / high, "cap_high_mm3_per_mpa"),
+                (x2p20 * p.relief_low_mm3_per_ms_mpa / low, "relief_low_mm3_per_ms_mpa"),
+                (x2p20 * p.area_top_mm2 / low, "cap_low_mm3_per_mpa"),
+            ] {
+                if !(v < 1024.0) {
+                    return Err(EhvvaError::InvalidParameter(name));
+                }
+            }
+        }
+        Ok(Self {
             h: R::from_f64(h_ms),
             h_x1024: R::from_f64(h_ms * 1024.0),
             h_per_kn_x2p20: R::from_f64(x2p20 / (1000.0 * p.mass_kg)),
@@ -422,7 +534,7 @@ impl<R: Real> SubStep<R> {
             relief_low_x2p20: R::from_f64(x2p20 * p.relief_low_mm3_per_ms_mpa / low),
             area_bottom_low_x2p20: R::from_f64(x2p20 * p.area_bottom_mm2 / low),
             area_net_low_x2p20: R::from_f64(x2p20 * (p.area_top_mm2 - p.area_bottom_mm2) / low),
-        }
+        })
     }
 }
 
@@ -484,17 +596,15 @@ mod tests {
         if !piston.held_at_stop(&m0, force, stroke) {
             return None;
         }
+        let h = match SubStep::new(h, &p) {
+            Ok(h) => h,
+            // Fixed point refuses a sub-step too long for its in-range products.
+            Err(_) if !R::IS_FLOAT => return None,
+            Err(e) => panic!("{e:?}"),
+        };
         let (mut full, mut held) = (m0, m0);
-        piston.advance(
-            &mut full,
-            force,
-            R::from_f64(quad_gain),
-            SubStep::new(h, &p),
-            stroke,
-            set_high,
-            set_low,
-        );
-        piston.advance_held(&mut held, SubStep::new(h, &p), set_high, set_low);
+        piston.advance(&mut full, force, R::from_f64(quad_gain), h, stroke, set_high, set_low);
+        piston.advance_held(&mut held, h, set_high, set_low);
         Some(
             full.lift == held.lift
                 && full.vel == held.vel
@@ -503,6 +613,30 @@ mod tests {
                 && full.seat_velocity.is_none()
                 && held.seat_velocity.is_none(),
         )
+    }
+
+    #[test]
+    fn fixed_point_refuses_constants_its_in_range_products_cannot_hold() {
+        // The model's 5 µs sub-step holds the paper's valve; a 0.1 ms one (a coarse approach's,
+        // for the floats) makes h/C times the supply accumulator's relief gain 6x too large
+        // for Q16.16's in-range product, and is refused by the parameter's name.
+        let p = EhvvaParams::paper_default();
+        assert!(SubStep::<Q16>::new(super::super::reduced::MAX_SUBSTEP_MS, &p).is_ok());
+        assert!(SubStep::<f64>::new(super::super::reduced::MAX_STEP_MS, &p).is_ok());
+        assert_eq!(
+            SubStep::<Q16>::new(super::super::reduced::MAX_STEP_MS, &p).err(),
+            Some(EhvvaError::InvalidParameter("relief_high_mm3_per_ms_mpa"))
+        );
+        // A piston area whose exact products with pressures the force's sum cannot hold.
+        let big = EhvvaParams {
+            area_top_mm2: 9000.0,
+            ..p
+        };
+        assert_eq!(
+            Piston::<Q16>::new(&big).err(),
+            Some(EhvvaError::InvalidParameter("area_top_mm2"))
+        );
+        assert!(Piston::<f32>::new(&big).is_ok());
     }
 
     proptest! {

@@ -20,7 +20,7 @@
 
 use super::event::EhvvaPlant;
 use super::params::{EhvvaError, EhvvaInputs, EhvvaParams};
-use super::piston::{Moving, Piston, SubLsb, SubStep};
+use super::piston::{DampingGains, Moving, Piston, SubLsb, SubStep};
 use super::tables::{EhvvaTables, EhvvaTablesAt};
 use crate::delay::DelayLine;
 use crate::real::Real;
@@ -84,6 +84,9 @@ pub struct EhvvaReduced<R: Real, const N: usize = DEFAULT_DELAY_SAMPLES> {
     tables: EhvvaTables<R>,
     /// `tables` at the last step's oil temperature.
     at: EhvvaTablesAt<R>,
+    /// Fixed point: the orifice damping's gains at that temperature (the floats multiply by
+    /// 1/Cd² each sub-step, as they always have).
+    damping: DampingGains<R>,
     dt: R,
     inv_dt: R,
     h: SubStep<R>,
@@ -91,6 +94,11 @@ pub struct EhvvaReduced<R: Real, const N: usize = DEFAULT_DELAY_SAMPLES> {
     /// 1/substeps, converted once (a run-time `from_f64` is soft-float on the target).
     inv_substeps: R,
     p_mo: R,
+    /// Fixed point: the last step's Pmo lag h/(τp + h), which the next step refines by one
+    /// Newton step instead of a long division (`pmo_lag_fixed`); 0 before the first step.
+    pmo_lag: R,
+    /// Fixed point: 1/h with h held times 2^10 (the Newton step's 1/(τp + h) ≈ lag/h).
+    inv_h_x1024: R,
     /// Lift, velocity, accumulators and the last seat landing (shared with the other models).
     m: Moving<R>,
     pmo_history: DelayLine<R, N>,
@@ -116,18 +124,36 @@ impl<R: Real, const N: usize> EhvvaReduced<R, N> {
         max_substep_ms: f64,
     ) -> Result<Self, EhvvaError> {
         let substeps = check_step_with(params, dt_ms, max_substep_ms, N)?;
+        if !R::IS_FLOAT && N >= 1 << 15 {
+            // The delays in samples must be in fixed point's range (see `step`).
+            return Err(EhvvaError::InvalidParameter("delay line length N"));
+        }
         let piston = Piston::new(params)?;
         let tables = EhvvaTables::new(params)?;
+        if !R::IS_FLOAT {
+            // Cd(T) is piecewise linear with clamped ends: its least value is at a breakpoint.
+            let inv_cd2_max = params
+                .tables
+                .cd_temp_c
+                .iter()
+                .map(|&t| 1.0 / (tables.cd(R::from_f64(t)).to_f64() * tables.cd(R::from_f64(t)).to_f64()))
+                .fold(0.0, f64::max);
+            piston.check_damping_gains(inv_cd2_max)?;
+        }
+        let at = tables.at_temperature(inputs.temp_c);
         Ok(Self {
             piston,
-            at: tables.at_temperature(inputs.temp_c),
+            at,
+            damping: piston.damping_gains(at.inv_cd2()),
             tables,
             dt: R::from_f64(dt_ms),
             inv_dt: R::from_f64(1.0 / dt_ms),
-            h: SubStep::new(dt_ms / substeps as f64, params),
+            h: SubStep::new(dt_ms / substeps as f64, params)?,
             substeps,
             inv_substeps: R::from_f64(1.0 / substeps as f64),
             p_mo: inputs.p_back_mpa,
+            pmo_lag: R::ZERO,
+            inv_h_x1024: R::from_f64(1.0 / (1024.0 * dt_ms / substeps as f64)),
             m: Moving {
                 lift: R::ZERO,
                 vel: R::ZERO,
@@ -157,11 +183,37 @@ impl<R: Real, const N: usize> EhvvaReduced<R, N> {
         &self.tables
     }
 
-    /// One sub-step with the delayed Pmo `p_top` and the step's constants. Not inlined: in
-    /// the step the compiler hoisted every parameter out of the (two-pass) sub-step loop and
-    /// spilled them to the stack, on the target some 60 instructions a step.
+    /// Fixed point's Pmo lag h/(τ + h) for this step's τ (ms), τ and h both times 2^10 (h's
+    /// own precision; τ ≤ 32 ms holds). τ follows the supply pressure, which moves little
+    /// from one step to the next: one Newton step from the last step's lag, lag + r·lag/h with
+    /// the residual r = h − (τ + h)·lag, squares its relative error (a few 1e-5 a step, below
+    /// the lag's LSB after it), in six products and adds where the long division costs about
+    /// 65 instructions on the target. The division where the last lag is more than 2^-9 off
+    /// (the first step, a temperature's or a pressure's jump): within that the Newton step
+    /// lands within a quarter of an LSB even for a lag near 1 (2^-18 relative). Within an LSB
+    /// of the division's quotient either way (test).
+    fn pmo_lag_fixed(&mut self, tau: R) -> R {
+        let h = self.h.h_x1024;
+        let d = tau.mul_pow2(10) + h;
+        // In range: lag is in [0, 1] and d below the range.
+        let r = h - d.mul_in_range(self.pmo_lag);
+        let lag = if r.abs() < h.mul_pow2(-9) {
+            // |r·(1/h)| < 2^-9 and lag < 1: both products in range.
+            self.pmo_lag + r.mul_in_range(self.inv_h_x1024).mul_in_range(self.pmo_lag)
+        } else {
+            R::ONE - (d - h) / d
+        };
+        self.pmo_lag = lag;
+        lag
+    }
+
+    /// One sub-step with the delayed Pmo `p_top` and the step's constants. Inlined: until
+    /// session 21 the compiler hoisted every parameter out of the (two-pass) sub-step loop and
+    /// spilled them to the stack (some 60 instructions a step), so it was kept a call; with
+    /// fixed point's products fused and in range fewer values live across the loop, and the
+    /// call and its arguments cost more (Q16.16 883 -> 843 instructions a step, f32 552 -> 553).
     #[allow(clippy::too_many_arguments)]
-    #[inline(never)]
+    #[inline(always)]
     fn substep(
         &mut self,
         u_pilot: bool,
@@ -178,8 +230,8 @@ impl<R: Real, const N: usize> EhvvaReduced<R, N> {
         self.p_mo = if R::IS_FLOAT {
             (self.p_mo + lag * p_in) * inv_1_plus_lag
         } else {
-            // Both weights in [0, 1]: the products are in range for any pressure.
-            self.p_mo.mul_in_range(inv_1_plus_lag) + lag.mul_in_range(p_in)
+            // Both weights in [0, 1] and adding up to 1: the sum is between the two pressures.
+            R::sum_of_products_in_range([(self.p_mo, inv_1_plus_lag), (lag, p_in)])
         };
         // Eq. (12) first line, with eqs. (5)-(6) as damping.
         let force = self.piston.static_force(p_top, self.m.p_low, self.m.lift);
@@ -190,9 +242,13 @@ impl<R: Real, const N: usize> EhvvaReduced<R, N> {
                 .advance_held(&mut self.m, self.h, inputs.p_supply_mpa, inputs.p_back_mpa);
             return;
         }
-        let k = self
-            .piston
-            .quadratic_gain_inv_cd2(inv_cd2, self.m.lift, self.m.vel, stroke, inputs.snubber_on);
+        let k = if R::IS_FLOAT {
+            self.piston
+                .quadratic_gain_inv_cd2(inv_cd2, self.m.lift, self.m.vel, stroke, inputs.snubber_on)
+        } else {
+            self.piston
+                .quadratic_gain_at(self.damping, self.m.lift, self.m.vel, stroke, inputs.snubber_on)
+        };
         // Piston, end stops and eqs. (7)-(8).
         self.piston.advance(
             &mut self.m,
@@ -211,22 +267,23 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaReduced<R, N> {
         let stroke = self.piston.stroke(inputs.lift_high);
         if inputs.temp_c != self.at.temp_c() {
             self.at = self.tables.at_temperature(inputs.temp_c);
+            self.damping = self.piston.damping_gains(self.at.inv_cd2());
         }
         let tau = self.at.tau_p_ms(self.m.p_high);
         let (td_open, td_close) = self.at.t_delay_pair_ms(self.m.p_high);
         let open_is_longer = td_open >= td_close;
-        let d_open = td_open * self.inv_dt;
-        let d_close = td_close * self.inv_dt;
+        // In range: both delays are at most the line's (N − 1)·dt (`check_step_with`, and N is
+        // below 2^15 in fixed point), so the delays in samples are below N.
+        let d_open = td_open.mul_in_range(self.inv_dt);
+        let d_close = td_close.mul_in_range(self.inv_dt);
         // Per-step constants of the sub-step loop: its implicit Pmo update (lag = h/τ and
         // 1/(1 + lag); in fixed point τ/(τ + h) and 1 − that, one long division, not two).
         let (lag, inv_1_plus_lag) = if R::IS_FLOAT {
             let lag = self.h.h / tau;
             (lag, R::ONE / (R::ONE + lag))
         } else {
-            // τ and h both times 2^10 (h's own precision; τ ≤ 32 ms holds).
-            let tau_x1024 = tau.mul_pow2(10);
-            let keep = tau_x1024 / (tau_x1024 + self.h.h_x1024);
-            (R::ONE - keep, keep)
+            let lag = self.pmo_lag_fixed(tau);
+            (lag, R::ONE - lag)
         };
         let inv_cd2 = self.at.inv_cd2();
         let inv_n = self.inv_substeps;
@@ -273,6 +330,69 @@ mod tests {
             lift_high,
             snubber_on: false,
         }
+    }
+
+    #[test]
+    fn the_fixed_point_pmo_lag_stays_within_an_lsb_of_the_division() {
+        // Events at both ends of the supply range (τp follows the supply pressure, which the
+        // piston draws down while it opens) and an oil temperature that jumps mid-event (τp
+        // jumps: the Newton step's start is far off and the division takes over): every step's
+        // lag within one LSB of h/(τ + h) by the long division, as the model took it before
+        // session 21.
+        use crate::real::Q16;
+        let p = EhvvaParams::paper_default();
+        for (p_supply, jump_to_c) in [(5.5, 90.0), (8.0, -20.0)] {
+            let mut i = EhvvaInputs::<Q16> {
+                p_supply_mpa: Q16::from_f64(p_supply),
+                p_back_mpa: Q16::from_f64(2.0),
+                temp_c: Q16::from_f64(22.0),
+                lift_high: true,
+                snubber_on: false,
+            };
+            let mut m = EhvvaReduced::<Q16>::new(&p, &i, 0.01).unwrap();
+            let (mut max_lift, mut p_high_min) = (0.0f64, f64::MAX);
+            for k in 0..2500 {
+                if k == 1200 {
+                    i.temp_c = Q16::from_f64(jump_to_c);
+                }
+                let at = m.tables.at_temperature(i.temp_c);
+                let tau_x1024 = at.tau_p_ms(m.m.p_high).mul_pow2(10);
+                let want = Q16::ONE - tau_x1024 / (tau_x1024 + m.h.h_x1024);
+                max_lift = max_lift.max(m.step((100..1100).contains(&k), &i).to_f64());
+                p_high_min = p_high_min.min(m.m.p_high.to_f64());
+                let off = (m.pmo_lag.to_bits() - want.to_bits()).abs();
+                assert!(off <= 1, "{p_supply} MPa, step {k}: lag {:?} vs {:?}", m.pmo_lag, want);
+            }
+            // The valve opened, and the supply pressure (with it τp) moved along the way.
+            assert!(
+                max_lift > 6.0 && p_high_min < p_supply - 0.01,
+                "{max_lift} mm, {p_high_min} MPa"
+            );
+        }
+    }
+
+    #[test]
+    fn fixed_point_refuses_a_cd_table_its_damping_gains_cannot_hold() {
+        // Cd 0.05 (the tables' floor) makes ρ/2·At³/Cd² 38 000, beyond the 2^13 the fixed
+        // point's sum of products is proven for: refused by the table's name, in Q16.16 only.
+        use crate::real::Q16;
+        let mut p = EhvvaParams::paper_default();
+        p.tables.cd[0] = 0.05;
+        let i = inputs(7.0, true);
+        let qi = EhvvaInputs::<Q16> {
+            p_supply_mpa: Q16::from_f64(7.0),
+            p_back_mpa: Q16::ONE,
+            temp_c: Q16::from_f64(22.0),
+            lift_high: true,
+            snubber_on: false,
+        };
+        assert_eq!(
+            EhvvaReduced::<Q16>::new(&p, &qi, 0.01).err(),
+            Some(EhvvaError::InvalidParameter("tables.cd"))
+        );
+        assert!(EhvvaReduced::<f64>::new(&p, &i, 0.01).is_ok());
+        // The paper's table (Cd 0.21 at -20 °C: 2 170) is taken.
+        assert!(EhvvaReduced::<Q16>::new(&EhvvaParams::paper_default(), &qi, 0.01).is_ok());
     }
 
     #[test]

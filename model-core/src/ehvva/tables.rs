@@ -131,9 +131,10 @@ impl<R: Real> EhvvaTables<R> {
         let at = self.td_open.locate(p_eff, temp_c);
         let vo = self.td_open.eval_at(at);
         let vc = self.td_close.eval_at(at);
-        let half = R::from_f64(0.5);
-        let mean = half * (vo + vc);
-        let half_split = self.gain_direction_delay * half * (vo - vc);
+        // Halves as shifts: the floats' bits of `0.5 · x` (exact scalings), fixed point's
+        // rounding of it, without a product.
+        let mean = (vo + vc).mul_pow2(-1);
+        let half_split = self.gain_direction_delay * (vo - vc).mul_pow2(-1);
         ((mean + half_split).max(R::ZERO), (mean - half_split).max(R::ZERO))
     }
 
@@ -194,7 +195,10 @@ impl<R: Real> EhvvaTablesAt<R> {
         self.inv_cd2
     }
 
-    /// [`EhvvaTables::t_delay_pair_ms`] at this temperature.
+    /// [`EhvvaTables::t_delay_pair_ms`] at this temperature. Inlined (once a step in each
+    /// model): as a call, its arguments and pair of results cost about 15 instructions on the
+    /// target.
+    #[inline(always)]
     pub fn t_delay_pair_ms(&self, p_supply_mpa: R) -> (R, R) {
         let p_eff = self.p_nominal + self.gain_pressure_delay * (p_supply_mpa - self.p_nominal);
         // Both delay tables are on the same Ph breakpoints.
@@ -207,7 +211,8 @@ impl<R: Real> EhvvaTablesAt<R> {
         ((mean + half_split).max(R::ZERO), (mean - half_split).max(R::ZERO))
     }
 
-    /// [`EhvvaTables::tau_p_ms`] at this temperature.
+    /// [`EhvvaTables::tau_p_ms`] at this temperature (inlined as `t_delay_pair_ms`).
+    #[inline(always)]
     pub fn tau_p_ms(&self, p_supply_mpa: R) -> R {
         self.tau.eval(p_supply_mpa).max(R::from_f64(TAU_MIN_MS))
     }
