@@ -62,6 +62,12 @@ pub struct LsqOptions {
     pub fd_step: f64,
     /// Evaluate Jacobian columns on this many threads (simulations are independent).
     pub threads: usize,
+    /// Give the 95 % intervals at the solution (`LsqResult::ci95`), from a Jacobian there:
+    /// the last iteration's where the solver stopped without moving since (a step too
+    /// small, a collapsed region), a fresh one otherwise. `false` for a stage whose
+    /// intervals nobody reads (a fit's first approach), which then ends without that
+    /// Jacobian's simulations and reports no intervals.
+    pub intervals: bool,
 }
 
 impl Default for LsqOptions {
@@ -72,6 +78,7 @@ impl Default for LsqOptions {
             step_tolerance: 1e-9,
             fd_step: 1e-6,
             threads: 2,
+            intervals: true,
         }
     }
 }
@@ -171,11 +178,14 @@ where
     let mut iterations = 0;
     let mut stop = StopReason::MaxIterations;
     let mut r_try = vec![0.0; n_residuals];
+    // Whether `jac` is the Jacobian at `x` (no step accepted since it was made).
+    let mut jac_at_x = false;
 
     'outer: while iterations < opts.max_iterations {
         iterations += 1;
         notify_iteration(iterations);
         evaluations += jacobian(&residual, &x, &r, lo, hi, opts, &mut jac);
+        jac_at_x = true;
         let h_mat = jtj(&jac, n_residuals, p);
         let g = jtr(&jac, &r, n_residuals, p);
         for j in 0..p {
@@ -231,6 +241,7 @@ where
             if actual_cost.is_finite() && actual_cost < cost {
                 let rel = (cost - actual_cost) / cost.max(f64::MIN_POSITIVE);
                 x = x_try;
+                jac_at_x = false;
                 std::mem::swap(&mut r, &mut r_try);
                 cost = actual_cost;
                 if rel < opts.cost_tolerance || cost == 0.0 {
@@ -246,8 +257,24 @@ where
         }
     }
 
-    // Confidence intervals at the solution from a fresh Jacobian.
-    evaluations += jacobian(&residual, &x, &r, lo, hi, opts, &mut jac);
+    if !opts.intervals {
+        return Ok(LsqResult {
+            x,
+            cost,
+            initial_cost,
+            iterations,
+            evaluations,
+            ci95: vec![None; p],
+            residuals: n_residuals,
+            stop,
+        });
+    }
+    // Confidence intervals at the solution, from the Jacobian there: the last iteration's
+    // where no step was accepted since (the same numbers a fresh one gives: the same point
+    // and residuals), else a fresh one.
+    if !jac_at_x {
+        evaluations += jacobian(&residual, &x, &r, lo, hi, opts, &mut jac);
+    }
     let h_mat = jtj(&jac, n_residuals, p);
     let dof = n_residuals.saturating_sub(p).max(1) as f64;
     let s2 = 2.0 * cost / dof;
@@ -504,6 +531,50 @@ mod tests {
             max_iterations: 200,
             ..Default::default()
         }
+    }
+
+    #[test]
+    fn intervals_come_from_the_jacobian_at_the_solution_and_can_be_left_out() {
+        // A decay fitted to noisy samples (the cost stays above 0), stopped once by the cost
+        // and once by the step: the intervals are those of a fresh Jacobian at the solution
+        // (a start there with no iteration gives exactly them), whether or not the last
+        // iteration's could serve; without intervals the same solution, none reported, and
+        // the fresh Jacobian's two simulations saved where the cost stopped it.
+        let t: Vec<f64> = (0..40).map(|k| k as f64 * 0.1).collect();
+        let y: Vec<f64> = (0..40)
+            .map(|k| 2.0 * (-0.7 * t[k]).exp() + 0.01 * ((k * 7919 % 13) as f64 - 6.0))
+            .collect();
+        let f = |x: &[f64], out: &mut [f64]| {
+            for k in 0..t.len() {
+                out[k] = x[0] * (-x[1] * t[k]).exp() - y[k];
+            }
+            Ok(())
+        };
+        let (lo, hi) = ([0.0, 0.0], [10.0, 10.0]);
+        let by_cost = opts();
+        let by_step = LsqOptions {
+            cost_tolerance: 0.0,
+            step_tolerance: 1e-4,
+            ..opts()
+        };
+        let mut stops = Vec::new();
+        for o in [by_cost, by_step] {
+            let full = solve(f, &[1.0, 1.0], &lo, &hi, t.len(), &o).unwrap();
+            let there = LsqOptions {
+                max_iterations: 0,
+                ..o.clone()
+            };
+            let fresh = solve(f, &full.x, &lo, &hi, t.len(), &there).unwrap();
+            assert_eq!(full.ci95, fresh.ci95, "{:?}", full.stop);
+            assert!(full.ci95.iter().all(Option::is_some));
+            let bare = solve(f, &[1.0, 1.0], &lo, &hi, t.len(), &LsqOptions { intervals: false, ..o }).unwrap();
+            assert_eq!((bare.x.clone(), bare.cost), (full.x.clone(), full.cost));
+            assert!(bare.ci95.iter().all(Option::is_none));
+            let saved = if full.stop == StopReason::CostConverged { 2 } else { 0 };
+            assert_eq!(bare.evaluations + saved, full.evaluations, "{:?}", full.stop);
+            stops.push(full.stop);
+        }
+        assert_eq!(stops, [StopReason::CostConverged, StopReason::StepConverged]);
     }
 
     #[test]

@@ -26,6 +26,8 @@ pub fn calibrate(
 ) -> Result<LsqResult, String> {
     let approach_opts = LsqOptions {
         cost_tolerance: APPROACH_COST_TOLERANCE,
+        // Only the approach's end is used: no Jacobian there for intervals.
+        intervals: false,
         ..opts.clone()
     };
     let approach = calibrate_with(base, knobs, x0, &set.coarse(), &approach_opts, &|_| Ok(()));
