@@ -517,7 +517,11 @@ impl<R: Real> SubStep<R> {
                 ),
                 (x2p20 * p.area_top_mm2 / high, "cap_high_mm3_per_mpa"),
                 (x2p20 * p.relief_low_mm3_per_ms_mpa / low, "relief_low_mm3_per_ms_mpa"),
-                (x2p20 * p.area_top_mm2 / low, "cap_low_mm3_per_mpa"),
+                // Ab opening, At − Ab closing: both below the larger area.
+                (
+                    x2p20 * p.area_top_mm2.max(p.area_bottom_mm2) / low,
+                    "cap_low_mm3_per_mpa",
+                ),
             ] {
                 if !(v < 1024.0) {
                     return Err(EhvvaError::InvalidParameter(name));

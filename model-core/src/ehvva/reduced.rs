@@ -187,8 +187,8 @@ impl<R: Real, const N: usize> EhvvaReduced<R, N> {
     /// own precision; τ ≤ 32 ms holds). τ follows the supply pressure, which moves little
     /// from one step to the next: one Newton step from the last step's lag, lag + r·lag/h with
     /// the residual r = h − (τ + h)·lag, squares its relative error (a few 1e-5 a step, below
-    /// the lag's LSB after it), in six products and adds where the long division costs about
-    /// 65 instructions on the target. The division where the last lag is more than 2^-9 off
+    /// the lag's LSB after it), in three products where the long division costs about 65
+    /// instructions on the target. The division where the last lag is more than 2^-9 off
     /// (the first step, a temperature's or a pressure's jump): within that the Newton step
     /// lands within a quarter of an LSB even for a lag near 1 (2^-18 relative). Within an LSB
     /// of the division's quotient either way (test).
