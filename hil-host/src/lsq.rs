@@ -50,6 +50,25 @@ fn notify_iteration(iteration: usize) {
     }
 }
 
+/// 95 % confidence half-widths from s²(JᵀJ)⁻¹ with `jac` the Jacobian at `x` (column-major,
+/// `n` residuals); `None` on a bound or where JᵀJ is singular.
+fn intervals(jac: &[f64], x: &[f64], lo: &[f64], hi: &[f64], cost: f64, n: usize) -> Vec<Option<f64>> {
+    let p = x.len();
+    let h_mat = jtj(jac, n, p);
+    let dof = n.saturating_sub(p).max(1) as f64;
+    let s2 = 2.0 * cost / dof;
+    let inv = invert_spd(&h_mat, p);
+    (0..p)
+        .map(|j| {
+            let on_bound = x[j] <= lo[j] || x[j] >= hi[j];
+            match (&inv, on_bound) {
+                (Some(m), false) if m[j * p + j] > 0.0 => Some(1.96 * (s2 * m[j * p + j]).sqrt()),
+                _ => None,
+            }
+        })
+        .collect()
+}
+
 /// Options; the defaults suit simulation-error fits of a handful of parameters.
 #[derive(Clone, Debug)]
 pub struct LsqOptions {
@@ -257,37 +276,17 @@ where
         }
     }
 
-    if !opts.intervals {
-        return Ok(LsqResult {
-            x,
-            cost,
-            initial_cost,
-            iterations,
-            evaluations,
-            ci95: vec![None; p],
-            residuals: n_residuals,
-            stop,
-        });
-    }
     // Confidence intervals at the solution, from the Jacobian there: the last iteration's
     // where no step was accepted since (the same numbers a fresh one gives: the same point
-    // and residuals), else a fresh one.
-    if !jac_at_x {
-        evaluations += jacobian(&residual, &x, &r, lo, hi, opts, &mut jac);
-    }
-    let h_mat = jtj(&jac, n_residuals, p);
-    let dof = n_residuals.saturating_sub(p).max(1) as f64;
-    let s2 = 2.0 * cost / dof;
-    let inv = invert_spd(&h_mat, p);
-    let ci95 = (0..p)
-        .map(|j| {
-            let on_bound = x[j] <= lo[j] || x[j] >= hi[j];
-            match (&inv, on_bound) {
-                (Some(m), false) if m[j * p + j] > 0.0 => Some(1.96 * (s2 * m[j * p + j]).sqrt()),
-                _ => None,
-            }
-        })
-        .collect();
+    // and residuals), else a fresh one; none where not asked for.
+    let ci95 = if opts.intervals {
+        if !jac_at_x {
+            evaluations += jacobian(&residual, &x, &r, lo, hi, opts, &mut jac);
+        }
+        intervals(&jac, &x, lo, hi, cost, n_residuals)
+    } else {
+        vec![None; p]
+    };
     Ok(LsqResult {
         x,
         cost,

@@ -79,6 +79,7 @@ pub(crate) fn q16_lift_deviation<F: EhvvaPlant<f64>, Q: EhvvaPlant<Q16>>(
 
 /// The corners' grid the tests' comments quote: supply 5.5/6.75/8 MPa, back pressure
 /// 1/2.5/4 MPa, -20/40/100 °C, both lifts and switch states, 8 and 20 ms events.
+#[cfg(feature = "std")]
 pub(crate) fn grid() -> impl Iterator<Item = Case> {
     (0..3 * 3 * 3 * 8).map(|i| Case {
         p_supply_mpa: [5.5, 6.75, 8.0][i % 3],

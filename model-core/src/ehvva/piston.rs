@@ -58,10 +58,10 @@ pub(crate) struct Piston<R: Real> {
 impl<R: Real> Piston<R> {
     pub fn new(p: &EhvvaParams) -> Result<Self, EhvvaError> {
         p.validate()?;
+        let half_rho = 0.5 * p.density_kg_m3 * 1e-6;
         if !R::IS_FLOAT {
             // The fixed-point force and damping sum exact products of these with any state
             // (`Real::sum_of_products`): each factor below 2^13.
-            let half_rho = 0.5 * p.density_kg_m3 * 1e-6;
             for (v, name) in [
                 (p.area_top_mm2, "area_top_mm2"),
                 (p.area_bottom_mm2, "area_bottom_mm2"),
@@ -82,7 +82,6 @@ impl<R: Real> Piston<R> {
             }
         }
         let r = R::from_f64;
-        let half_rho = 0.5 * p.density_kg_m3 * 1e-6;
         let mut piston = Self {
             area_top: r(p.area_top_mm2),
             area_bottom: r(p.area_bottom_mm2),

@@ -136,11 +136,13 @@ impl<R: Real, const N: usize> EhvvaReduced<R, N> {
                 .tables
                 .cd_temp_c
                 .iter()
-                .map(|&t| 1.0 / (tables.cd(R::from_f64(t)).to_f64() * tables.cd(R::from_f64(t)).to_f64()))
+                .map(|&t| tables.cd(R::from_f64(t)).to_f64())
+                .map(|cd| 1.0 / (cd * cd))
                 .fold(0.0, f64::max);
             piston.check_damping_gains(inv_cd2_max)?;
         }
         let at = tables.at_temperature(inputs.temp_c);
+        let h_ms = dt_ms / substeps as f64;
         Ok(Self {
             piston,
             at,
@@ -148,12 +150,12 @@ impl<R: Real, const N: usize> EhvvaReduced<R, N> {
             tables,
             dt: R::from_f64(dt_ms),
             inv_dt: R::from_f64(1.0 / dt_ms),
-            h: SubStep::new(dt_ms / substeps as f64, params)?,
+            h: SubStep::new(h_ms, params)?,
             substeps,
             inv_substeps: R::from_f64(1.0 / substeps as f64),
             p_mo: inputs.p_back_mpa,
             pmo_lag: R::ZERO,
-            inv_h_x1024: R::from_f64(1.0 / (1024.0 * dt_ms / substeps as f64)),
+            inv_h_x1024: R::from_f64(1.0 / (1024.0 * h_ms)),
             m: Moving {
                 lift: R::ZERO,
                 vel: R::ZERO,
@@ -277,7 +279,7 @@ impl<R: Real, const N: usize> EhvvaPlant<R> for EhvvaReduced<R, N> {
         let d_open = td_open.mul_in_range(self.inv_dt);
         let d_close = td_close.mul_in_range(self.inv_dt);
         // Per-step constants of the sub-step loop: its implicit Pmo update (lag = h/τ and
-        // 1/(1 + lag); in fixed point τ/(τ + h) and 1 − that, one long division, not two).
+        // 1/(1 + lag); in fixed point h/(τ + h) by `pmo_lag_fixed` and 1 − that).
         let (lag, inv_1_plus_lag) = if R::IS_FLOAT {
             let lag = self.h.h / tau;
             (lag, R::ONE / (R::ONE + lag))
@@ -332,6 +334,18 @@ mod tests {
         }
     }
 
+    /// [`inputs`] in Q16.16 with a back pressure of its own (high lift, switch valve off).
+    fn q16_inputs(p_supply: f64, p_back: f64) -> EhvvaInputs<crate::real::Q16> {
+        use crate::real::Q16;
+        EhvvaInputs {
+            p_supply_mpa: Q16::from_f64(p_supply),
+            p_back_mpa: Q16::from_f64(p_back),
+            temp_c: Q16::from_f64(22.0),
+            lift_high: true,
+            snubber_on: false,
+        }
+    }
+
     #[test]
     fn the_fixed_point_pmo_lag_stays_within_an_lsb_of_the_division() {
         // Events at both ends of the supply range (τp follows the supply pressure, which the
@@ -342,13 +356,7 @@ mod tests {
         use crate::real::Q16;
         let p = EhvvaParams::paper_default();
         for (p_supply, jump_to_c) in [(5.5, 90.0), (8.0, -20.0)] {
-            let mut i = EhvvaInputs::<Q16> {
-                p_supply_mpa: Q16::from_f64(p_supply),
-                p_back_mpa: Q16::from_f64(2.0),
-                temp_c: Q16::from_f64(22.0),
-                lift_high: true,
-                snubber_on: false,
-            };
+            let mut i = q16_inputs(p_supply, 2.0);
             let mut m = EhvvaReduced::<Q16>::new(&p, &i, 0.01).unwrap();
             let (mut max_lift, mut p_high_min) = (0.0f64, f64::MAX);
             for k in 0..2500 {
@@ -379,13 +387,7 @@ mod tests {
         let mut p = EhvvaParams::paper_default();
         p.tables.cd[0] = 0.05;
         let i = inputs(7.0, true);
-        let qi = EhvvaInputs::<Q16> {
-            p_supply_mpa: Q16::from_f64(7.0),
-            p_back_mpa: Q16::ONE,
-            temp_c: Q16::from_f64(22.0),
-            lift_high: true,
-            snubber_on: false,
-        };
+        let qi = q16_inputs(7.0, 1.0);
         assert_eq!(
             EhvvaReduced::<Q16>::new(&p, &qi, 0.01).err(),
             Some(EhvvaError::InvalidParameter("tables.cd"))

@@ -129,13 +129,11 @@ impl<R: Real> EhvvaTables<R> {
         let p_eff = self.p_nominal + self.gain_pressure_delay * (p_supply_mpa - self.p_nominal);
         // Both delay tables are on the same grid: one look-up.
         let at = self.td_open.locate(p_eff, temp_c);
-        let vo = self.td_open.eval_at(at);
-        let vc = self.td_close.eval_at(at);
-        // Halves as shifts: the floats' bits of `0.5 · x` (exact scalings), fixed point's
-        // rounding of it, without a product.
-        let mean = (vo + vc).mul_pow2(-1);
-        let half_split = self.gain_direction_delay * (vo - vc).mul_pow2(-1);
-        ((mean + half_split).max(R::ZERO), (mean - half_split).max(R::ZERO))
+        split_by_direction(
+            self.td_open.eval_at(at),
+            self.td_close.eval_at(at),
+            self.gain_direction_delay,
+        )
     }
 
     /// Main-valve outlet pressure time constant τp(Ph, T) in ms (eq. (10), Fig. 5 top).
@@ -162,6 +160,17 @@ impl<R: Real> EhvvaTables<R> {
             gain_direction_delay: self.gain_direction_delay,
         }
     }
+}
+
+/// The `direction-delay` effect on the tables' (VO, VC) delays: their mean kept, their
+/// half-difference scaled by `gain` (1 = the paper), neither below 0. One function for the
+/// full tables and their slice at a temperature, so both give the same bits. Halves as
+/// shifts: the floats' bits of `0.5 · x` (an exact scaling), fixed point without a product.
+#[inline(always)]
+fn split_by_direction<R: Real>(vo: R, vc: R, gain: R) -> (R, R) {
+    let mean = (vo + vc).mul_pow2(-1);
+    let half_split = gain * (vo - vc).mul_pow2(-1);
+    ((mean + half_split).max(R::ZERO), (mean - half_split).max(R::ZERO))
 }
 
 /// [`EhvvaTables`] at one oil temperature ([`EhvvaTables::at_temperature`]): Cd, and τp and
@@ -203,12 +212,11 @@ impl<R: Real> EhvvaTablesAt<R> {
         let p_eff = self.p_nominal + self.gain_pressure_delay * (p_supply_mpa - self.p_nominal);
         // Both delay tables are on the same Ph breakpoints.
         let at = self.td_open.locate(p_eff);
-        let vo = self.td_open.eval_at(at);
-        let vc = self.td_close.eval_at(at);
-        let half = R::from_f64(0.5);
-        let mean = half * (vo + vc);
-        let half_split = self.gain_direction_delay * half * (vo - vc);
-        ((mean + half_split).max(R::ZERO), (mean - half_split).max(R::ZERO))
+        split_by_direction(
+            self.td_open.eval_at(at),
+            self.td_close.eval_at(at),
+            self.gain_direction_delay,
+        )
     }
 
     /// [`EhvvaTables::tau_p_ms`] at this temperature (inlined as `t_delay_pair_ms`).
