@@ -19,6 +19,8 @@ use std::sync::Arc;
 
 use nalgebra::{DMatrix, DVector};
 
+use crate::signal::dot;
+
 /// Told the number of each solver iteration as it starts (a progress display's feed).
 pub type IterationObserver = Arc<dyn Fn(usize) + Send + Sync>;
 
@@ -354,26 +356,57 @@ where
     p
 }
 
+/// Rows of the Jacobian a block of JᵀJ sums: the block's columns stay in the cache while
+/// every pair of them is multiplied (one pass over the Jacobian instead of one per pair).
+const JTJ_BLOCK_ROWS: usize = 2048;
+
+/// JᵀJ of the column-major `jac` (`n` rows, `p` columns), the row blocks spread over the
+/// machine's cores (also where the residuals are evaluated serially because each simulation
+/// uses the threads itself); their partial sums are added in block order, so the bits do
+/// not depend on the number of cores.
 fn jtj(jac: &[f64], n: usize, p: usize) -> Vec<f64> {
+    let threads = std::thread::available_parallelism().map_or(1, |t| t.get());
+    let blocks = n.div_ceil(JTJ_BLOCK_ROWS).max(1);
+    let mut partial = vec![0.0; blocks * p * p];
+    let block_sums = |first_block: usize, out: &mut [f64]| {
+        for (b, h) in out.chunks_mut(p * p).enumerate() {
+            let rows = (first_block + b) * JTJ_BLOCK_ROWS..((first_block + b + 1) * JTJ_BLOCK_ROWS).min(n);
+            for a in 0..p {
+                let col_a = &jac[a * n..(a + 1) * n][rows.clone()];
+                for c in a..p {
+                    h[a * p + c] = dot(col_a, &jac[c * n..(c + 1) * n][rows.clone()]);
+                }
+            }
+        }
+    };
+    let per_thread = blocks.div_ceil(threads.clamp(1, blocks));
+    if per_thread == blocks {
+        block_sums(0, &mut partial);
+    } else {
+        std::thread::scope(|s| {
+            for (t, out) in partial.chunks_mut(per_thread * p * p).enumerate() {
+                s.spawn(move || block_sums(t * per_thread, out));
+            }
+        });
+    }
     let mut h = vec![0.0; p * p];
+    for block in partial.chunks(p * p) {
+        for a in 0..p {
+            for c in a..p {
+                h[a * p + c] += block[a * p + c];
+            }
+        }
+    }
     for a in 0..p {
-        for b in a..p {
-            let v: f64 = jac[a * n..(a + 1) * n]
-                .iter()
-                .zip(&jac[b * n..(b + 1) * n])
-                .map(|(x, y)| x * y)
-                .sum();
-            h[a * p + b] = v;
-            h[b * p + a] = v;
+        for c in 0..a {
+            h[a * p + c] = h[c * p + a];
         }
     }
     h
 }
 
 fn jtr(jac: &[f64], r: &[f64], n: usize, p: usize) -> Vec<f64> {
-    (0..p)
-        .map(|j| jac[j * n..(j + 1) * n].iter().zip(r).map(|(a, b)| a * b).sum())
-        .collect()
+    (0..p).map(|j| dot(&jac[j * n..(j + 1) * n], r)).collect()
 }
 
 /// The step minimising the model on the free parameters with ‖D h‖ ≤ Δ: the Gauss-Newton step

@@ -10,6 +10,8 @@
 //!   condition signal (each value of a sign or flag, else the signal's low, middle and high
 //!   third), and whether the group means differ by more than noise explains.
 
+use crate::signal::dot;
+
 /// Root mean square of `e`.
 pub fn rmse(e: &[f64]) -> f64 {
     if e.is_empty() {
@@ -44,13 +46,7 @@ pub fn autocorrelation(e: &[f64], max_lag: usize) -> Vec<f64> {
     let n = c.len();
     let r0: f64 = c.iter().map(|v| v * v).sum();
     (0..=max_lag.min(n.saturating_sub(1)))
-        .map(|k| {
-            if r0 > 0.0 {
-                c[..n - k].iter().zip(&c[k..]).map(|(a, b)| a * b).sum::<f64>() / r0
-            } else {
-                0.0
-            }
-        })
+        .map(|k| if r0 > 0.0 { dot(&c[..n - k], &c[k..]) / r0 } else { 0.0 })
         .collect()
 }
 
@@ -66,13 +62,14 @@ pub fn cross_correlation(e: &[f64], u: &[f64], max_lag: usize) -> Vec<f64> {
             if den == 0.0 {
                 return 0.0;
             }
-            let mut s = 0.0;
-            for t in 0..n as isize {
-                let j = t - k;
-                if j >= 0 && j < n as isize {
-                    s += ce[t as usize] * cu[j as usize];
-                }
-            }
+            // Σ e(t) u(t − k) over the t where both exist.
+            let s = if k >= 0 {
+                let k = k as usize;
+                dot(&ce[k..], &cu[..n - k])
+            } else {
+                let k = k.unsigned_abs();
+                dot(&ce[..n - k], &cu[k..])
+            };
             s / den
         })
         .collect()
