@@ -44,7 +44,7 @@ mod knobs;
 
 pub use events::*;
 pub use fits::{calibrate, calibrate_with, edge_delays_ms};
-use fits::{calibrate_restarted, with_tau_profile_start};
+use fits::{calibrate_best_of, calibrate_restarted, with_tau_profile_start};
 pub use knobs::*;
 
 /// The catalogue effects of this family (DATA-FORMAT.md), from the typed catalogue.
@@ -249,13 +249,6 @@ impl Family for EhvvaFamily {
             } else {
                 self.unit_lsq()
             };
-            let mut r = calibrate_restarted(&EhvvaParams::baseline(), &knobs, &start(1.0), &de, &lsq)?;
-            if r.cost > parent_cost {
-                let r0 = calibrate_restarted(&EhvvaParams::baseline(), &knobs, &start(0.0), &de, &lsq)?;
-                if r0.cost < r.cost {
-                    r = r0;
-                }
-            }
             // A baseline with the unit's knobs free can absorb part of an effect into wrong
             // unit values (a pressure-dependent delay into τp and the orifices) and the
             // parent's optimum is then a poor start for the effect: also start from the paper's
@@ -271,9 +264,12 @@ impl Family for EhvvaFamily {
                     },
                 )
                 .collect();
-            let rf = calibrate_restarted(&EhvvaParams::baseline(), &knobs, &fresh, &de, &lsq)?;
-            if rf.cost < r.cost {
-                r = rf;
+            let mut r = calibrate_best_of(&EhvvaParams::baseline(), &knobs, &[start(1.0), fresh], &de, &lsq)?;
+            if r.cost > parent_cost {
+                let r0 = calibrate_restarted(&EhvvaParams::baseline(), &knobs, &start(0.0), &de, &lsq)?;
+                if r0.cost < r.cost {
+                    r = r0;
+                }
             }
             with_tau_profile_start(&knobs, r, &de, &lsq)?
         };
