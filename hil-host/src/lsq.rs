@@ -360,40 +360,51 @@ where
 /// every pair of them is multiplied (one pass over the Jacobian instead of one per pair).
 const JTJ_BLOCK_ROWS: usize = 2048;
 
-/// JᵀJ of the column-major `jac` (`n` rows, `p` columns), the row blocks spread over the
-/// machine's cores (also where the residuals are evaluated serially because each simulation
-/// uses the threads itself); their partial sums are added in block order, so the bits do
-/// not depend on the number of cores.
+/// The row blocks of JᵀJ are summed in this many contiguous parts, one partial JᵀJ each: a
+/// fixed number, so that the sum's order (and bits) does not depend on the number of cores,
+/// and the partials' memory not on the number of rows.
+const JTJ_PARTS: usize = 8;
+
+/// JᵀJ of the column-major `jac` (`n` rows, `p` columns), its parts spread over the machine's
+/// cores (also where the residuals are evaluated serially because each simulation uses the
+/// threads itself) and added in order.
 fn jtj(jac: &[f64], n: usize, p: usize) -> Vec<f64> {
-    let threads = std::thread::available_parallelism().map_or(1, |t| t.get());
     let blocks = n.div_ceil(JTJ_BLOCK_ROWS).max(1);
-    let mut partial = vec![0.0; blocks * p * p];
-    let block_sums = |first_block: usize, out: &mut [f64]| {
-        for (b, h) in out.chunks_mut(p * p).enumerate() {
-            let rows = (first_block + b) * JTJ_BLOCK_ROWS..((first_block + b + 1) * JTJ_BLOCK_ROWS).min(n);
+    let blocks_per_part = blocks.div_ceil(JTJ_PARTS);
+    let mut partial = vec![0.0; JTJ_PARTS * p * p];
+    let part_sum = |part: usize, h: &mut [f64]| {
+        for b in part * blocks_per_part..((part + 1) * blocks_per_part).min(blocks) {
+            let rows = b * JTJ_BLOCK_ROWS..((b + 1) * JTJ_BLOCK_ROWS).min(n);
             for a in 0..p {
                 let col_a = &jac[a * n..(a + 1) * n][rows.clone()];
                 for c in a..p {
-                    h[a * p + c] = dot(col_a, &jac[c * n..(c + 1) * n][rows.clone()]);
+                    h[a * p + c] += dot(col_a, &jac[c * n..(c + 1) * n][rows.clone()]);
                 }
             }
         }
     };
-    let per_thread = blocks.div_ceil(threads.clamp(1, blocks));
-    if per_thread == blocks {
-        block_sums(0, &mut partial);
+    let threads = std::thread::available_parallelism()
+        .map_or(1, |t| t.get())
+        .min(JTJ_PARTS);
+    if threads == 1 || blocks == 1 {
+        partial.chunks_mut(p * p).enumerate().for_each(|(k, h)| part_sum(k, h));
     } else {
+        let parts_per_thread = JTJ_PARTS.div_ceil(threads);
         std::thread::scope(|s| {
-            for (t, out) in partial.chunks_mut(per_thread * p * p).enumerate() {
-                s.spawn(move || block_sums(t * per_thread, out));
+            for (t, out) in partial.chunks_mut(parts_per_thread * p * p).enumerate() {
+                s.spawn(move || {
+                    for (k, h) in out.chunks_mut(p * p).enumerate() {
+                        part_sum(t * parts_per_thread + k, h);
+                    }
+                });
             }
         });
     }
     let mut h = vec![0.0; p * p];
-    for block in partial.chunks(p * p) {
+    for part in partial.chunks(p * p) {
         for a in 0..p {
             for c in a..p {
-                h[a * p + c] += block[a * p + c];
+                h[a * p + c] += part[a * p + c];
             }
         }
     }
