@@ -577,6 +577,24 @@ mod tests {
     }
 
     #[test]
+    fn jtj_in_parts_is_the_plain_product() {
+        // Small integers: every partial sum is exact, so the blocks, parts and lanes must give
+        // the plain JᵀJ exactly; the row counts end inside a block, on a part's edge, and give
+        // fewer blocks than parts.
+        for n in [5usize, 2048, 9 * 2048 + 5, 17 * 2048 - 1] {
+            let p = 3;
+            let jac: Vec<f64> = (0..n * p).map(|i| ((i * 37 + 11) % 7) as f64 - 3.0).collect();
+            let h = jtj(&jac, n, p);
+            for a in 0..p {
+                for b in 0..p {
+                    let plain: f64 = (0..n).map(|i| jac[a * n + i] * jac[b * n + i]).sum();
+                    assert_eq!(h[a * p + b], plain, "n = {n}, ({a}, {b})");
+                }
+            }
+        }
+    }
+
+    #[test]
     fn intervals_come_from_the_jacobian_at_the_solution_and_can_be_left_out() {
         // A decay fitted to noisy samples (the cost stays above 0), stopped once by the cost
         // and once by the step: the intervals are those of a fresh Jacobian at the solution

@@ -232,10 +232,11 @@ impl Family for EhvvaFamily {
         let r = if effects.is_empty() {
             rb
         } else {
-            // Start from the parent's optimum (the baseline's when there is none), the new
-            // effect first at the paper's gain (where its gradient is informative), then, if
-            // that ends above the parent, from the parent itself with the gain at neutral: a
-            // richer model never ends worse than the one it extends.
+            // Start from the parent's optimum (the baseline's when there is none) with the new
+            // effect at the paper's gain (where its gradient is informative), and (below) from
+            // the paper's calibration; if the better end lies above the parent, also from the
+            // parent itself with the gain at neutral: a richer model never ends worse than the
+            // one it extends.
             let from_parent = |name: &str| {
                 parent
                     .and_then(|f| f.internal.iter().find(|(n, _)| n == name).map(|(_, v)| *v))
