@@ -18,6 +18,7 @@ use std::fmt;
 use std::sync::Arc;
 
 use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
 
 use crate::signal::dot;
 
@@ -365,9 +366,9 @@ const JTJ_BLOCK_ROWS: usize = 2048;
 /// and the partials' memory not on the number of rows.
 const JTJ_PARTS: usize = 8;
 
-/// JᵀJ of the column-major `jac` (`n` rows, `p` columns), its parts spread over the machine's
-/// cores (also where the residuals are evaluated serially because each simulation uses the
-/// threads itself) and added in order.
+/// JᵀJ of the column-major `jac` (`n` rows, `p` columns), its parts on rayon's pool (also
+/// where the residuals are evaluated serially because each simulation uses the threads
+/// itself) and added in order.
 fn jtj(jac: &[f64], n: usize, p: usize) -> Vec<f64> {
     let blocks = n.div_ceil(JTJ_BLOCK_ROWS).max(1);
     let blocks_per_part = blocks.div_ceil(JTJ_PARTS);
@@ -383,23 +384,10 @@ fn jtj(jac: &[f64], n: usize, p: usize) -> Vec<f64> {
             }
         }
     };
-    let threads = std::thread::available_parallelism()
-        .map_or(1, |t| t.get())
-        .min(JTJ_PARTS);
-    if threads == 1 || blocks == 1 {
-        partial.chunks_mut(p * p).enumerate().for_each(|(k, h)| part_sum(k, h));
-    } else {
-        let parts_per_thread = JTJ_PARTS.div_ceil(threads);
-        std::thread::scope(|s| {
-            for (t, out) in partial.chunks_mut(parts_per_thread * p * p).enumerate() {
-                s.spawn(move || {
-                    for (k, h) in out.chunks_mut(p * p).enumerate() {
-                        part_sum(t * parts_per_thread + k, h);
-                    }
-                });
-            }
-        });
-    }
+    partial
+        .par_chunks_mut(p * p)
+        .enumerate()
+        .for_each(|(k, h)| part_sum(k, h));
     let mut h = vec![0.0; p * p];
     for part in partial.chunks(p * p) {
         for a in 0..p {
