@@ -18,7 +18,6 @@ use std::fmt;
 use std::sync::Arc;
 
 use nalgebra::{DMatrix, DVector};
-use rayon::prelude::*;
 
 use crate::signal::dot;
 
@@ -361,19 +360,20 @@ where
 /// every pair of them is multiplied (one pass over the Jacobian instead of one per pair).
 const JTJ_BLOCK_ROWS: usize = 2048;
 
-/// The row blocks of JᵀJ are summed in this many contiguous parts, one partial JᵀJ each: a
-/// fixed number, so that the sum's order (and bits) does not depend on the number of cores,
-/// and the partials' memory not on the number of rows.
+/// The row blocks of JᵀJ are summed in this many contiguous parts, one partial JᵀJ each (the
+/// order in which the 400 000-row diagnosis and the EHVVA sweeps of session 22 were measured).
 const JTJ_PARTS: usize = 8;
 
-/// JᵀJ of the column-major `jac` (`n` rows, `p` columns), its parts on rayon's pool (also
-/// where the residuals are evaluated serially because each simulation uses the threads
-/// itself) and added in order.
+/// JᵀJ of the column-major `jac` (`n` rows, `p` columns), its parts added in order. On the
+/// calling thread: spread over the cores (on threads of its own or rayon's) the EVVT
+/// diagnosis of 425 000 rows peaked at up to 105 B a row instead of 91-98 (each thread's
+/// malloc arena keeps freed residual buffers), and in lanes and blocks it is a small part of
+/// a fit's time.
 fn jtj(jac: &[f64], n: usize, p: usize) -> Vec<f64> {
     let blocks = n.div_ceil(JTJ_BLOCK_ROWS).max(1);
     let blocks_per_part = blocks.div_ceil(JTJ_PARTS);
     let mut partial = vec![0.0; JTJ_PARTS * p * p];
-    let part_sum = |part: usize, h: &mut [f64]| {
+    for (part, h) in partial.chunks_mut(p * p).enumerate() {
         for b in part * blocks_per_part..((part + 1) * blocks_per_part).min(blocks) {
             let rows = b * JTJ_BLOCK_ROWS..((b + 1) * JTJ_BLOCK_ROWS).min(n);
             for a in 0..p {
@@ -383,11 +383,7 @@ fn jtj(jac: &[f64], n: usize, p: usize) -> Vec<f64> {
                 }
             }
         }
-    };
-    partial
-        .par_chunks_mut(p * p)
-        .enumerate()
-        .for_each(|(k, h)| part_sum(k, h));
+    }
     let mut h = vec![0.0; p * p];
     for part in partial.chunks(p * p) {
         for a in 0..p {
