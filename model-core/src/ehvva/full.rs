@@ -36,7 +36,7 @@
 
 use super::event::EhvvaPlant;
 use super::params::{EhvvaError, EhvvaInputs, EhvvaParams};
-use super::piston::{stops, Moving, Piston, SubLsb, SubStep};
+use super::piston::{stops, Moving, Piston, SubStep};
 use super::reduced::{check_step, directional, DEFAULT_DELAY_SAMPLES};
 use super::tables::EhvvaTables;
 use crate::delay::DelayLine;
@@ -211,14 +211,7 @@ impl<R: Real, const N: usize> EhvvaFull<R, N> {
             vp: R::ZERO,
             xm: R::ZERO,
             vm: R::ZERO,
-            m: Moving {
-                lift: R::ZERO,
-                vel: R::ZERO,
-                p_high: inputs.p_supply_mpa,
-                p_low: inputs.p_back_mpa,
-                seat_velocity: None,
-                carry_x1024: SubLsb::ZERO,
-            },
+            m: Moving::at_rest(inputs),
             pilot_history: DelayLine::new(R::ZERO),
             main_p_history: DelayLine::new(inputs.p_back_mpa),
             main_s_history: DelayLine::new(R::ZERO),

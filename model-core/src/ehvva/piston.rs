@@ -7,7 +7,7 @@
 //! An orifice of area A passing the piston flow A_p·v drops ρ/2·(A_p v / (Cd A))²; with ρ in
 //! kg/m³ and the velocity ratio in m/s this is ρ/2·1e-6 MPa per (m/s)².
 
-use super::params::{EhvvaError, EhvvaParams};
+use super::params::{EhvvaError, EhvvaInputs, EhvvaParams};
 use crate::real::Real;
 
 /// Physical constants of the piston, snubbers and accumulators in the model's number type.
@@ -553,6 +553,20 @@ pub struct Moving<R> {
     /// Fixed point: what the states gained below their LSB ([`Piston::advance`]); 0 for the
     /// floats.
     pub carry_x1024: SubLsb<R>,
+}
+
+impl<R: Real> Moving<R> {
+    /// Valve seated and still, the accumulators at the operating point's pressures.
+    pub fn at_rest(inputs: &EhvvaInputs<R>) -> Self {
+        Self {
+            lift: R::ZERO,
+            vel: R::ZERO,
+            p_high: inputs.p_supply_mpa,
+            p_low: inputs.p_back_mpa,
+            seat_velocity: None,
+            carry_x1024: SubLsb::ZERO,
+        }
+    }
 }
 
 /// What each integrated state of [`Moving`] gained below its LSB, times 2^10 (fixed point's

@@ -340,6 +340,14 @@ impl<'a> Lane<'a> {
         })
     }
 
+    /// The lane on `ev`, its model back at rest for `ev`'s operating point: the same numbers
+    /// as a new lane's, without building the unit's tables again.
+    fn start(&mut self, ev: &'a Event) {
+        self.ev = ev;
+        self.model.rest_at(&ev.inputs);
+        self.seated_for = 0;
+    }
+
     /// The lift at the event's sample `k`. Once the valve has sat on its seat for `settle`
     /// samples after the command's end, it stays there: 0 without stepping the model.
     fn sample(&mut self, k: usize, settle: usize) -> Result<f64, String> {
@@ -375,11 +383,16 @@ fn simulate_events(
 ) -> Result<(), String> {
     let settle = ((2.0 / dt_ms).round() as usize).max(1);
     let (mut rest, mut rest_from) = (out, base);
+    // Each lane's model is built once (a move of some 10 kB and the unit's tables) and put
+    // back at rest for each next event.
+    let mut lanes: Vec<Lane> = Vec::with_capacity(LANES);
     for group in events.chunks(LANES) {
-        let mut lanes = Vec::with_capacity(LANES);
         let mut outs: Vec<&mut [f64]> = Vec::with_capacity(LANES);
-        for ev in group {
-            lanes.push(Lane::new(params, ev, dt_ms, max_substep_ms)?);
+        for (i, ev) in group.iter().enumerate() {
+            match lanes.get_mut(i) {
+                Some(lane) => lane.start(ev),
+                None => lanes.push(Lane::new(params, ev, dt_ms, max_substep_ms)?),
+            }
             let gap = ev
                 .start
                 .checked_sub(rest_from)
@@ -391,6 +404,7 @@ fn simulate_events(
         }
         let longest = outs.iter().map(|o| o.len()).max().unwrap_or(0);
         for k in 0..longest {
+            // zip stops at the group's events: a last group may use fewer lanes.
             for (lane, o) in lanes.iter_mut().zip(outs.iter_mut()) {
                 if k < o.len() {
                     o[k] = lane.sample(k, settle)?;
