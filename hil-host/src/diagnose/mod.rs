@@ -123,6 +123,11 @@ pub struct Rules {
     /// not noise into one that is (step 2 of the docs).
     pub resolve_gain_pct: f64,
     pub resolve_z: f64,
+    /// Where no candidate is eligible, the effect with the largest gain is also added when it
+    /// takes the estimation cost down to at most this fraction of the model's without it (it
+    /// explains most of what the estimation log's fit missed) and the validation data confirm
+    /// it: gain at least `min_gain_pct`, z at least `resolve_z`.
+    pub confirm_est_cost_ratio: f64,
 }
 
 impl Default for Rules {
@@ -137,6 +142,7 @@ impl Default for Rules {
             max_causes: 3,
             resolve_gain_pct: 20.0,
             resolve_z: 2.33,
+            confirm_est_cost_ratio: 0.5,
         }
     }
 }

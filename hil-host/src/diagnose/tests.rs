@@ -195,3 +195,80 @@ fn a_masked_pair_is_found_when_its_second_effect_gains_least_alone() {
     assert!(by("decoy").gain_pct > 0.0 && by("masked").gain_pct < 0.0);
     assert_eq!(d.causes, ["near", "masked"], "{:#?}", d.evidence);
 }
+
+/// A family of one effect, `snub`, that removes a twelfth of a signal which lives only in the
+/// first 15 % of the validation record (6 of the 40 blocks): about 12 % gain at z near 2.6,
+/// under `min_z` and `resolve_gain_pct`. On the estimation data the effect takes the cost to
+/// `est_ratio` of the baseline's.
+struct Confirmed {
+    est_ratio: f64,
+}
+
+impl Confirmed {
+    const N: usize = 4000;
+    /// The signal in the first 15 %, and the noise.
+    fn parts(k: usize) -> (f64, f64) {
+        let t = k as f64 / Self::N as f64;
+        let signal = if t < 0.15 { (60.0 * t).sin() } else { 0.0 };
+        let noise = 0.01 * ((k as f64 * 12.9898).sin() * 43_758.545_3).fract();
+        (signal, noise)
+    }
+}
+
+impl Family for Confirmed {
+    fn plant(&self) -> Plant {
+        Plant::Positioner
+    }
+    fn output(&self) -> &'static str {
+        "pos_m"
+    }
+    fn formulation(&self) -> &'static str {
+        "test"
+    }
+    fn effects(&self) -> &'static [&'static str] {
+        &["snub"]
+    }
+    fn fit(&self, effects: &[&str], _parent: Option<&Fit>, _est: &Log, _val: &Log) -> Result<Fit, String> {
+        let with = !effects.is_empty();
+        let taken = if with { 0.12 } else { 0.0 };
+        let (mut measured, mut predicted) = (Vec::with_capacity(Self::N), Vec::with_capacity(Self::N));
+        for k in 0..Self::N {
+            let (signal, noise) = Self::parts(k);
+            measured.push(signal + noise);
+            predicted.push(taken * signal);
+        }
+        let params: Vec<(String, f64)> = effects.iter().map(|e| (format!("{e}_gain"), 1.0)).collect();
+        let ci = vec![None; params.len()];
+        let mut fit = Fit::new(&Fit::label(effects), params, ci, measured, predicted, 1);
+        fit.est_cost = if with { self.est_ratio } else { 1.0 };
+        Ok(fit)
+    }
+    fn regressors<'a>(&self, _val: &'a Log) -> Vec<(String, Cow<'a, [f64]>)> {
+        Vec::new()
+    }
+}
+
+/// A validation gain under the block test's `min_z` is added where the estimation data make
+/// it plain (the cost at most half the baseline's) and the validation confirms it (gain and
+/// z over `min_gain_pct` and `resolve_z`); with the same validation gain and a small
+/// estimation gain, nothing is named.
+#[test]
+fn a_gain_plain_on_estimation_and_confirmed_on_validation_is_added() {
+    let log = two_row_log();
+    let rules = Rules::default();
+    let plain = diagnose(&Confirmed { est_ratio: 0.3 }, &log, &log, false, &rules, &mut |_| {}).unwrap();
+    let c = &plain.candidates[0];
+    assert!(
+        c.gain_pct > rules.min_gain_pct
+            && c.gain_pct < rules.resolve_gain_pct
+            && c.z >= rules.resolve_z
+            && c.z < rules.min_z,
+        "premise: gain {} %, z {}",
+        c.gain_pct,
+        c.z
+    );
+    assert_eq!(plain.causes, ["snub"], "{:#?}", plain.evidence);
+    assert!(plain.evidence.iter().any(|e| e.contains("takes the estimation cost")));
+    let slight = diagnose(&Confirmed { est_ratio: 0.8 }, &log, &log, false, &rules, &mut |_| {}).unwrap();
+    assert!(slight.causes.is_empty(), "{:?}", slight.causes);
+}
