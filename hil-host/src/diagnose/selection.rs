@@ -237,9 +237,9 @@ pub(super) fn diagnose_fits(
             // effect takes the estimation cost to at most `confirm_est_cost_ratio` of the model
             // without it, and gains at least `min_gain_pct` on validation at z >= `resolve_z`.
             // The block test alone can miss it where the gain sits in a few events of a short
-            // validation log: an EHVVA unit's snubber on top of viscosity or a delay effect
-            // (seed 88109) halved the estimation cost three times over (0.54 -> 0.15,
-            // 0.34 -> 0.15, 0.33 -> 0.15) and gained 8-15 % at z = 3.1-3.5.
+            // validation log: an EHVVA unit's snubber on top of viscosity, pressure-delay or
+            // direction-delay (seed 88109's three pair logs) took the estimation cost from
+            // 0.54, 0.34, 0.33 to 0.15 each and gained 8-15 % at z = 3.0-3.5.
             let confirmed = |c: &Candidate| {
                 c.fit.est_cost <= rules.confirm_est_cost_ratio * without.est_cost
                     && gain_over(c) >= rules.min_gain_pct

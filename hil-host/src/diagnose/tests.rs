@@ -196,7 +196,7 @@ fn a_masked_pair_is_found_when_its_second_effect_gains_least_alone() {
     assert_eq!(d.causes, ["near", "masked"], "{:#?}", d.evidence);
 }
 
-/// A family of one effect, `snub`, that removes a twelfth of a signal which lives only in the
+/// A family of one effect, `snub`, that reproduces 12 % of a signal which lives only in the
 /// first 15 % of the validation record (6 of the 40 blocks): about 12 % gain at z near 2.6,
 /// under `min_z` and `resolve_gain_pct`. On the estimation data the effect takes the cost to
 /// `est_ratio` of the baseline's.
