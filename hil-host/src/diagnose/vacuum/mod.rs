@@ -341,10 +341,11 @@ impl VacuumFamily {
     /// new effect at its starting magnitude, and, for a mechanical effect, also from the
     /// band-centre map of the prepared start (the baseline's rod is bent by the hysteresis it
     /// could not describe); the clearance, whose cost is multimodal, also from a large
-    /// clearance (10 %); friction and clearance together also from Dahl's starting shape and
-    /// from the parent's dead band split between the two. If every start ends above the
-    /// parent's position cost, the parent with the effect at its neutral value is refitted
-    /// too: an extension never ends worse on the estimation data than the model it extends.
+    /// clearance (10 %); any model with friction also from the best two of a coarse grid of
+    /// Dahl distances (with the clearance too, of the parent's dead band split between the
+    /// two). If every start ends above the parent's position cost, the parent with the effect
+    /// at its neutral value is refitted too: an extension never ends worse on the estimation
+    /// data than the model it extends.
     /// Returns the model, the fitted parameter names, their 95 % half-widths, the iterations
     /// and the final position-stage solver run.
     fn calibrate(&self, est: &Log, effects: &[&str], parent: Option<&Fit>) -> Result<Calibrated, String> {
@@ -425,17 +426,19 @@ impl VacuumFamily {
                 m.backlash_pct = 10.0;
                 starts.push(m);
             }
-            // Friction and clearance together: the cost is multimodal in Dahl's presliding
-            // distance and in how the dead band is shared. A friction fit without the clearance
-            // sharpens the distance to its bound to mimic the clearance's dead band, and from
-            // there (a nearly discontinuous friction, a rough cost) the solver stops within a
-            // few steps. So a coarse global stage first: the parent's dead band as it is, split
-            // half and half between friction (2·Fc/slope wide in position, at the map's slope
-            // mid-band) and clearance, and kept with the new effect at its starting magnitude
-            // and the parent's smaller by as much; each with the parent's distance and 0.03-1 %.
-            // The two with the lowest position cost are fitted.
+            // Friction: the cost is multimodal in Dahl's presliding distance, and with the
+            // clearance also in how the dead band is shared. A fit sharpens the distance to
+            // mimic what it lacks (a clearance's dead band; a slow pressure fall: an HPT unit's
+            // friction fit ended at 0.058 % for the unit's 0.48 %), and from there (a nearly
+            // discontinuous friction, a rough cost) the solver stops within a few steps, even
+            // once the extension has put the pressure right. So a coarse global stage first:
+            // the parent's model, and with the clearance its dead band split half and half
+            // between friction (2·Fc/slope wide in position, at the map's slope mid-band) and
+            // clearance, and kept with the new effect at its starting magnitude and the
+            // parent's smaller by as much; each with the parent's distance and 0.03-1 %. The
+            // two with the lowest position cost (the pressure stage as it starts) are fitted.
             let (cf, bl) = (VacuumEffect::CoulombFriction.name(), VacuumEffect::Backlash.name());
-            if effects.contains(&cf) && effects.contains(&bl) {
+            if effects.contains(&cf) {
                 let m = parent_model(false)?;
                 let mut bases = vec![m];
                 let x_mid = data.x.iter().sum::<f64>() / data.x.len().max(1) as f64;
@@ -444,7 +447,7 @@ impl VacuumFamily {
                     .map(|s| s.pressure_per_position_kpa_per_pct(x_mid))
                     .unwrap_or(0.0);
                 let band_pct = 2.0 * parent_only.fc_kpa / slope + parent_only.backlash_pct;
-                if slope > 0.0 && band_pct.is_finite() && band_pct > 0.0 {
+                if effects.contains(&bl) && slope > 0.0 && band_pct.is_finite() && band_pct > 0.0 {
                     let (b_lo, b_hi) = bounds("backlash_pct");
                     let (f_lo, f_hi) = bounds("fc_kPa");
                     let mut split = m;
@@ -469,6 +472,7 @@ impl VacuumFamily {
                     .collect();
                 let cost_only = LsqOptions {
                     max_iterations: 0,
+                    intervals: false,
                     ..self.lsq.clone()
                 };
                 let mut grid: Vec<(f64, VacuumModel)> = Vec::new();
