@@ -441,29 +441,31 @@ impl VacuumFamily {
             if effects.contains(&cf) {
                 let m = parent_model(false)?;
                 let mut bases = vec![m];
-                let x_mid = data.x.iter().sum::<f64>() / data.x.len().max(1) as f64;
-                let parent_only = parent_model(true)?;
-                let slope = VacuumStaticModel::<f64>::new(&parent_only.to_params())
-                    .map(|s| s.pressure_per_position_kpa_per_pct(x_mid))
-                    .unwrap_or(0.0);
-                let band_pct = 2.0 * parent_only.fc_kpa / slope + parent_only.backlash_pct;
-                if effects.contains(&bl) && slope > 0.0 && band_pct.is_finite() && band_pct > 0.0 {
-                    let (b_lo, b_hi) = bounds("backlash_pct");
-                    let (f_lo, f_hi) = bounds("fc_kPa");
-                    let mut split = m;
-                    split.backlash_pct = (0.5 * band_pct).clamp(b_lo, b_hi);
-                    split.fc_kpa = (0.25 * band_pct * slope).clamp(f_lo, f_hi);
-                    bases.push(split);
-                    // The band kept, the new effect at its starting magnitude and the parent's
-                    // effect smaller by what the new one takes (a friction band of ±26 % on a
-                    // clearance of 3.7 % is far from half and half).
-                    let mut kept = m;
-                    if last == bl {
-                        kept.fc_kpa = (parent_only.fc_kpa - 0.5 * slope * m.backlash_pct).clamp(f_lo, f_hi);
-                    } else {
-                        kept.backlash_pct = (parent_only.backlash_pct - 2.0 * m.fc_kpa / slope).clamp(b_lo, b_hi);
+                if effects.contains(&bl) {
+                    let x_mid = data.x.iter().sum::<f64>() / data.x.len().max(1) as f64;
+                    let parent_only = parent_model(true)?;
+                    let slope = VacuumStaticModel::<f64>::new(&parent_only.to_params())
+                        .map(|s| s.pressure_per_position_kpa_per_pct(x_mid))
+                        .unwrap_or(0.0);
+                    let band_pct = 2.0 * parent_only.fc_kpa / slope + parent_only.backlash_pct;
+                    if slope > 0.0 && band_pct.is_finite() && band_pct > 0.0 {
+                        let (b_lo, b_hi) = bounds("backlash_pct");
+                        let (f_lo, f_hi) = bounds("fc_kPa");
+                        let mut split = m;
+                        split.backlash_pct = (0.5 * band_pct).clamp(b_lo, b_hi);
+                        split.fc_kpa = (0.25 * band_pct * slope).clamp(f_lo, f_hi);
+                        bases.push(split);
+                        // The band kept, the new effect at its starting magnitude and the
+                        // parent's effect smaller by what the new one takes (a friction band of
+                        // ±26 % on a clearance of 3.7 % is far from half and half).
+                        let mut kept = m;
+                        if last == bl {
+                            kept.fc_kpa = (parent_only.fc_kpa - 0.5 * slope * m.backlash_pct).clamp(f_lo, f_hi);
+                        } else {
+                            kept.backlash_pct = (parent_only.backlash_pct - 2.0 * m.fc_kpa / slope).clamp(b_lo, b_hi);
+                        }
+                        bases.push(kept);
                     }
-                    bases.push(kept);
                 }
                 let rod_names: Vec<&'static str> = m
                     .parameter_names(effects)?

@@ -365,8 +365,8 @@ fn friction_and_clearance_together_are_fitted_from_the_friction_fit() {
 /// Friction under another effect: the friction fit alone, which takes a slow pressure fall for
 /// its rod, ends at a presliding distance of 0.058 % on this HPT unit (truth 0.48 %); from
 /// there, with the pressure model put right, the rod stage stopped at once (estimation cost
-/// 9 525 against the parent's 8 918). Every fit with friction now starts also from the best of
-/// a coarse grid of distances.
+/// 9 525 against the parent's 8 918). Every fit with friction now starts also from the best two
+/// of a coarse grid of distances.
 #[test]
 fn friction_under_pressure_direction_leaves_the_parents_presliding_distance() {
     let (case, est, val) = case_logs("pressure-direction+coulomb-friction", 119_785);
