@@ -73,6 +73,14 @@ pub trait Family {
     fn fit_probe(&self, probe: &str, _effects: &[&str], _parent: &Fit, _est: &Log, _val: &Log) -> Result<Fit, String> {
         Err(format!("no probe `{probe}` in this family"))
     }
+    /// Whether a model may also be started from another model it nests than its parent (the
+    /// same effects but one of the parent's, an effect that competed with the parent's in an
+    /// earlier round), passed to [`Self::fit`] as `parent` with the effects reordered so that
+    /// the missing one comes last. Only for a family whose fit reads the parent's values by
+    /// name (the order of `effects` does not matter to its result) and depends on its start.
+    fn starts_from_other_nested(&self) -> bool {
+        false
+    }
     /// Whether `effect` ended at its neutral value in `fit` (switched off: its gain comes from
     /// refitting the rest of the model). By default to 1e-6 ([`catalogue::is_off`]); a family
     /// whose starts can lower the cost of a practically neutral effect judges by the fitted

@@ -104,6 +104,43 @@ pub(super) fn diagnose_fits(
                     continue;
                 }
             };
+            // The model also nests every competing explanation of an earlier round: a fit of
+            // the same effects but one of the selected ones, eligible on its own there (two
+            // effects that stand in for each other, such as friction and a clearance, both
+            // gain in the first round). From such a model's optimum the fit may reach another
+            // valley than from the parent's; the lower estimation cost is kept, so the model
+            // never ends worse on the estimation data than any model it nests that was fitted.
+            let mut fitted = fitted;
+            if family.starts_from_other_nested() && !selected.is_empty() {
+                for alt in other_nested(&rounds, &set, &current) {
+                    let Some(missing) = set.iter().copied().find(|e| !alt.effects.iter().any(|a| a == e)) else {
+                        continue;
+                    };
+                    let mut order: Vec<&'static str> = alt
+                        .effects
+                        .iter()
+                        .filter_map(|a| family.effects().iter().copied().find(|e| e == a))
+                        .collect();
+                    order.push(missing);
+                    index += 1;
+                    total += 1;
+                    let Ok(mut other) = fit(&order, Some(&alt), index, total) else {
+                        continue;
+                    };
+                    if other.est_cost < fitted.est_cost {
+                        evidence.push(format!(
+                            "`{}` fitted also from the `{}` model's optimum: estimation cost {:.4e} against {:.4e} from the model it extends; kept",
+                            Fit::label(&set),
+                            alt.effect,
+                            other.est_cost,
+                            fitted.est_cost
+                        ));
+                        other.effect = Fit::label(&set);
+                        other.effects = set.iter().map(|s| s.to_string()).collect();
+                        fitted = other;
+                    }
+                }
+            }
             let gain_pct = 100.0 * (current.rmse - fitted.rmse) / current.rmse;
             let z = improvement_z_of(&current, &fitted);
             // Gains are judged against what the baseline got wrong beyond the noise: an effect
@@ -623,6 +660,26 @@ pub(super) fn diagnose_fits(
         evidence,
         unexcited,
     })
+}
+
+/// The fits of earlier rounds that `set` nests other than `parent`: the same effects but one
+/// (in any order), eligible in their round, with a known estimation cost.
+fn other_nested(rounds: &[Round], set: &[&str], parent: &Fit) -> Vec<Fit> {
+    let same_set = |a: &[String], b: &[String]| a.len() == b.len() && a.iter().all(|x| b.contains(x));
+    let mut out: Vec<Fit> = Vec::new();
+    for c in rounds.iter().flat_map(|r| &r.candidates) {
+        let f = &c.fit;
+        if c.eligible
+            && f.est_cost.is_finite()
+            && f.effects.len() + 1 == set.len()
+            && f.effects.iter().all(|e| set.contains(&e.as_str()))
+            && !same_set(&f.effects, &parent.effects)
+            && !out.iter().any(|o| same_set(&o.effects, &f.effects))
+        {
+            out.push(f.clone());
+        }
+    }
+    out
 }
 
 /// The effects a round extended (for the report), from the selection after it.

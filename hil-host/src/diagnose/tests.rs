@@ -272,3 +272,90 @@ fn a_gain_plain_on_estimation_and_confirmed_on_validation_is_added() {
     let slight = diagnose(&Confirmed { est_ratio: 0.8 }, &log, &log, false, &rules, &mut |_| {}).unwrap();
     assert!(slight.causes.is_empty(), "{:?}", slight.causes);
 }
+
+/// A family of two effects that stand in for each other, as friction and a clearance do: each
+/// alone is eligible, `stick` predicts the validation better and is selected first, `gap`
+/// fits the estimation data better. The pair's fit ends where it starts: from `stick`'s
+/// optimum in a valley that reproduces little of `gap`'s signal, from `gap`'s at the truth.
+struct Swapped {
+    restarts: bool,
+}
+
+impl Swapped {
+    const N: usize = 4000;
+    /// `stick`'s signal, `gap`'s signal, the noise.
+    fn parts(k: usize) -> (f64, f64, f64) {
+        // Many periods in each of the significance test's blocks: both gains are consistent.
+        let t = k as f64;
+        let noise = 0.02 * ((t * 12.9898).sin() * 43_758.545_3).fract();
+        ((t / 7.0).sin(), 0.6 * (t / 11.0).cos(), noise)
+    }
+}
+
+impl Family for Swapped {
+    fn plant(&self) -> Plant {
+        Plant::Positioner
+    }
+    fn output(&self) -> &'static str {
+        "pos_m"
+    }
+    fn formulation(&self) -> &'static str {
+        "test"
+    }
+    fn effects(&self) -> &'static [&'static str] {
+        &["stick", "gap"]
+    }
+    fn starts_from_other_nested(&self) -> bool {
+        self.restarts
+    }
+    fn fit(&self, effects: &[&str], parent: Option<&Fit>, _est: &Log, _val: &Log) -> Result<Fit, String> {
+        let has = |e: &str| effects.contains(&e);
+        let from_gap = parent.is_some_and(|p| p.effects == ["gap"]);
+        // What each model reproduces of the two signals, and its estimation cost.
+        let (w_stick, w_gap, est_cost) = match (has("stick"), has("gap")) {
+            (true, true) if from_gap => (1.0, 1.0, 0.01),
+            (true, true) => (1.0, 0.02, 0.38),
+            (true, false) => (1.0, 0.0, 0.4),
+            (false, true) => (0.3, 1.0, 0.3),
+            (false, false) => (0.0, 0.0, 1.0),
+        };
+        let (mut measured, mut predicted) = (Vec::with_capacity(Self::N), Vec::with_capacity(Self::N));
+        for k in 0..Self::N {
+            let (stick, gap, noise) = Self::parts(k);
+            measured.push(stick + gap + noise);
+            predicted.push(w_stick * stick + w_gap * gap);
+        }
+        let params: Vec<(String, f64)> = effects.iter().map(|e| (format!("{e}_gain"), 1.0)).collect();
+        let ci = vec![None; params.len()];
+        let mut fit = Fit::new(&Fit::label(effects), params, ci, measured, predicted, 1);
+        fit.est_cost = est_cost;
+        Ok(fit)
+    }
+    fn regressors<'a>(&self, _val: &'a Log) -> Vec<(String, Cow<'a, [f64]>)> {
+        Vec::new()
+    }
+}
+
+/// A pair whose fit from the first cause's optimum stops in a poor valley is also fitted from
+/// the optimum of the other effect, which competed in the first round: the lower estimation
+/// cost is kept, under the pair's name in the order the effects were added, and both effects
+/// are named. Without those starts only the first is.
+#[test]
+fn a_pair_is_also_fitted_from_the_competing_effects_optimum() {
+    let log = two_row_log();
+    let rules = Rules::default();
+    let d = diagnose(&Swapped { restarts: true }, &log, &log, false, &rules, &mut |_| {}).unwrap();
+    // The premise: both alone eligible, `stick` the better on validation.
+    assert!(d.candidates.iter().all(|c| c.eligible), "{:#?}", d.evidence);
+    assert_eq!(d.cause, "stick");
+    assert_eq!(d.causes, ["stick", "gap"], "{:#?}", d.evidence);
+    let pair = &d.rounds[0].candidates[0].fit;
+    assert_eq!((pair.effect.as_str(), pair.est_cost), ("stick+gap", 0.01));
+    assert_eq!(pair.effects, ["stick", "gap"]);
+    assert!(d
+        .evidence
+        .iter()
+        .any(|e| e.contains("fitted also from the `gap` model's optimum")));
+    let without = diagnose(&Swapped { restarts: false }, &log, &log, false, &rules, &mut |_| {}).unwrap();
+    assert_eq!(without.causes, ["stick"], "{:#?}", without.evidence);
+}

@@ -218,6 +218,11 @@ impl Family for EhvvaFamily {
         Ok(est.select_rows(&ranges, label))
     }
 
+    /// The parent's values are read by knob name, and the fits depend on their start.
+    fn starts_from_other_nested(&self) -> bool {
+        true
+    }
+
     fn fit(&self, effects: &[&str], parent: Option<&Fit>, est: &Log, val: &Log) -> Result<Fit, String> {
         let all = Events::from_log(est)?;
         let de = all.for_fitting(MAX_FIT_EVENTS);
