@@ -602,3 +602,46 @@ fn an_evvt_recording_calibrates_the_units_table() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The EVVT image keeps the designed loop (crossover 2 rad/s on the identified α/β), and the
+/// notes say how the paper defaults would run the unit instead: on a unit whose α is 1.27x
+/// the paper's (seed 2) the paper's kp gives a higher crossover, on one at 0.79x (seed 3) a
+/// lower one. Checked against the crossover of the paper's kp on the unit's true α/β at its
+/// nominal point, |kp·α / (jω(jω + β))| = 1.
+#[test]
+fn the_evvt_notes_say_how_the_paper_defaults_would_run_the_unit() {
+    use model_core::control::evvt_phase::EvvtPhaseController;
+    use model_core::ecu::calibration::EcuCalibration;
+    let paper = EvvtPhaseController::<f64>::new(&EcuCalibration::paper_defaults().evvt_controller()).unwrap();
+    for (seed, faster) in [(2, true), (3, false)] {
+        let dir = workdir(&format!("evvt-loop-{seed}"));
+        let case = generate::generate(Plant::Evvt, "none", seed).unwrap();
+        let (est, _) = write_case(&case, &dir.join("unit"));
+        let get = |k: &str| case.truth.iter().find(|(n, _)| n == k).unwrap().1;
+        let (a, b) = (get("alpha_at_nominal_deg_per_s2_rpm"), get("beta_at_nominal_per_s"));
+        let kp = paper.gains_at(get("nominal_engine_rpm"), get("nominal_voltage_V")).0;
+        let k = kp * a;
+        let wc = (0.5 * ((b.powi(4) + 4.0 * k * k).sqrt() - b * b)).sqrt();
+        // The premise, from the truth alone.
+        assert!(if faster { wc > 2.2 } else { wc < 1.8 }, "seed {seed}: {wc} rad/s");
+        let outcome = calibrate::calibrate(std::slice::from_ref(&est), &mut |_| {}).unwrap();
+        let note = outcome
+            .notes
+            .iter()
+            .find(|n| n.contains("the paper defaults would run it at"))
+            .unwrap_or_else(|| panic!("{:?}", outcome.notes));
+        assert!(note.contains("at a crossover of 2.00-2.00 rad/s"), "{note}");
+        let want = if faster {
+            "faster than designed"
+        } else {
+            "slower than designed"
+        };
+        assert!(note.contains(want), "seed {seed}: {note}");
+        // The true nominal point's crossover lies within the reported range (±5 %).
+        let range = note.split("would run it at ").nth(1).unwrap();
+        let (lo, hi) = range.split(" rad/s").next().unwrap().split_once('-').unwrap();
+        let (lo, hi): (f64, f64) = (lo.parse().unwrap(), hi.parse().unwrap());
+        assert!(wc > 0.95 * lo && wc < 1.05 * hi, "seed {seed}: {wc} against {lo}-{hi}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}

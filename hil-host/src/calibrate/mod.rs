@@ -277,6 +277,7 @@ fn evvt(logs: &[Log], out: &mut Outcome, progress: &mut dyn FnMut(&str)) -> Resu
         files.join(", ")
     ));
     out.notes.push(evvt_coverage(&table));
+    out.notes.push(evvt_loop(&out.calibration)?);
     for name in [
         "evvt.engine_speed_rpm",
         "evvt.battery_voltage_v",
@@ -308,6 +309,63 @@ fn evvt_coverage(t: &model_core::evvt::EvvtLpvTable) -> String {
         "EVVT: the tables cover {:.0}-{:.0} rpm and {:.1}-{:.1} V (the recorded operating points); beyond them the ECU holds the edge values (no extrapolation): record the speeds and voltages the engine runs at",
         n[0], n[2], v[0], v[2]
     )
+}
+
+/// Crossover frequency (rad/s) of the P loop `kp·α/(s(s+β))`: where |L(jω)| = 1, i.e.
+/// ω²(ω² + β²) = (kp·α)².
+fn p_loop_crossover_rad_s(kp_rpm_per_deg: f64, alpha_deg_per_s2_rpm: f64, beta_per_s: f64) -> f64 {
+    let k = kp_rpm_per_deg * alpha_deg_per_s2_rpm;
+    let b2 = beta_per_s * beta_per_s;
+    (0.5 * ((b2 * b2 + 4.0 * k * k).sqrt() - b2)).sqrt()
+}
+
+/// How the EVVT loop runs on this unit with its own image, next to the paper defaults: the
+/// image's kp gives the designed crossover on the identified α/β, while the paper's kp runs a
+/// unit faster than the paper's at a higher crossover (tighter tracking, less phase margin)
+/// and a slower one at a lower one. The calibration keeps the design; the note tells the
+/// engineer what that trades, and which value to raise for a tighter loop.
+fn evvt_loop(cal: &EcuCalibration) -> Result<String, String> {
+    use model_core::control::evvt_phase::EvvtPhaseController;
+    let own_kp = cal.implied_kp().map_err(|e| e.to_string())?;
+    let paper = EvvtPhaseController::<f64>::new(&EcuCalibration::paper_defaults().evvt_controller())
+        .map_err(|_| "EVVT: the paper-default controller refused its own tables".to_string())?;
+    let t = &cal.evvt_lpv;
+    let (mut own, mut by_paper, mut pm_paper) = (Vec::new(), Vec::new(), Vec::new());
+    for i in 0..3 {
+        for j in 0..3 {
+            let (a, b) = (t.alpha_deg_per_s2_rpm[i][j], t.beta_per_s[i][j]);
+            let kp_paper = paper.gains_at(t.engine_speed_rpm[i], t.battery_voltage_v[j]).0;
+            let wc = p_loop_crossover_rad_s(kp_paper, a, b);
+            by_paper.push(wc);
+            pm_paper.push(90.0 - (wc / b).atan().to_degrees());
+            own.push(p_loop_crossover_rad_s(own_kp[i][j], a, b));
+        }
+    }
+    let range = |v: &[f64]| {
+        let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        (lo, hi)
+    };
+    let ((o_lo, o_hi), (p_lo, p_hi), (m_lo, m_hi)) = (range(&own), range(&by_paper), range(&pm_paper));
+    let ratio: Vec<f64> = by_paper.iter().zip(&own).map(|(p, o)| p / o).collect();
+    let (r_lo, r_hi) = range(&ratio);
+    let mut sorted = ratio.clone();
+    sorted.sort_by(f64::total_cmp);
+    let median = sorted[sorted.len() / 2];
+    let verdict = if median > 1.1 {
+        format!(
+            "the paper's gains run this unit's loop faster than designed: with this image its steps settle as designed and track less tightly than with the paper's gains (raise `evvt.crossover_rad_s`, now {:.1} rad/s, for a tighter loop)",
+            cal.evvt_crossover_rad_s
+        )
+    } else if median < 0.9 {
+        "the paper's gains run this unit's loop slower than designed: this image restores the designed response"
+            .to_string()
+    } else {
+        "the paper's gains run this unit's loop about as designed".to_string()
+    };
+    Ok(format!(
+        "EVVT: this image runs the unit's loop at a crossover of {o_lo:.2}-{o_hi:.2} rad/s over the table; the paper defaults would run it at {p_lo:.2}-{p_hi:.2} rad/s ({r_lo:.2}-{r_hi:.2}x, phase margin {m_lo:.0}-{m_hi:.0} deg): {verdict}"
+    ))
 }
 
 /// Which of the ECU's vacuum actuators a fitted model is, from its map shapes.
