@@ -101,6 +101,16 @@ fn progress_reports_every_fit_and_each_solver_iteration() {
     assert_eq!(seen.len(), fits.iter().map(|f| f.1.iterations + 1).sum::<usize>());
 }
 
+/// A written-out family's fit: a gain of 1 per effect, its validation series and its
+/// estimation cost.
+fn written_fit(effects: &[&str], measured: Vec<f64>, predicted: Vec<f64>, est_cost: f64) -> Fit {
+    let params: Vec<(String, f64)> = effects.iter().map(|e| (format!("{e}_gain"), 1.0)).collect();
+    let ci = vec![None; params.len()];
+    let mut fit = Fit::new(&Fit::label(effects), params, ci, measured, predicted, 1);
+    fit.est_cost = est_cost;
+    fit
+}
+
 /// A family of three effects whose fits are written out: `near` gains much but only in the
 /// first tenth of the record (z under 2), `decoy` gains a little everywhere, `masked` alone
 /// makes things worse; `near` with `masked` is the truth. Validation predictions only: each
@@ -165,11 +175,7 @@ impl Family for Masked {
                 0.5 * r * r
             })
             .sum();
-        let params = effects.iter().map(|e| (format!("{e}_gain"), 1.0)).collect::<Vec<_>>();
-        let ci = vec![None; params.len()];
-        let mut fit = Fit::new(&Fit::label(effects), params, ci, measured, predicted, 1);
-        fit.est_cost = est_cost;
-        Ok(fit)
+        Ok(written_fit(effects, measured, predicted, est_cost))
     }
     fn regressors<'a>(&self, _val: &'a Log) -> Vec<(String, Cow<'a, [f64]>)> {
         Vec::new()
@@ -237,11 +243,8 @@ impl Family for Confirmed {
             measured.push(signal + noise);
             predicted.push(taken * signal);
         }
-        let params: Vec<(String, f64)> = effects.iter().map(|e| (format!("{e}_gain"), 1.0)).collect();
-        let ci = vec![None; params.len()];
-        let mut fit = Fit::new(&Fit::label(effects), params, ci, measured, predicted, 1);
-        fit.est_cost = if with { self.est_ratio } else { 1.0 };
-        Ok(fit)
+        let est_cost = if with { self.est_ratio } else { 1.0 };
+        Ok(written_fit(effects, measured, predicted, est_cost))
     }
     fn regressors<'a>(&self, _val: &'a Log) -> Vec<(String, Cow<'a, [f64]>)> {
         Vec::new()
@@ -325,11 +328,7 @@ impl Family for Swapped {
             measured.push(stick + gap + noise);
             predicted.push(w_stick * stick + w_gap * gap);
         }
-        let params: Vec<(String, f64)> = effects.iter().map(|e| (format!("{e}_gain"), 1.0)).collect();
-        let ci = vec![None; params.len()];
-        let mut fit = Fit::new(&Fit::label(effects), params, ci, measured, predicted, 1);
-        fit.est_cost = est_cost;
-        Ok(fit)
+        Ok(written_fit(effects, measured, predicted, est_cost))
     }
     fn regressors<'a>(&self, _val: &'a Log) -> Vec<(String, Cow<'a, [f64]>)> {
         Vec::new()
