@@ -116,11 +116,7 @@ pub(super) fn diagnose_fits(
                     let Some(missing) = set.iter().copied().find(|e| !alt.effects.iter().any(|a| a == e)) else {
                         continue;
                     };
-                    let mut order: Vec<&'static str> = alt
-                        .effects
-                        .iter()
-                        .filter_map(|a| family.effects().iter().copied().find(|e| e == a))
-                        .collect();
+                    let mut order: Vec<&str> = alt.effects.iter().map(String::as_str).collect();
                     order.push(missing);
                     index += 1;
                     total += 1;
