@@ -159,8 +159,14 @@ fn diagnose(a: DiagnoseArgs) -> Result<()> {
         write_json(out, report::to_json(&d))?;
         eprintln!("report written to {}", out.display());
     }
+    // The validation time of the samples the diagnosis scored (a part, when it left a regime
+    // out: `validation_scope`).
+    let t_s: Option<Vec<f64>> = val.col("t_s").map(|t| match &d.validation_scope {
+        Some(s) => s.kept_rows.iter().flat_map(|r| t[r.clone()].iter().copied()).collect(),
+        None => t.to_vec(),
+    });
     if let Some(mut dir) = plots {
-        let written = hil_host::plot::diagnosis_plots_timed(&d, val.col("t_s").unwrap_or(&[]), dir.dir())
+        let written = hil_host::plot::diagnosis_plots_timed(&d, t_s.as_deref().unwrap_or(&[]), dir.dir())
             .map_err(|e| fail(format!("{}: {e}", dir.dir().display())))?;
         for w in &written {
             dir.record(w);
@@ -169,7 +175,7 @@ fn diagnose(a: DiagnoseArgs) -> Result<()> {
         dir.finish()?;
     }
     if let Some(page) = &a.report {
-        let plots = hil_host::plot::diagnosis_svgs(&d, val.col("t_s"));
+        let plots = hil_host::plot::diagnosis_svgs(&d, t_s.as_deref());
         let mut json = report::to_json(&d);
         tidy_json(&mut json);
         let html = hil_host::html::diagnosis_page(&json, &report::summary(&d), &plots);

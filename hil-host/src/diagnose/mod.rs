@@ -55,6 +55,15 @@ pub trait Family {
     fn estimation_part(&self, est: Log) -> Result<Log, String> {
         Ok(est)
     }
+    /// The part of the validation log to score, where the family can tell that some of it
+    /// lies in a regime the estimation log `est` never shows (`None`, the default: all of it).
+    /// A model is calibrated only where the estimation data excite it; scored on a regime the
+    /// estimation never held, a richer model that fits the estimation better can lose to a
+    /// poorer one by extrapolating differently, and the candidates are judged on that instead
+    /// of on the effect. What is left out is said in the report ([`ValidationScope`]).
+    fn validation_scope(&self, _est: &Log, _val: &Log) -> Result<Option<ValidationScope>, String> {
+        Ok(None)
+    }
     /// Calibrates the baseline plus `effects` (empty: the baseline) on `est`, predicts `val`.
     /// `parent` is the calibrated model that this one extends (the baseline plus all but the
     /// last of `effects`): the fit starts from its optimum with the new effect at its neutral
@@ -185,6 +194,20 @@ pub struct Remainder {
     pub evidence: Vec<String>,
 }
 
+/// The validation rows the diagnosis scores, when a family leaves out a regime the estimation
+/// log does not hold ([`Family::validation_scope`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ValidationScope {
+    /// Rows of the validation log that are scored, in order.
+    pub kept_rows: Vec<std::ops::Range<usize>>,
+    /// What was left out and why, in words a calibration engineer can act on.
+    pub reason: String,
+    /// How many of the log's parts (`what`, e.g. `valve events`) were left out, of how many.
+    pub left_out: usize,
+    pub of: usize,
+    pub what: &'static str,
+}
+
 /// Everything the diagnosis found.
 #[derive(Clone, Debug)]
 pub struct Diagnosis {
@@ -223,6 +246,9 @@ pub struct Diagnosis {
     /// only one is (`duty_pct`, `u_batt_V (validation data only)`): no excitation, so what depends on them cannot be
     /// computed (the report says so instead of printing NaN or a perfect fit).
     pub unexcited: Vec<String>,
+    /// The part of the validation log that was scored, when not all of it
+    /// ([`Family::validation_scope`]); `validation` is then that part's name and length.
+    pub validation_scope: Option<ValidationScope>,
 }
 
 /// The plant's input columns that are constant in `est` or `val` (see [`Diagnosis::unexcited`]).
@@ -310,6 +336,20 @@ fn diagnose_in(
 ) -> Result<Diagnosis, String> {
     let est_id = (est.file.clone(), est.len());
     let unexcited = unexcited_inputs(&est, val);
+    let scope = family.validation_scope(&est, val)?;
+    let val_part = scope.as_ref().map(|s| {
+        val.clone().select_rows(
+            &s.kept_rows,
+            format!(
+                "{} (scored: {} of its {} {})",
+                val.file,
+                s.of - s.left_out,
+                s.of,
+                s.what
+            ),
+        )
+    });
+    let val: &Log = val_part.as_ref().unwrap_or(val);
     let est = RefCell::new(Some(est));
     let start = Instant::now();
     let (tx, rx) = mpsc::channel::<Tick>();
@@ -377,7 +417,12 @@ fn diagnose_in(
             &release,
         );
         drop(tx);
-        result.map_err(|e| locate_error(e, &est_id.0, est.borrow().as_deref(), val))
+        let mut d = result.map_err(|e| locate_error(e, &est_id.0, est.borrow().as_deref(), val))?;
+        if let Some(s) = scope {
+            d.evidence.insert(0, format!("validation scope: {}", s.reason));
+            d.validation_scope = Some(s);
+        }
+        Ok(d)
     })
 }
 

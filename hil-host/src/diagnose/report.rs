@@ -216,10 +216,21 @@ pub fn to_json(d: &Diagnosis) -> Value {
         .put("output", json!(d.output))
         .put("formulation", json!(d.formulation))
         .put("estimation", json!({"file": d.estimation.0, "samples": d.estimation.1}))
-        .put(
-            "validation",
-            json!({"file": d.validation.0, "samples": d.validation.1, "held_out_tail": d.validation_is_tail}),
-        )
+        .put("validation", {
+            let mut v =
+                json!({"file": d.validation.0, "samples": d.validation.1, "held_out_tail": d.validation_is_tail});
+            // The part scored, when a regime the estimation log never holds was left out.
+            if let Some(s) = &d.validation_scope {
+                v["scope"] = json!({
+                    "left_out": s.left_out,
+                    "of": s.of,
+                    "unit": s.what,
+                    "kept_rows": s.kept_rows.iter().map(|r| [r.start, r.end]).collect::<Vec<_>>(),
+                    "reason": s.reason,
+                });
+            }
+            v
+        })
         .put("baseline", baseline.done())
         .put("residual_tests", tests.done())
         .put("candidates", Value::Array(candidates))

@@ -655,6 +655,7 @@ pub(super) fn diagnose_fits(
         remainder_grouped: rest.grouped,
         evidence,
         unexcited,
+        validation_scope: None,
     })
 }
 

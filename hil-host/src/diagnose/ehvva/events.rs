@@ -19,6 +19,12 @@ pub const PRE_MS: f64 = 1.0;
 /// not information.
 pub const MAX_FIT_EVENTS: usize = 64;
 
+/// [`Event::held_short_of_stroke`]: how long before the command's falling edge the valve must
+/// have stood, and how far below its stroke (a valve at its stop reads within a few hundredths
+/// of a millimetre of it).
+pub const HELD_WINDOW_MS: f64 = 2.0;
+pub const HELD_SHORT_MM: f64 = 0.15;
+
 /// Delay-line length of the simulated model: 1024 samples hold 10 ms even at a 0.01 ms step.
 const DELAY_SAMPLES: usize = 1024;
 
@@ -44,6 +50,28 @@ pub struct Event {
 impl Event {
     pub fn stroke_mm(&self, p: &EhvvaParams) -> f64 {
         p.stroke_mm(self.inputs.lift_high)
+    }
+
+    /// Whether the measured valve is held open short of its stroke `stroke_mm` at the end of
+    /// the command: over the last [`HELD_WINDOW_MS`] before the falling edge its lift (a
+    /// quarter-millisecond mean at each end, so the sensor noise does not decide) stays
+    /// between a tenth of the stroke and [`HELD_SHORT_MM`] below it, moving by less than 5 % of
+    /// the stroke. That is the force balance of the spring against the pressures (a low supply,
+    /// a high back pressure, a weak spring): a valve still opening moves faster than that
+    /// while driven, one whose command ended before it moved is below a tenth.
+    pub fn held_short_of_stroke(&self, stroke_mm: f64, dt_ms: f64) -> bool {
+        let Some(off) = self.off_index else {
+            return false;
+        };
+        let window = ((HELD_WINDOW_MS / dt_ms).round() as usize).max(2);
+        let avg = ((0.25 / dt_ms).round() as usize).clamp(1, window / 2);
+        if off < self.on_index + window || off > self.lift_mm.len() {
+            return false;
+        }
+        let mean = |r: std::ops::Range<usize>| self.lift_mm[r.clone()].iter().sum::<f64>() / r.len() as f64;
+        let end = mean(off - avg..off);
+        let begin = mean(off - window..off - window + avg);
+        end > 0.1 * stroke_mm && end < stroke_mm - HELD_SHORT_MM && (end - begin).abs() < 0.05 * stroke_mm
     }
 }
 

@@ -335,3 +335,101 @@ fn the_approach_on_the_coarse_model_ends_at_the_models_own_optimum() {
     simulate_all(&pp, &set.coarse(), &mut coarse).unwrap();
     assert!(fine != coarse, "the coarse sub-step did not reach the model");
 }
+
+/// A bench log at 20 kHz written out: one 40 ms event per entry of `held_at` (low lift, 4 mm
+/// stroke, 8 ms command). The lift rises at 1 mm/ms from 3 ms after the command and stands at
+/// `held_at` (a fraction of the stroke: 1.0 its stop) until 3 ms after the command ends, then
+/// falls at 1 mm/ms.
+fn trapezoid_log(name: &str, held_at: &[f64]) -> Log {
+    let (dt_ms, per_event) = (0.05, 800);
+    let mut cols: [Vec<f64>; 8] = Default::default();
+    for (i, &level) in held_at.iter().enumerate() {
+        let top = 4.0 * level;
+        for k in 0..per_event {
+            let t = k as f64 * dt_ms - 2.0; // ms from the command's rising edge
+            let lift = if t < 3.0 {
+                0.0
+            } else if t < 11.0 {
+                (t - 3.0).min(top)
+            } else {
+                (top - (t - 11.0)).max(0.0)
+            };
+            let row = [
+                ((i * per_event + k) as f64 * dt_ms * 1e-3),
+                if (0.0..8.0).contains(&t) { 1.0 } else { 0.0 },
+                6.0,
+                1.0,
+                22.0,
+                0.0,
+                0.0,
+                lift,
+            ];
+            for (c, v) in cols.iter_mut().zip(row) {
+                c.push(v);
+            }
+        }
+    }
+    let names = [
+        "t_s",
+        "u_pilot",
+        "p_supply_MPa",
+        "p_back_MPa",
+        "temp_C",
+        "lift_high",
+        "snubber_on",
+        "lift_mm",
+    ];
+    let columns: Vec<(&str, &[f64])> = names.iter().copied().zip(cols.iter().map(|c| &c[..])).collect();
+    let text = crate::log::format_log(&[("plant".into(), "ehvva".into())], &columns);
+    crate::log::parse_log(name, &text, None).unwrap()
+}
+
+/// An event held short of its stroke by the force balance is told from one at its stop, one
+/// still opening when its command ends, and one that never opened.
+#[test]
+fn a_valve_held_short_of_its_stroke_is_told_from_one_at_its_stop_or_still_moving() {
+    let events = |held_at: &[f64]| Events::from_log(&trapezoid_log("t.csv", held_at)).unwrap();
+    let held = |e: &Events, i: usize| e.events[i].held_short_of_stroke(4.0, e.dt_ms);
+    let e = events(&[1.0, 0.7, 0.2, 0.98]);
+    assert!(!held(&e, 0), "a valve at its stop");
+    assert!(held(&e, 1), "a valve standing at 2.8 of 4 mm");
+    assert!(held(&e, 2), "a valve standing at 0.8 of 4 mm");
+    assert!(!held(&e, 3), "3.92 mm: within the stop's tolerance");
+    // A command of 8 ms ends with the valve 5 mm up a 7.5 mm stroke, still opening at 1 mm/ms.
+    let moving = events(&[1.9]);
+    assert!(!moving.events[0].held_short_of_stroke(7.5, moving.dt_ms));
+    // One that never moved while commanded.
+    assert!(!held(&events(&[0.0]), 0));
+}
+
+/// Validation events held short of the stroke are left out of the scores when the
+/// estimation log holds none, with their count, times and set-points said; kept when the
+/// estimation log holds one, or when they would be most of the validation log.
+#[test]
+fn validation_events_in_a_regime_the_estimation_never_holds_are_left_out_and_named() {
+    let family = EhvvaFamily::default();
+    let est = trapezoid_log("est.csv", &[1.0, 1.0, 1.0, 1.0]);
+    let val = trapezoid_log("val.csv", &[1.0, 0.7, 1.0, 0.6, 1.0]);
+    let scope = family
+        .validation_scope(&est, &val)
+        .unwrap()
+        .expect("two events left out");
+    assert_eq!((scope.left_out, scope.of), (2, 5));
+    // The kept rows are the first, third and fifth events whole (800 rows each).
+    assert_eq!(scope.kept_rows.iter().map(|r| r.len()).sum::<usize>(), 3 * 800);
+    assert!(scope
+        .kept_rows
+        .iter()
+        .all(|r| !r.contains(&(800 + 400)) && !r.contains(&(3 * 800 + 400))));
+    assert!(scope.reason.contains("0.042, 0.122 s"), "{}", scope.reason);
+    assert!(scope.reason.contains("supply 6.00..6.00 MPa"), "{}", scope.reason);
+    let kept = val.clone().select_rows(&scope.kept_rows, "part".into());
+    let part = Events::from_log(&kept).unwrap();
+    assert_eq!(part.events.len(), 3);
+    assert!(part.events.iter().all(|e| !e.held_short_of_stroke(4.0, part.dt_ms)));
+
+    let est_holding_one = trapezoid_log("est.csv", &[1.0, 0.5, 1.0, 1.0]);
+    assert_eq!(family.validation_scope(&est_holding_one, &val).unwrap(), None);
+    let mostly_held = trapezoid_log("val.csv", &[0.7, 0.6, 1.0]);
+    assert_eq!(family.validation_scope(&est, &mostly_held).unwrap(), None);
+}
