@@ -358,3 +358,114 @@ fn a_pair_is_also_fitted_from_the_competing_effects_optimum() {
     let without = diagnose(&Swapped { restarts: false }, &log, &log, false, &rules, &mut |_| {}).unwrap();
     assert_eq!(without.causes, ["stick"], "{:#?}", without.evidence);
 }
+
+/// A family whose validation log holds a regime the estimation never shows (rows 600..800 of
+/// 1000, told by the family when `scoped`): there its one effect, exact elsewhere,
+/// extrapolates 10 units off, while the baseline (half the signal) misses alike everywhere.
+/// The fits read the rows they are given (`force_N` holds each row's index in the log).
+struct Scoped {
+    scoped: bool,
+}
+
+impl Scoped {
+    const N: usize = 1000;
+    const OUT: std::ops::Range<usize> = 600..800;
+    fn log() -> Log {
+        let mut text = String::from("# plant: positioner\nt_s,force_N,pos_m\n");
+        for k in 0..Self::N {
+            text += &format!("{},{k},0\n", k as f64 * 1e-3);
+        }
+        crate::log::parse_log("scoped.csv", &text, None).unwrap()
+    }
+}
+
+impl Family for Scoped {
+    fn plant(&self) -> Plant {
+        Plant::Positioner
+    }
+    fn output(&self) -> &'static str {
+        "pos_m"
+    }
+    fn formulation(&self) -> &'static str {
+        "test"
+    }
+    fn effects(&self) -> &'static [&'static str] {
+        &["exact"]
+    }
+    fn validation_scope(&self, _est: &Log, _val: &Log) -> Result<Option<ValidationScope>, String> {
+        Ok(self.scoped.then(|| ValidationScope {
+            kept_rows: vec![0..Self::OUT.start, Self::OUT.end..Self::N],
+            reason: "rows 600..800 lie in a regime the estimation log never holds".into(),
+            left_out: 1,
+            of: 3,
+            what: "blocks",
+        }))
+    }
+    fn fit(&self, effects: &[&str], _parent: Option<&Fit>, _est: &Log, val: &Log) -> Result<Fit, String> {
+        let rows = val.col("force_N").ok_or("no force_N")?;
+        let (mut measured, mut predicted) = (Vec::new(), Vec::new());
+        for &k in rows {
+            let k = k as usize;
+            let signal = (k as f64 / 50.0).sin();
+            let noise = 0.02 * ((k as f64 * 12.9898).sin() * 43_758.545_3).fract();
+            measured.push(signal + noise);
+            predicted.push(match (effects.is_empty(), Self::OUT.contains(&k)) {
+                (true, _) => 0.5 * signal,
+                (false, false) => signal,
+                (false, true) => signal + 10.0,
+            });
+        }
+        let est_cost = if effects.is_empty() { 100.0 } else { 1.0 };
+        Ok(written_fit(effects, measured, predicted, est_cost))
+    }
+    fn regressors<'a>(&self, _val: &'a Log) -> Vec<(String, Cow<'a, [f64]>)> {
+        Vec::new()
+    }
+}
+
+/// A regime the family leaves out of the validation is out of every score: the effect that
+/// is exact where the estimation reached is named (scored on all rows it loses to the
+/// baseline), the report names the part scored and says why, in the summary and the JSON.
+#[test]
+fn a_validation_regime_the_family_leaves_out_is_out_of_every_score_and_said() {
+    let log = Scoped::log();
+    let all = diagnose(
+        &Scoped { scoped: false },
+        &log,
+        &log,
+        false,
+        &Rules::default(),
+        &mut |_| {},
+    )
+    .unwrap();
+    assert_eq!(all.cause, "none", "the premise: scored on every row the effect loses");
+    assert!(all.validation_scope.is_none() && all.validation.1 == Scoped::N);
+
+    let d = diagnose(
+        &Scoped { scoped: true },
+        &log,
+        &log,
+        false,
+        &Rules::default(),
+        &mut |_| {},
+    )
+    .unwrap();
+    assert_eq!(d.causes, ["exact"], "{:#?}", d.evidence);
+    assert_eq!(d.verdict, "explained", "{:#?}", d.remainder);
+    assert_eq!(d.validation.1, Scoped::N - Scoped::OUT.len());
+    assert_eq!(d.extended.residual_len(), d.validation.1);
+    assert!(
+        d.validation.0.contains("scored: 2 of its 3 blocks"),
+        "{}",
+        d.validation.0
+    );
+    assert!(
+        d.evidence[0].starts_with("validation scope: rows 600..800"),
+        "{:?}",
+        d.evidence
+    );
+    let j = report::to_json(&d);
+    assert_eq!(j["validation"]["scope"]["left_out"], 1);
+    assert_eq!(j["validation"]["scope"]["kept_rows"][1], serde_json::json!([800, 1000]));
+    assert!(report::summary(&d).contains("validation scope: rows 600..800"));
+}

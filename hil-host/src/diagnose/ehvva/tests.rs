@@ -369,17 +369,9 @@ fn trapezoid_log(name: &str, held_at: &[f64]) -> Log {
             }
         }
     }
-    let names = [
-        "t_s",
-        "u_pilot",
-        "p_supply_MPa",
-        "p_back_MPa",
-        "temp_C",
-        "lift_high",
-        "snubber_on",
-        "lift_mm",
-    ];
-    let columns: Vec<(&str, &[f64])> = names.iter().copied().zip(cols.iter().map(|c| &c[..])).collect();
+    // The rows above are in the layout's column order, after the time.
+    let names = std::iter::once("t_s").chain(Plant::Ehvva.columns().iter().map(|(n, _)| *n));
+    let columns: Vec<(&str, &[f64])> = names.zip(cols.iter().map(|c| &c[..])).collect();
     let text = crate::log::format_log(&[("plant".into(), "ehvva".into())], &columns);
     crate::log::parse_log(name, &text, None).unwrap()
 }
