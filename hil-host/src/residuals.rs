@@ -56,10 +56,11 @@ pub fn autocorrelation(e: &[f64], max_lag: usize) -> Vec<f64> {
 }
 
 /// A correlation over more products than this runs its lags on rayon's pool: each lag's sum is
-/// the same computation either way (the same bits), the series are shared, not copied (the
-/// residual tests of a 200 000-row record were the longest stretch of its diagnosis on one
-/// core; each regressor's tests on a thread of its own had cost a centred copy of both series
-/// per thread, 105 B a row of peak memory against the goal's 100).
+/// the same computation either way (the same bits), and the centred series are shared, not
+/// copied (the residual tests of a 200 000-row record were the longest stretch of its
+/// diagnosis on one core; whole tests on threads of their own, per regressor or the baseline's
+/// beside the extended model's, each held centred copies of the series: 105 B a row of peak
+/// memory against the goal's 100).
 const PARALLEL_PRODUCTS: usize = 1 << 22;
 
 /// Normalised cross-correlation between `e` and `u` at lags −max_lag..=max_lag
