@@ -223,7 +223,7 @@ impl Log {
     /// The rows in `ranges` (in that order) as a log of their own, named `label`: a part of a
     /// long record that a fit uses. Metadata, notices and the sample period are kept; the
     /// time column is cut like the others, so it jumps where the ranges meet.
-    pub fn select_rows(self, ranges: &[std::ops::Range<usize>], label: String) -> Log {
+    pub fn select_rows(&self, ranges: &[std::ops::Range<usize>], label: String) -> Log {
         let mut part = self.clone_empty();
         part.file = label;
         for (name, v) in &self.columns {

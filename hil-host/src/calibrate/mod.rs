@@ -311,21 +311,13 @@ fn evvt_coverage(t: &model_core::evvt::EvvtLpvTable) -> String {
     )
 }
 
-/// Crossover frequency (rad/s) of the P loop `kp·α/(s(s+β))`: where |L(jω)| = 1, i.e.
-/// ω²(ω² + β²) = (kp·α)².
-fn p_loop_crossover_rad_s(kp_rpm_per_deg: f64, alpha_deg_per_s2_rpm: f64, beta_per_s: f64) -> f64 {
-    let k = kp_rpm_per_deg * alpha_deg_per_s2_rpm;
-    let b2 = beta_per_s * beta_per_s;
-    (0.5 * ((b2 * b2 + 4.0 * k * k).sqrt() - b2)).sqrt()
-}
-
 /// How the EVVT loop runs on this unit with its own image, next to the paper defaults: the
 /// image's kp gives the designed crossover on the identified α/β, while the paper's kp runs a
 /// unit faster than the paper's at a higher crossover (tighter tracking, less phase margin)
 /// and a slower one at a lower one. The calibration keeps the design; the note tells the
 /// engineer what that trades, and which value to raise for a tighter loop.
 fn evvt_loop(cal: &EcuCalibration) -> Result<String, String> {
-    use model_core::control::evvt_phase::EvvtPhaseController;
+    use model_core::control::evvt_phase::{p_loop_crossover_and_margin, EvvtPhaseController};
     let own_kp = cal.implied_kp().map_err(|e| e.to_string())?;
     let paper = EvvtPhaseController::<f64>::new(&EcuCalibration::paper_defaults().evvt_controller())
         .map_err(|_| "EVVT: the paper-default controller refused its own tables".to_string())?;
@@ -335,10 +327,10 @@ fn evvt_loop(cal: &EcuCalibration) -> Result<String, String> {
         for j in 0..3 {
             let (a, b) = (t.alpha_deg_per_s2_rpm[i][j], t.beta_per_s[i][j]);
             let kp_paper = paper.gains_at(t.engine_speed_rpm[i], t.battery_voltage_v[j]).0;
-            let wc = p_loop_crossover_rad_s(kp_paper, a, b);
+            let (wc, pm) = p_loop_crossover_and_margin(kp_paper, a, b);
             by_paper.push(wc);
-            pm_paper.push(90.0 - (wc / b).atan().to_degrees());
-            own.push(p_loop_crossover_rad_s(own_kp[i][j], a, b));
+            pm_paper.push(pm);
+            own.push(p_loop_crossover_and_margin(own_kp[i][j], a, b).0);
         }
     }
     let range = |v: &[f64]| {

@@ -338,7 +338,7 @@ fn diagnose_in(
     let unexcited = unexcited_inputs(&est, val);
     let scope = family.validation_scope(&est, val)?;
     let val_part = scope.as_ref().map(|s| {
-        val.clone().select_rows(
+        val.select_rows(
             &s.kept_rows,
             format!(
                 "{} (scored: {} of its {} {})",

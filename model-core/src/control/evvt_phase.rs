@@ -197,6 +197,17 @@ enum Law<R: Real> {
     },
 }
 
+/// Crossover frequency (rad/s) and phase margin (degrees) of the proportional loop
+/// `kp·α/(s(s+β))` (α in crank-deg/(s²·rpm), kp in rpm/deg, β in 1/s): ω·√(ω² + β²) = kp·α
+/// solved for ω, and 90° − atan(ω/β) there. The controller schedules kp from a wanted
+/// crossover; this is the way back, for a host that analyses a loop (`calibrate`'s notes).
+pub fn p_loop_crossover_and_margin(kp_rpm_per_deg: f64, alpha_deg_per_s2_rpm: f64, beta_per_s: f64) -> (f64, f64) {
+    let k = kp_rpm_per_deg * alpha_deg_per_s2_rpm;
+    let b2 = beta_per_s * beta_per_s;
+    let w = libm::sqrt(0.5 * (libm::sqrt(b2 * b2 + 4.0 * k * k) - b2));
+    (w, 90.0 - libm::atan(w / beta_per_s).to_degrees())
+}
+
 /// The controller state machine.
 #[derive(Clone, Debug)]
 pub struct EvvtPhaseController<R: Real> {
@@ -481,15 +492,6 @@ mod tests {
         assert_eq!(c.integral_rpm(), 0.0);
     }
 
-    /// |L(jω)| and the phase margin of `L = kp α/(s(s+β))` at the crossover.
-    fn crossover_and_margin(kp: f64, a: f64, b: f64) -> (f64, f64) {
-        // Solve ω √(ω² + β²) = kp α for ω.
-        let k = kp * a;
-        let w2 = (-b * b + (b * b * b * b + 4.0 * k * k).sqrt()) / 2.0;
-        let w = w2.sqrt();
-        (w, 90.0 - (w / b).atan().to_degrees())
-    }
-
     #[test]
     fn schedule_holds_the_crossover_and_the_phase_margin() {
         let c = EvvtPhaseController::<f64>::new(&EvvtPhaseConfig::default()).unwrap();
@@ -499,7 +501,7 @@ mod tests {
                 let (kp, ki_rate) = c.gains_at(n, v);
                 let a = c.alpha.eval(n, v);
                 let b = c.beta.eval(n, v);
-                let (wc, pm) = crossover_and_margin(kp, a, b);
+                let (wc, pm) = p_loop_crossover_and_margin(kp, a, b);
                 assert!(pm >= 55.0 - 1e-6, "{n} rpm {v} V: phase margin {pm}");
                 if b * (35.0f64).to_radians().tan() >= 2.0 {
                     assert!((wc - 2.0).abs() < 1e-9, "{n} rpm {v} V: crossover {wc}");

@@ -65,7 +65,7 @@ impl Event {
         };
         let window = ((HELD_WINDOW_MS / dt_ms).round() as usize).max(2);
         let avg = ((0.25 / dt_ms).round() as usize).clamp(1, window / 2);
-        if off < self.on_index + window || off > self.lift_mm.len() {
+        if off < self.on_index + window {
             return false;
         }
         let mean = |r: std::ops::Range<usize>| self.lift_mm[r.clone()].iter().sum::<f64>() / r.len() as f64;

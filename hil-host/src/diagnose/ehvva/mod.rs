@@ -237,10 +237,17 @@ impl Family for EhvvaFamily {
             return Ok(None);
         }
         let v = Events::from_log(val)?;
+        let is_held: Vec<bool> = v
+            .events
+            .iter()
+            .map(|ev| ev.held_short_of_stroke(stroke(ev), v.dt_ms))
+            .collect();
         let held: Vec<&Event> = v
             .events
             .iter()
-            .filter(|ev| ev.held_short_of_stroke(stroke(ev), v.dt_ms))
+            .zip(&is_held)
+            .filter(|(_, h)| **h)
+            .map(|(ev, _)| ev)
             .collect();
         if held.is_empty() || 2 * held.len() > v.events.len() {
             return Ok(None);
@@ -249,7 +256,7 @@ impl Family for EhvvaFamily {
         let mut kept_rows: Vec<std::ops::Range<usize>> = Vec::new();
         kept_rows.push(0..v.skipped());
         for (i, ev) in v.events.iter().enumerate() {
-            if held.iter().any(|h| h.start == ev.start) {
+            if is_held[i] {
                 continue;
             }
             let end = v.events.get(i + 1).map_or(v.samples, |n| n.start);

@@ -415,7 +415,7 @@ fn validation_events_in_a_regime_the_estimation_never_holds_are_left_out_and_nam
         .all(|r| !r.contains(&(800 + 400)) && !r.contains(&(3 * 800 + 400))));
     assert!(scope.reason.contains("0.042, 0.122 s"), "{}", scope.reason);
     assert!(scope.reason.contains("supply 6.00..6.00 MPa"), "{}", scope.reason);
-    let kept = val.clone().select_rows(&scope.kept_rows, "part".into());
+    let kept = val.select_rows(&scope.kept_rows, "part".into());
     let part = Events::from_log(&kept).unwrap();
     assert_eq!(part.events.len(), 3);
     assert!(part.events.iter().all(|e| !e.held_short_of_stroke(4.0, part.dt_ms)));
