@@ -9,8 +9,9 @@
 //!
 //! - Estimation: a Table 1-like matrix: the 4 × 5 grid of supply pressure (5/6/7/8 MPa) and
 //!   temperature (−20/0/22/60/100 °C), each jittered, in random order, dwell 8 or 20 ms, back
-//!   pressure 1 MPa (a quarter of the events at 2-4 MPa, like tests 12-15), lift and switch
-//!   valve states at random; where the valve could not reach its lift stop, high lift becomes
+//!   pressure: the 8 MPa row sweeps it as tests 12-15 do (1, 2, 3 and 4 MPa and one more
+//!   between 2 and 4, shuffled over its temperatures), the other rows at 1 MPa but a quarter
+//!   of their events at 2-4 MPa; lift and switch valve states at random; where the valve could not reach its lift stop, high lift becomes
 //!   low lift, then the back pressure 1 MPa, then the supply pressure rises (Table 1 runs high
 //!   lift from 6 MPa and high back pressure at 8 MPa only).
 //! - Validation: other excitation: 24 events at conditions drawn anywhere in the ranges
@@ -174,14 +175,23 @@ fn reaching_the_stop(mut t: Test) -> Test {
 
 /// The estimation matrix (module doc).
 pub fn estimation_tests(rng: &mut Rng) -> Vec<Test> {
+    // Table 1's back-pressure sweep (tests 12-15: 1-4 MPa at 8 MPa supply) on the 8 MPa row,
+    // from a stream of its own so that every other draw of a seed's matrix is unchanged.
+    let mut sweep_rng = Rng::new(rng.clone().next_u64() ^ 0x0BAC_4E55);
+    let mut sweep = [1.0, 2.0, 3.0, 4.0, sweep_rng.uniform(2.0, 4.0)];
+    for i in (1..sweep.len()).rev() {
+        let j = (sweep_rng.next_u64() % (i as u64 + 1)) as usize;
+        sweep.swap(i, j);
+    }
     let mut tests = Vec::new();
     for ph in [5.0, 6.0, 7.0, 8.0] {
-        for t in [-20.0, 0.0, 22.0, 60.0, 100.0] {
-            let pl = if rng.unit() < 0.25 {
+        for (k, t) in [-20.0, 0.0, 22.0, 60.0, 100.0].into_iter().enumerate() {
+            let drawn = if rng.unit() < 0.25 {
                 [2.0, 3.0, 4.0][(rng.next_u64() % 3) as usize]
             } else {
                 1.0
             };
+            let pl = if ph == 8.0 { sweep[k] } else { drawn };
             tests.push(reaching_the_stop(Test {
                 inputs: EhvvaInputs {
                     p_supply_mpa: ph + rng.uniform(-0.1, 0.1),
@@ -424,5 +434,36 @@ mod tests {
         }
         assert_eq!(crate::diagnose::ehvva::Events::from_log(&val).unwrap().events.len(), 24);
         assert_ne!(case.estimation_csv, generate("none", 6).unwrap().estimation_csv);
+    }
+
+    /// The estimation log loads the bottom path and the closing against the back pressure
+    /// over the validation's range on every unit: before the 8 MPa row swept it, a quarter of
+    /// the events drawn at random left a unit with one event above 1 MPa (viscosity+snubber
+    /// seed 24757), whose flow paths were then fitted where the back pressure barely loads them.
+    #[test]
+    fn every_estimation_matrix_sweeps_the_back_pressure_at_8_mpa() {
+        for seed in [5, 24757, 72271] {
+            let mut rng = Rng::new(seed);
+            let tests = estimation_tests(&mut rng);
+            let mut at_8: Vec<f64> = tests
+                .iter()
+                .filter(|t| t.inputs.p_supply_mpa > 7.85)
+                .map(|t| t.inputs.p_back_mpa)
+                .collect();
+            at_8.sort_by(f64::total_cmp);
+            assert_eq!(at_8.len(), 5, "seed {seed}: the 8 MPa row {at_8:?}");
+            assert_eq!(&at_8[..1], &[1.0], "seed {seed}: {at_8:?}");
+            for p in [2.0, 3.0, 4.0] {
+                assert!(at_8.contains(&p), "seed {seed}: no {p} MPa in the 8 MPa row {at_8:?}");
+            }
+            assert!((2.0..=4.0).contains(&at_8[2]), "seed {seed}: {at_8:?}");
+        }
+        // Read back from a generated log: the set-points as the bench logs them.
+        let case = generate("none", 24757).unwrap();
+        let (est, _) = case.logs().unwrap();
+        let ev = crate::diagnose::ehvva::Events::from_log(&est).unwrap();
+        let loaded = ev.events.iter().filter(|e| e.inputs.p_back_mpa > 1.9).count();
+        assert!(loaded >= 4, "{loaded} events above 1.9 MPa back pressure");
+        assert!(ev.events.iter().any(|e| e.inputs.p_back_mpa > 3.9));
     }
 }
