@@ -90,6 +90,14 @@ pub trait Family {
     fn starts_from_other_nested(&self) -> bool {
         false
     }
+    /// Whether [`Self::fit`] given a `parent` that holds every effect of the model and more
+    /// starts from that fit's optimum (its values by name, the extra effects left out), so
+    /// that the selection can refit a model whose solver stopped in another valley than a
+    /// richer model reached with its extra effect switched off ([`Self::is_off`]) or barely
+    /// on. Only for a family whose fits read the parent by name and depend on their start.
+    fn refits_parent_from(&self) -> bool {
+        false
+    }
     /// Whether `effect` ended at its neutral value in `fit` (switched off: its gain comes from
     /// refitting the rest of the model). By default to 1e-6 ([`catalogue::is_off`]); a family
     /// whose starts can lower the cost of a practically neutral effect judges by the fitted

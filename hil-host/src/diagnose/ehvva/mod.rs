@@ -177,6 +177,41 @@ impl EhvvaFamily {
         }
         Ok(b)
     }
+
+    /// The baseline's knobs fitted again from `parent`'s values of them (a model whose
+    /// effects ended switched off, [`Family::refits_parent_from`]), kept, and cached for
+    /// the fits that extend it, where that ends lower than the baseline as it stood.
+    fn refit_baseline_from(&self, set: &Events, parent: &Fit) -> Result<Baseline, String> {
+        let mut b = self.fit_baseline(set)?;
+        let x0: Vec<f64> = b
+            .knobs
+            .iter()
+            .zip(&b.x)
+            .map(|(k, v)| {
+                parent
+                    .internal
+                    .iter()
+                    .find(|(n, _)| n == k.name)
+                    .map_or(*v, |(_, p)| *p)
+                    .clamp(k.lo, k.hi)
+            })
+            .collect();
+        let lsq = if b.paper_unit {
+            self.lsq.clone()
+        } else {
+            self.unit_lsq()
+        };
+        let r = calibrate_restarted(&EhvvaParams::baseline(), &b.knobs, &x0, set, &lsq)?;
+        let r = with_tau_profile_start(&b.knobs, r, set, &lsq)?;
+        if r.cost < b.r.cost {
+            b.x = r.x.clone();
+            b.r = r;
+            if let Ok(mut g) = self.baseline.lock() {
+                *g = Some((set.key(), b.clone()));
+            }
+        }
+        Ok(b)
+    }
 }
 
 impl Family for EhvvaFamily {
@@ -220,6 +255,12 @@ impl Family for EhvvaFamily {
 
     /// The parent's values are read by knob name, and the fits depend on their start.
     fn starts_from_other_nested(&self) -> bool {
+        true
+    }
+
+    /// The baseline given a parent starts from the parent's values of its knobs
+    /// ([`EhvvaFamily::refit_baseline_from`]).
+    fn refits_parent_from(&self) -> bool {
         true
     }
 
@@ -302,7 +343,10 @@ impl Family for EhvvaFamily {
         let de = all.for_fitting(MAX_FIT_EVENTS);
         let (fitted_on, of) = (de.events.len(), all.events.len());
         drop(all);
-        let base = self.fit_baseline(&de)?;
+        let base = match parent {
+            Some(p) if effects.is_empty() => self.refit_baseline_from(&de, p)?,
+            _ => self.fit_baseline(&de)?,
+        };
         let (xb, rb) = (base.x.clone(), base.r.clone());
         let mut knobs: Vec<Knob> = base.knobs.clone();
         for e in effects {
