@@ -593,6 +593,14 @@ mod tests {
         };
         assert!(enters_tables(&id.conditions[0]));
         assert!(!enters_tables(&id.conditions[1]));
+        // A joint fit that slid along the td-τp ridge (td VO 1.1 ms from its onset reading,
+        // well beyond its interval) is left out too; one within a few tenths stays.
+        let mut slid = condition(5.0, -20.0, 4.3, 0.08, 0.45);
+        slid.td_open_ms = 3.2;
+        slid.td_open_ci95 = Some(0.18);
+        assert!(!enters_tables(&slid));
+        slid.td_open_ms = 4.0;
+        assert!(enters_tables(&slid));
         assert_eq!(id.left_out(), vec!["5.00 MPa / 100.0 °C".to_string()]);
         let t = id.table_data_onset_td();
         // The kept condition sets the 5 MPa, -20 °C entry; the left-out one's 0.15 ms appears

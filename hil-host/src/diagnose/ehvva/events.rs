@@ -25,8 +25,12 @@ pub const MAX_FIT_EVENTS: usize = 64;
 pub const HELD_WINDOW_MS: f64 = 2.0;
 pub const HELD_SHORT_MM: f64 = 0.15;
 
-/// Delay-line length of the simulated model: 1024 samples hold 10 ms even at a 0.01 ms step.
-const DELAY_SAMPLES: usize = 1024;
+/// Delay-line length of the simulated model: 2048 samples hold 20 ms even at a 0.01 ms step,
+/// 102 ms at a 20 kHz log's 0.05 ms. A fit's trial may ask for far longer delays than a
+/// unit has (a large direction-delay gain); 1024 samples refused one fit's 51.1 ms at 20 kHz,
+/// and the model then failed where it was simulated outside the solver (session 27:
+/// `calibrate` of generated pressure-delay unit 35 ended with `DelayLineTooShort`).
+const DELAY_SAMPLES: usize = 2048;
 
 /// One valve event of a log: the samples from rest before a pilot command to the next event.
 #[derive(Clone, Debug)]

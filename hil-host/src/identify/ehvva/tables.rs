@@ -73,9 +73,28 @@ fn interpolate(points: &[(f64, f64, f64)], p: f64, t: f64) -> f64 {
 /// at Cd 0.05 with td VC 0.15 ms). τp on a bound stays: the onset td beside it is still the
 /// measured onset less a bounded response time, and at low supply pressure those conditions
 /// carry the pressure dependence of td that the tables exist for.
+///
+/// Nor may its joint fit (pass 2) have slid along the td-τp ridge ([`slid_along_the_ridge`]).
 pub fn enters_tables(c: &ConditionFit) -> bool {
     let cd = &CONDITION_KNOBS[1];
-    c.cd_onset > cd.lo + 1e-3 * (cd.hi - cd.lo)
+    c.cd_onset > cd.lo + 1e-3 * (cd.hi - cd.lo) && !slid_along_the_ridge(c)
+}
+
+/// How far a condition's joint td may lie from its onset td, ms, beyond three of its 95 %
+/// half-widths: on the reduced model's logs the two agree within a few tenths of a
+/// millisecond.
+const RIDGE_SLIDE_MS: f64 = 0.5;
+
+/// Whether the joint fit moved td VO or VC away from its onset reading by more than
+/// [`RIDGE_SLIDE_MS`] and three of its 95 % half-widths: τp took the rest (a valve near its
+/// force balance at 5 MPa, whose slow opening the lift cannot tell from a slower pressure
+/// rise: td VO 1.1 ms early with τp 0.37 ms, four times its neighbours'). Such a set
+/// reproduces the condition's lift but is no delay for the ECU's tables.
+pub fn slid_along_the_ridge(c: &ConditionFit) -> bool {
+    let slid = |joint: f64, onset: f64, ci95: Option<f64>| {
+        (joint - onset).abs() > RIDGE_SLIDE_MS.max(3.0 * ci95.unwrap_or(0.0))
+    };
+    slid(c.td_open_ms, c.td_open_onset_ms, c.td_open_ci95) || slid(c.td_close_ms, c.td_close_onset_ms, c.td_close_ci95)
 }
 
 impl Identified {
@@ -233,7 +252,7 @@ impl Identified {
         let left = self.left_out();
         if !left.is_empty() {
             s.push_str(&format!(
-                "\nleft out of the tables (pass 1 ended with Cd on its lower bound: the reduced model could not follow the lift there, no calibration): {}; the tables interpolate the other conditions there\n",
+                "\nleft out of the tables (pass 1 ended with Cd on its lower bound: the reduced model could not follow the lift there; or the joint fit slid along the td-tau_p ridge, td more than 0.5 ms from its onset reading: no delay for the tables): {}; the tables interpolate the other conditions there\n",
                 left.join(", ")
             ));
         }
