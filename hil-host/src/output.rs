@@ -310,7 +310,17 @@ fn foreign_contents(dir: &Path, claim: &Claim) -> io::Result<Option<String>> {
         )));
     }
     let text = std::fs::read_to_string(dir.join(MANIFEST))?;
-    let owner = serde_json::from_str::<Value>(&text).ok().and_then(|m| {
+    let manifest = serde_json::from_str::<Value>(&text).ok();
+    // A run that failed before its first file (a missing input, a log refused) leaves only its
+    // incomplete manifest: nothing of it to protect, so any run may take the directory.
+    let failed_before_writing = manifest.as_ref().is_some_and(|m| {
+        m.get("complete") == Some(&Value::Bool(false))
+            && m.get("files").and_then(Value::as_array).is_some_and(|f| f.is_empty())
+    });
+    if failed_before_writing && others.len() == 1 {
+        return Ok(None);
+    }
+    let owner = manifest.and_then(|m| {
         Some(Claim {
             command: m.get("command")?.as_str()?.to_string(),
             identity: m.get("identity")?.as_str()?.to_string(),
@@ -377,6 +387,25 @@ mod tests {
         let e = OutputDir::open(&d, Claim::new("run", "scenario default"), false).unwrap_err();
         assert!(
             e.to_string().contains("notes.txt") && e.to_string().contains("--force"),
+            "{e}"
+        );
+        std::fs::remove_dir_all(&d).ok();
+    }
+
+    #[test]
+    fn a_run_that_failed_before_writing_leaves_its_directory_free() {
+        let d = scratch("failed");
+        // Claimed, then the run fails (no file written, no finish).
+        drop(OutputDir::open(&d.join("out"), Claim::new("calibrate", "1 logs"), false).unwrap());
+        OutputDir::open(&d.join("out"), Claim::new("calibrate", "9 logs"), false).unwrap();
+        // Killed after a file of its set: that file is the run's, so the directory stays claimed.
+        let mut out = OutputDir::open(&d.join("out"), Claim::new("calibrate", "9 logs"), false).unwrap();
+        out.write("calibration.bin", b"ECAL").unwrap();
+        drop(out);
+        let e = OutputDir::open(&d.join("out"), Claim::new("calibrate", "2 logs"), false).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("holds the outputs of `hil-host calibrate` (9 logs)"),
             "{e}"
         );
         std::fs::remove_dir_all(&d).ok();

@@ -1,9 +1,11 @@
 //! `hil-host calibrate`: from a generated unit's bench logs to the ECU's calibration image, its
 //! A2L and JSON, and the ECU running it.
 //!
-//! The A2L is read back twice: by `a2lfile` (load + its consistency check) and by a small
+//! The A2L is read back three times: by `a2lfile` (load + its consistency check), by a small
 //! structural reader in this file (tokens of the `CHARACTERISTIC`/`AXIS_PTS` blocks) that
-//! takes every object's address, element count and limits and checks the image's bytes there.
+//! takes every object's address, element count and limits and checks the image's bytes there,
+//! and by pya2ldb (tools/py/read_a2l.py: an ASAP2 parser and validator of its own, in the
+//! venv that tools/test.sh makes; skipped without it unless HIL_REQUIRE_PY is set).
 use std::path::{Path, PathBuf};
 
 use a2lfile::A2lObjectName;
@@ -13,6 +15,8 @@ use hil_host::log::Plant;
 use hil_host::run::{run_unit, Scenario, Summary};
 use model_core::ecu::calibration::{CalibrationImage, CHARACTERISTICS, IMAGE_BYTES};
 use model_core::ecu::lockstep::EcuCoreConfig;
+
+mod py_venv;
 
 fn workdir(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("hil-calibrate-{name}-{}", std::process::id()));
@@ -256,7 +260,126 @@ fn ehvva_unit_gives_an_image_json_and_a2l_that_agree() {
     }
     // The objects cover every value byte between the header and the CRC.
     assert_eq!(covered, IMAGE_BYTES - 16 - 4);
+
+    // A2L, reader 3: pya2ldb, an ASAP2 parser of its own, as a calibration tool reads the file.
+    if let Some(py) = py_venv::python() {
+        pya2l_reads_the_image(&py, &dir.join("cal"), &image, &json);
+    }
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Reads `cal/calibration.a2l` with pya2ldb (tools/py/read_a2l.py) and checks what it finds
+/// against the image and its JSON: no message of its ASAP2 validator, one conversion per name,
+/// the image's identification (EPK at ADDR_EPK), and every object at its address with the
+/// image's f32 layout, its unit's conversion, its limits, its axes, and the JSON's values.
+fn pya2l_reads_the_image(py: &Path, cal: &Path, image: &[u8], json: &serde_json::Value) {
+    use model_core::ecu::calibration::Shape;
+    use serde_json::Value;
+    let out = cal.join("pya2l.json");
+    let o = std::process::Command::new(py)
+        .arg(py_venv::root().join("tools/py/read_a2l.py"))
+        .arg(cal.join("calibration.a2l"))
+        .arg(&out)
+        .output()
+        .expect("python runs");
+    assert!(
+        o.status.success(),
+        "read_a2l.py failed:\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let r: Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(r["diagnostics"], serde_json::json!([]), "pya2l's validator");
+    assert_eq!(r["byte_order"], "MSB_LAST");
+    let segment = &r["memory_segments"][0];
+    assert_eq!(segment["address"], serde_json::json!(FLASH_BASE));
+    assert_eq!(segment["size"], serde_json::json!(IMAGE_BYTES));
+    let epk = r["epk"].as_str().unwrap().as_bytes();
+    let epk_at = r["addr_epk"][0].as_u64().unwrap() - u64::from(FLASH_BASE);
+    assert_eq!(&image[epk_at as usize..epk_at as usize + epk.len()], epk, "EPK");
+
+    let layouts = &r["record_layouts"];
+    let mut unit_of = std::collections::BTreeMap::new();
+    for cm in r["compu_methods"].as_array().unwrap() {
+        let name = cm["name"].as_str().unwrap();
+        assert_eq!(cm["type"], "IDENTICAL", "{name}");
+        let before = unit_of.insert(name.to_string(), cm["unit"].as_str().unwrap().to_string());
+        assert!(before.is_none(), "COMPU_METHOD {name} defined twice");
+    }
+    let objects: Vec<&Value> = r["characteristics"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .chain(r["axis_pts"].as_array().unwrap())
+        .collect();
+    assert_eq!(objects.len(), CHARACTERISTICS.len());
+    let values = json["characteristics"].as_object().unwrap();
+    for c in CHARACTERISTICS.iter() {
+        let o = objects
+            .iter()
+            .find(|o| o["name"] == c.name)
+            .unwrap_or_else(|| panic!("pya2l: no object {}", c.name));
+        let address = u64::from(FLASH_BASE) + c.offset() as u64;
+        assert_eq!(o["address"].as_u64(), Some(address), "{}", c.name);
+        let layout = &layouts[o["record_layout"].as_str().unwrap()];
+        let datatype = if matches!(c.shape, Shape::Axis(_)) {
+            &layout["axis_pts_x"]
+        } else {
+            assert_eq!(layout["fnc_index_mode"], "COLUMN_DIR", "{}", c.name);
+            &layout["fnc_values"]
+        };
+        assert_eq!(datatype, "FLOAT32_IEEE", "{}", c.name);
+        let conversion = o["conversion"].as_str().unwrap();
+        assert_eq!(unit_of[conversion], c.unit, "{}: conversion {conversion}", c.name);
+        assert_eq!(o["lower"].as_f64(), Some(f64::from(c.min)), "{}", c.name);
+        assert_eq!(o["upper"].as_f64(), Some(f64::from(c.max)), "{}", c.name);
+        let axes: Vec<(&str, u64)> = o["axes"]
+            .as_array()
+            .map(|a| {
+                a.iter()
+                    .map(|x| {
+                        (
+                            x["axis_pts_ref"].as_str().unwrap(),
+                            x["max_axis_points"].as_u64().unwrap(),
+                        )
+                    })
+                    .collect()
+            })
+            .unwrap_or_default();
+        let axis_len = |name: &str| CHARACTERISTICS.iter().find(|a| a.name == name).unwrap().shape.len() as u64;
+        match c.shape {
+            Shape::Value => assert_eq!(o["type"], "VALUE", "{}", c.name),
+            Shape::Axis(n) => assert_eq!(o["max_axis_points"].as_u64(), Some(n as u64), "{}", c.name),
+            Shape::Array(n) => {
+                assert_eq!(o["type"], "VAL_BLK", "{}", c.name);
+                assert_eq!(o["matrix_dim"], serde_json::json!([n]), "{}", c.name);
+            }
+            Shape::Curve { x_axis, n } => {
+                assert_eq!(o["type"], "CURVE", "{}", c.name);
+                assert_eq!(axes, vec![(x_axis, n as u64)], "{}", c.name);
+                assert_eq!(axis_len(x_axis), n as u64);
+            }
+            Shape::Map { x_axis, nx, y_axis, ny } => {
+                assert_eq!(o["type"], "MAP", "{}", c.name);
+                assert_eq!(axes, vec![(x_axis, nx as u64), (y_axis, ny as u64)], "{}", c.name);
+            }
+        }
+        // The values at the address, in the A2L's order (COLUMN_DIR: the second index fastest,
+        // as the JSON nests them), are the JSON's and inside the limits.
+        let mut expect = Vec::new();
+        let mut flatten = vec![&values[c.name]["value"]];
+        while let Some(v) = flatten.pop() {
+            match v {
+                Value::Array(a) => flatten.extend(a.iter().rev()),
+                v => expect.push(v.as_f64().unwrap()),
+            }
+        }
+        assert_eq!(expect.len(), c.shape.len(), "{}", c.name);
+        for (k, e) in expect.iter().enumerate() {
+            let v = f32_at(image, address + 4 * k as u64);
+            assert_eq!(v, *e as f32, "{}[{k}]", c.name);
+            assert!(v >= c.min && v <= c.max, "{}[{k}] = {v}", c.name);
+        }
+    }
 }
 
 fn runs(truth: &Path, image: &Path) -> (Summary, Summary) {

@@ -16,29 +16,8 @@ use hil_host::log::{read_log, read_log_mapped, Log, Plant};
 use hil_host::mf4::ChannelMap;
 use serde_json::Value;
 
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-/// The venv's python, or None (skip) when it is missing and HIL_REQUIRE_PY is unset.
-fn python() -> Option<PathBuf> {
-    let target = std::env::var_os("CARGO_TARGET_DIR").map_or_else(|| root().join("target"), PathBuf::from);
-    let py = target.join("py-venv/bin/python");
-    if py.exists() {
-        return Some(py);
-    }
-    if std::env::var_os("HIL_REQUIRE_PY").is_some() {
-        panic!(
-            "HIL_REQUIRE_PY is set but {} is missing: run tools/test.sh (it creates the venv from tools/py/requirements.txt)",
-            py.display()
-        );
-    }
-    eprintln!(
-        "SKIP: {} is missing (python3 -m venv target/py-venv && target/py-venv/bin/pip install -r tools/py/requirements.txt)",
-        py.display()
-    );
-    None
-}
+mod py_venv;
+use py_venv::{python, root};
 
 fn scratch(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("hil-mf4-{}-{name}", std::process::id()));
