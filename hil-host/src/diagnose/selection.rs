@@ -196,9 +196,7 @@ pub(super) fn diagnose_fits(
                         "baseline refitted from the optimum of `{}`, whose effect ended switched off (estimation cost {:.4e}): it ends at {:.4e} where its first fit stopped at {:.4e}; every candidate fitted again from it",
                         from.effect, from.est_cost, refitted.est_cost, baseline.est_cost
                     ));
-                    baseline = refitted;
-                    current = baseline.clone();
-                    floor = family.noise_floor(val, &baseline);
+                    adopt_refit(refitted, true, (&mut baseline, &mut current, &mut floor), family, val);
                     continue;
                 }
             }
@@ -520,11 +518,13 @@ pub(super) fn diagnose_fits(
                     current.est_cost,
                     candidates[b].fit.est_cost
                 ));
-                if selected.is_empty() {
-                    baseline = nested.clone();
-                    floor = family.noise_floor(val, &baseline);
-                }
-                current = nested;
+                adopt_refit(
+                    nested,
+                    selected.is_empty(),
+                    (&mut baseline, &mut current, &mut floor),
+                    family,
+                    val,
+                );
                 if rounds.is_empty() {
                     total += remaining.len();
                 }
@@ -771,6 +771,23 @@ fn round_base(selected: &[&str], added: bool) -> Vec<String> {
 
 /// Keeps the lower of `floor` and the floor read from the residual of the model now selected
 /// (`current`, with the effects `selected`).
+/// Makes `refit`, a model refitted from a richer one's optimum, the model the selection
+/// extends: the current model, and with no effect selected yet also the baseline, whose noise
+/// floor follows it.
+fn adopt_refit(
+    refit: Fit,
+    no_effect_yet: bool,
+    (baseline, current, floor): (&mut Fit, &mut Fit, &mut NoiseFloor),
+    family: &dyn Family,
+    val: &Log,
+) {
+    if no_effect_yet {
+        *floor = family.noise_floor(val, &refit);
+        *baseline = refit.clone();
+    }
+    *current = refit;
+}
+
 fn lower_floor(floor: &mut NoiseFloor, family: &dyn Family, val: &Log, current: &Fit, selected: &[&str]) {
     let f = family.noise_floor(val, current);
     if f.rmse < floor.rmse {
