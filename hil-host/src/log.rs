@@ -287,24 +287,22 @@ pub fn read_log_mapped(path: &Path, plant: Option<Plant>, map: Option<&ChannelMa
     let map_plant = map
         .and_then(|m| m.meta.iter().find(|(k, _)| k == "plant"))
         .and_then(|(_, v)| Plant::from_name(v));
-    let mut log = read_csv_log(path, plant.or(map_plant))?;
+    let renames = map.map(|m| csv::Renames {
+        map_file: &m.file,
+        columns: &m.channels,
+    });
+    let mut log = read_csv_log(path, plant.or(map_plant), renames)?;
     if let Some(map) = map {
         for (k, v) in &map.meta {
             if log.meta(k).is_none() {
                 log.meta.push((k.clone(), v.clone()));
             }
         }
-        if !map.channels.is_empty() {
-            log.notices.push(format!(
-                "channel map {}: its [channels] apply to MF4 files only",
-                map.file
-            ));
-        }
     }
     Ok(log)
 }
 
-fn read_csv_log(path: &Path, plant: Option<Plant>) -> Result<Log, LogError> {
+fn read_csv_log(path: &Path, plant: Option<Plant>, renames: Option<csv::Renames<'_>>) -> Result<Log, LogError> {
     let file = path.display().to_string();
     let input = fs::File::open(path).map_err(|e| LogError {
         file: file.clone(),
@@ -313,7 +311,7 @@ fn read_csv_log(path: &Path, plant: Option<Plant>) -> Result<Log, LogError> {
         message: format!("cannot read: {e}"),
     })?;
     let size = input.metadata().ok().filter(|m| m.is_file()).map(|m| m.len());
-    csv::read_csv_sized(&file, BufReader::with_capacity(1 << 16, input), plant, size)
+    csv::read_csv_sized(&file, BufReader::with_capacity(1 << 16, input), plant, size, renames)
 }
 
 /// Parses log text; `file` names it in errors.

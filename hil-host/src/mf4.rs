@@ -101,9 +101,10 @@ impl ChannelMap {
             file: file.to_string(),
             ..ChannelMap::default()
         };
-        let known_columns: Vec<&str> = Plant::ALL
-            .iter()
-            .flat_map(|p| p.columns().iter().map(|(n, _)| *n))
+        // `t_s` too: a bench's CSV names its time column its own way (an MF4 file's time is
+        // its master channel's, whatever the map says).
+        let known_columns: Vec<&str> = std::iter::once("t_s")
+            .chain(Plant::ALL.iter().flat_map(|p| p.columns().iter().map(|(n, _)| *n)))
             .collect();
         for (section, value) in &table {
             let toml::Value::Table(entries) = value else {

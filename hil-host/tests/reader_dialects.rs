@@ -220,3 +220,78 @@ fn broken_quoting_and_ragged_rows_name_the_line() {
     assert_eq!(e.line, Some(5), "{e}");
     assert!(e.message.contains("8 cells, header has 7"), "{e}");
 }
+
+/// The bench's own column names in the `;` dialect with decimal commas and a units row, and
+/// the channel map (the same TOML file as for MF4 loggers) that renames them.
+const BENCH_HEADER: &str = "Zeit;PWM Tastgrad;U_Batt;p_Umgebung;p_Tank;Position";
+const BENCH_MAP: &str = "[channels]\n\"Zeit\" = \"t_s\"\n\"PWM Tastgrad\" = \"duty_pct\"\n\"U_Batt\" = \"u_batt_V\"\n\"p_Umgebung\" = \"p_amb_kPa\"\n\"p_Tank\" = \"p_tank_kPa\"\n\"Position\" = \"x_pct\"\n";
+
+fn bench_csv() -> String {
+    dialect(";", true, false, Some("s,%,V,kPa,kPa,%,-"), false, false).replacen(
+        "t_s;duty_pct;u_batt_V;p_amb_kPa;p_tank_kPa;x_pct",
+        BENCH_HEADER,
+        1,
+    )
+}
+
+/// Reads `text` as the file `name` in a scratch directory through `map`.
+fn read_mapped(name: &str, text: &str, map: &str) -> Result<Log, LogError> {
+    use hil_host::log::read_log_mapped;
+    use hil_host::mf4::ChannelMap;
+    let dir = std::env::temp_dir().join(format!("hil-dialect-map-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join(name);
+    std::fs::write(&path, text).unwrap();
+    let map = ChannelMap::parse("bench.toml", map).unwrap();
+    let r = read_log_mapped(&path, None, Some(&map));
+    std::fs::remove_file(&path).ok();
+    r
+}
+
+#[test]
+fn a_channel_map_renames_a_bench_csvs_own_column_names() {
+    let base = read("plain.csv", &plain());
+    let log = read_mapped("bench.csv", &bench_csv(), BENCH_MAP).unwrap();
+    same_numbers(&base, &log);
+    let renamed = log
+        .notices
+        .iter()
+        .find(|n| n.starts_with("channel map bench.toml: columns renamed"))
+        .unwrap_or_else(|| panic!("{:?}", log.notices));
+    assert!(
+        renamed.contains("`Zeit` → `t_s`") && renamed.contains("`Position` → `x_pct`"),
+        "{renamed}"
+    );
+    // The units row is checked against the DATA-FORMAT name the column was renamed to.
+    let text = bench_csv().replacen("s;%;V;kPa;kPa;%", "s;%;V;kPa;kPa;mm", 1);
+    let e = read_mapped("units.csv", &text, BENCH_MAP).unwrap_err();
+    assert_eq!((e.line, e.column.as_deref()), (Some(4), Some("x_pct")), "{e}");
+    // A bad cell in a renamed column: the file's line, the column it is read as.
+    let text = bench_csv().replacen(";37,75;", ";37..75;", 1);
+    assert_ne!(text, bench_csv());
+    let e = read_mapped("cell.csv", &text, BENCH_MAP).unwrap_err();
+    assert_eq!((e.line, e.column.as_deref()), (Some(8), Some("x_pct")), "{e}");
+}
+
+#[test]
+fn a_channel_map_that_does_not_fit_the_header_is_named() {
+    // The header has the renamed column's new name too: two sources for one column.
+    let text = bench_csv().replacen(BENCH_HEADER, &BENCH_HEADER.replace("p_Tank", "x_pct"), 1);
+    let e = read_mapped("twice.csv", &text, BENCH_MAP).unwrap_err();
+    assert_eq!((e.line, e.column.as_deref()), (Some(3), Some("x_pct")), "{e}");
+    assert!(
+        e.message
+            .contains("`Position` is renamed to `x_pct` by the channel map bench.toml"),
+        "{e}"
+    );
+    // The map's source name is not in the header, nor the column itself: both are named.
+    let map = BENCH_MAP.replace("\"Position\"", "\"Hub\"");
+    let e = read_mapped("missing.csv", &bench_csv(), &map).unwrap_err();
+    assert_eq!(e.column.as_deref(), Some("x_pct"), "{e}");
+    assert!(
+        e.message
+            .contains("no column `Hub` (channel map bench.toml) or `x_pct`")
+            && e.message.contains("Position"),
+        "{e}"
+    );
+}

@@ -171,7 +171,7 @@ pub struct CheckArgs {
     /// The plant, when the log does not say
     #[arg(long, value_enum)]
     pub plant: Option<PlantArg>,
-    /// Rename an MF4 file's channels to DATA-FORMAT columns and add metadata (TOML:
+    /// Rename an MF4 file's channels or a CSV file's columns to DATA-FORMAT columns and add metadata (TOML:
     /// [channels] "Logger.Name" = "column", [meta] key = value; docs/data-format.md)
     #[arg(long, value_name = "FILE")]
     pub channel_map: Option<PathBuf>,
@@ -196,7 +196,7 @@ pub struct DiagnoseArgs {
     /// Write one self-contained HTML page: verdict, evidence, plots, parameters, gain
     #[arg(long, value_name = "FILE")]
     pub report: Option<PathBuf>,
-    /// Rename an MF4 file's channels to DATA-FORMAT columns and add metadata (TOML:
+    /// Rename an MF4 file's channels or a CSV file's columns to DATA-FORMAT columns and add metadata (TOML:
     /// [channels] "Logger.Name" = "column", [meta] key = value; docs/data-format.md)
     #[arg(long, value_name = "FILE")]
     pub channel_map: Option<PathBuf>,
@@ -315,7 +315,7 @@ pub struct IdentifyArgs {
     /// Write the tables as JSON here
     #[arg(long, value_name = "FILE")]
     pub json: Option<PathBuf>,
-    /// Rename an MF4 file's channels to DATA-FORMAT columns and add metadata (TOML:
+    /// Rename an MF4 file's channels or a CSV file's columns to DATA-FORMAT columns and add metadata (TOML:
     /// [channels] "Logger.Name" = "column", [meta] key = value; docs/data-format.md)
     #[arg(long, value_name = "FILE")]
     pub channel_map: Option<PathBuf>,

@@ -9,7 +9,7 @@
 use std::io::{BufRead, Read};
 
 use super::check::{check_meta, finish, select_columns, MetaEntry, RowLines};
-use super::{Log, LogError, Plant, FLAGS};
+use super::{Log, LogError, Plant, Role, FLAGS};
 
 /// Longest accepted line (bytes, without its line end).
 pub const MAX_LINE_BYTES: usize = 1 << 20;
@@ -267,7 +267,95 @@ fn bare_unit(cell: &str) -> &str {
 /// Reads a CSV log from `input`, checking it whole; `source` names it in errors.
 /// `plant_override` (from `--plant`) wins over `# plant:`.
 pub fn read_csv(source: &str, input: impl BufRead, plant_override: Option<Plant>) -> Result<Log, LogError> {
-    read_csv_sized(source, input, plant_override, None)
+    read_csv_sized(source, input, plant_override, None, None)
+}
+
+/// Header renames from a channel map's `[channels]` (a bench tool's column names to
+/// DATA-FORMAT's), applied before the header is checked.
+#[derive(Clone, Copy, Debug)]
+pub struct Renames<'a> {
+    /// The map file, for messages.
+    pub map_file: &'a str,
+    /// (the file's column name, the DATA-FORMAT column name).
+    pub columns: &'a [(String, String)],
+}
+
+/// The header's names with `renames` applied; a notice lists what was renamed. A renamed
+/// column whose new name the header also has is an error naming both; a required column
+/// that the map's source name would have given, found under neither name, names both.
+fn rename_header(
+    source: &str,
+    plant: Plant,
+    header_line: usize,
+    mut names: Vec<String>,
+    renames: Renames<'_>,
+    notices: &mut Vec<String>,
+) -> Result<Vec<String>, LogError> {
+    let err = |column: &str, message: String| LogError {
+        file: source.to_string(),
+        line: Some(header_line),
+        column: Some(column.to_string()),
+        message,
+    };
+    let mut renamed = Vec::new();
+    let mut absent = Vec::new();
+    for (from, to) in renames.columns {
+        let Some(i) = names.iter().position(|n| n == from) else {
+            if !names.contains(to) {
+                absent.push(format!("`{from}` (for `{to}`)"));
+            }
+            continue;
+        };
+        if let Some(j) = names.iter().position(|n| n == to) {
+            return Err(err(
+                to,
+                format!(
+                    "column #{} `{from}` is renamed to `{to}` by the channel map {}, and the header has `{to}` too (column #{})",
+                    i + 1,
+                    renames.map_file,
+                    j + 1
+                ),
+            ));
+        }
+        renamed.push(format!("`{from}` → `{to}`"));
+        names[i] = to.clone();
+    }
+    let required = plant
+        .columns()
+        .iter()
+        .filter(|(_, role)| matches!(role, Role::Input | Role::PrimaryOutput))
+        .map(|(n, _)| *n);
+    for column in std::iter::once("t_s").chain(required) {
+        if names.iter().any(|n| n == column) {
+            continue;
+        }
+        if let Some((from, _)) = renames.columns.iter().find(|(_, to)| to == column) {
+            return Err(err(
+                column,
+                format!(
+                    "required `{plant}` column `{column}` is missing: no column `{from}` (channel map {}) or `{column}` in the header (its columns: {})",
+                    renames.map_file,
+                    names.join(", ")
+                ),
+            ));
+        }
+    }
+    if !renamed.is_empty() {
+        notices.push(format!(
+            "channel map {}: column{} renamed: {}",
+            renames.map_file,
+            if renamed.len() == 1 { "" } else { "s" },
+            renamed.join(", ")
+        ));
+    }
+    if !absent.is_empty() {
+        notices.push(format!(
+            "channel map {}: not in the header: {}",
+            renames.map_file,
+            absent.join(", ")
+        ));
+    }
+    Ok(names)
 }
 
 /// Data rows read before the columns are sized from the file's length.
@@ -275,12 +363,13 @@ const SIZING_ROWS: usize = 512;
 
 /// As [`read_csv`]; with the input's length in bytes (`size_hint`), the columns are sized
 /// once from the length of the first rows instead of growing by doubling, which may hold up
-/// to twice the log while it is read.
+/// to twice the log while it is read; `renames` (a channel map's) apply to the header.
 pub fn read_csv_sized(
     source: &str,
     input: impl BufRead,
     plant_override: Option<Plant>,
     size_hint: Option<u64>,
+    renames: Option<Renames<'_>>,
 ) -> Result<Log, LogError> {
     let mut lines = Lines {
         input,
@@ -363,6 +452,10 @@ pub fn read_csv_sized(
             }
         })
         .collect();
+    let names = match renames {
+        Some(r) => rename_header(source, plant, header_line, names, r, &mut notices)?,
+        None => names,
+    };
     let sel = select_columns(source, plant, &names, Some(header_line))?;
     lines.sep = Some(dialect.sep);
     lines.names = names;
