@@ -272,13 +272,31 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
     let mut by_column: BTreeMap<&str, Vec<&Channel>> = BTreeMap::new();
     let mut ignored: Vec<&str> = Vec::new();
     let wanted: Vec<&str> = plant.columns().iter().map(|(n, _)| *n).collect();
+    let mut device_suffixed: Vec<String> = Vec::new();
     for ch in mdf.channels().filter(|c| !c.is_master()) {
-        let column = map.column_of(&ch.name);
+        let mut column = map.column_of(&ch.name);
+        if !wanted.contains(&column) {
+            // ETK/XCP measurement tools (INCA, CANape) name a signal after the device that
+            // measured it, `Name\Device` (`lift_mm\ETKC:1`): the name before the backslash.
+            if let Some((bare, _)) = ch.name.split_once('\\') {
+                let c = map.column_of(bare);
+                if wanted.contains(&c) {
+                    column = c;
+                    device_suffixed.push(format!("`{}` as `{c}`", ch.name));
+                }
+            }
+        }
         if wanted.contains(&column) {
             by_column.entry(column).or_default().push(ch);
         } else {
             ignored.push(&ch.name);
         }
+    }
+    if !device_suffixed.is_empty() {
+        notices.push(format!(
+            "channel(s) read by their name before the measuring device's `\\` suffix: {}",
+            device_suffixed.join(", ")
+        ));
     }
     if !ignored.is_empty() {
         notices.push(format!(

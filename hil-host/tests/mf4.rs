@@ -298,3 +298,34 @@ fn errors_name_the_file_and_the_channel() {
     let e = read_log_mapped(&renamed, None, Some(&map)).unwrap_err();
     assert!(e.message.contains("sample 37"), "{e}");
 }
+
+/// ETK/XCP measurement tools (INCA, CANape) name each signal after the device that measured it,
+/// `Name\Device`: such channels are read by the name before the backslash, with a notice, and
+/// give the CSV's columns bit for bit.
+#[test]
+fn device_suffixed_channel_names_are_read_by_their_signal_name() {
+    let Some(py) = python() else { return };
+    let case = generate::generate(Plant::Positioner, "none", 7).unwrap();
+    let dir = scratch("device-suffix");
+    let csv = dir.join("estimation.csv");
+    std::fs::write(&csv, &case.estimation_csv).unwrap();
+    let mf4 = dir.join("estimation.mf4");
+    write_mf4(
+        &py,
+        &csv,
+        &mf4,
+        &["--rename", "pos_m=pos_m\\ETKC:1", "--rename", "force_N=force_N\\XCP:2"],
+    );
+    let log = read_log(&mf4, None).unwrap();
+    assert_same_columns(&read_log(&csv, None).unwrap(), &log);
+    let notice = log
+        .notices
+        .iter()
+        .find(|n| n.contains("device"))
+        .unwrap_or_else(|| panic!("{:?}", log.notices));
+    assert!(
+        notice.contains("`pos_m\\ETKC:1` as `pos_m`") && notice.contains("`force_N\\XCP:2` as `force_N`"),
+        "{notice}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
