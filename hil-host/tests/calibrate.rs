@@ -768,3 +768,44 @@ fn the_evvt_notes_say_how_the_paper_defaults_would_run_the_unit() {
         let _ = std::fs::remove_dir_all(&dir);
     }
 }
+
+/// A bench recording whose tool names the columns its own way is calibrated through the
+/// channel map (`calibrate --channel-map`): the same image as from the DATA-FORMAT log.
+#[test]
+fn a_bench_recording_with_its_own_column_names_calibrates_through_a_channel_map() {
+    let dir = workdir("mapped");
+    let case = generate::generate(Plant::Evvt, "none", 3).unwrap();
+    let (est, _) = write_case(&case, &dir.join("unit"));
+    let text = std::fs::read_to_string(&est).unwrap();
+    let ours = "t_s,motor_cmd_rpm,engine_rpm,u_batt_V,phase_ref_deg,phase_deg";
+    assert!(text.contains(ours), "the EVVT header changed");
+    let bench = dir.join("unit/bench.csv");
+    std::fs::write(
+        &bench,
+        text.replacen(ours, "Time,CamMot_rpm,nEng,UBatt,PhiSoll,PhiIst", 1),
+    )
+    .unwrap();
+    let map_path = dir.join("bench.toml");
+    std::fs::write(
+        &map_path,
+        "[channels]\n\"Time\" = \"t_s\"\n\"CamMot_rpm\" = \"motor_cmd_rpm\"\n\"nEng\" = \"engine_rpm\"\n\"UBatt\" = \"u_batt_V\"\n\"PhiSoll\" = \"phase_ref_deg\"\n\"PhiIst\" = \"phase_deg\"\n",
+    )
+    .unwrap();
+    let map = hil_host::mf4::ChannelMap::read(&map_path).unwrap();
+    // Without the map the bench's names are refused by name.
+    let e = calibrate::calibrate(std::slice::from_ref(&bench), &mut |_| {}).unwrap_err();
+    assert!(e.contains("t_s"), "{e}");
+    let mapped = calibrate::calibrate_mapped(std::slice::from_ref(&bench), Some(&map), &mut |_| {}).unwrap();
+    let plain = calibrate::calibrate(std::slice::from_ref(&est), &mut |_| {}).unwrap();
+    calibrate::write_outputs(&mapped, &dir.join("mapped"), FLASH_BASE).unwrap();
+    calibrate::write_outputs(&plain, &dir.join("plain"), FLASH_BASE).unwrap();
+    let image = |d: &str| std::fs::read(dir.join(d).join("calibration.bin")).unwrap();
+    assert_eq!(image("mapped"), image("plain"));
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("mapped/calibration.json")).unwrap()).unwrap();
+    assert_eq!(
+        json["characteristics"]["evvt.alpha_deg_per_s2_rpm"]["source"]["from"],
+        "log"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -34,7 +34,7 @@ use model_core::vacuum::VacuumParams;
 use serde_json::{json, Map, Value};
 
 use crate::diagnose::vacuum::VacuumModel;
-use crate::log::{read_log, Log, Plant};
+use crate::log::{read_log_mapped, Log, Plant};
 use crate::run::Unit;
 
 /// The calibration sector's address in the ECU's flash (STM32F405 sector 11; `memory.x`).
@@ -74,6 +74,16 @@ impl Outcome {
 
 /// Learns the calibration from `paths` (any mix of plants); `progress` is told each step.
 pub fn calibrate(paths: &[PathBuf], progress: &mut dyn FnMut(&str)) -> Result<Outcome, String> {
+    calibrate_mapped(paths, None, progress)
+}
+
+/// [`calibrate`] with the logs read through a channel map (a logger's or a bench tool's own
+/// channel and column names, `--channel-map`).
+pub fn calibrate_mapped(
+    paths: &[PathBuf],
+    map: Option<&crate::mf4::ChannelMap>,
+    progress: &mut dyn FnMut(&str),
+) -> Result<Outcome, String> {
     if paths.is_empty() {
         return Err("calibrate takes one or more bench logs".into());
     }
@@ -90,7 +100,7 @@ pub fn calibrate(paths: &[PathBuf], progress: &mut dyn FnMut(&str)) -> Result<Ou
     };
     let mut by_plant: Vec<(Plant, Vec<Log>)> = Vec::new();
     for p in paths {
-        let log = read_log(p, None).map_err(|e| e.to_string())?;
+        let log = read_log_mapped(p, None, map).map_err(|e| e.to_string())?;
         match by_plant.iter_mut().find(|(pl, _)| *pl == log.plant) {
             Some((_, v)) => v.push(log),
             None => by_plant.push((log.plant, vec![log])),

@@ -543,6 +543,7 @@ fn summary_json(a: &CalibrationArgs, s: &hil_host::run::Summary, name: &str) -> 
 fn calibrate(a: CalibrateArgs) -> Result<()> {
     use hil_host::calibrate::{self as cal, parse_flash_base};
     let flash_base = parse_flash_base(&a.flash_base).map_err(fail)?;
+    let map = channel_map(a.channel_map.as_deref())?;
     output::protect_inputs(&a.logs);
     let mut dir = OutputDir::open(
         &a.out,
@@ -551,7 +552,7 @@ fn calibrate(a: CalibrateArgs) -> Result<()> {
     )?;
     let o = {
         let _s = Spinner::start("calibrating from the logs", true);
-        cal::calibrate(&a.logs, &mut |_| {}).map_err(fail)?
+        cal::calibrate_mapped(&a.logs, map.as_ref(), &mut |_| {}).map_err(fail)?
     };
     for n in &o.notes {
         println!("{n}");

@@ -233,6 +233,10 @@ pub struct CalibrateArgs {
     /// The calibration sector's address in the ECU's flash (hex)
     #[arg(long, value_name = "ADDR", default_value = "0x080E0000")]
     pub flash_base: String,
+    /// Rename an MF4 file's channels or a CSV file's columns to DATA-FORMAT columns and add metadata (TOML:
+    /// [channels] "Logger.Name" = "column", [meta] key = value; docs/data-format.md)
+    #[arg(long, value_name = "FILE")]
+    pub channel_map: Option<PathBuf>,
     /// Write into a directory that holds other files or another run's outputs
     #[arg(long)]
     pub force: bool,
