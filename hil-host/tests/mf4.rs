@@ -25,6 +25,23 @@ fn scratch(name: &str) -> PathBuf {
     dir
 }
 
+/// A generated case's estimation log as CSV and as MF4 (`args`: write_mf4.py's options) in
+/// the scratch directory `name`: (directory, CSV, MF4).
+fn estimation_as_mf4(
+    py: &Path,
+    (plant, effect, seed): (Plant, &str, u64),
+    name: &str,
+    args: &[&str],
+) -> (PathBuf, PathBuf, PathBuf) {
+    let case = generate::generate(plant, effect, seed).unwrap();
+    let dir = scratch(name);
+    let csv = dir.join("estimation.csv");
+    std::fs::write(&csv, &case.estimation_csv).unwrap();
+    let mf4 = dir.join("estimation.mf4");
+    write_mf4(py, &csv, &mf4, args);
+    (dir, csv, mf4)
+}
+
 /// Writes `csv` as an MF4 file with asammdf; `args` are write_mf4.py's options.
 fn write_mf4(py: &Path, csv: &Path, out: &Path, args: &[&str]) {
     let o = Command::new(py)
@@ -193,15 +210,10 @@ fn deflate_mf4_with_header_comment_metadata_diagnoses_like_its_csv() {
 #[test]
 fn slower_channel_group_is_held_for_flags_and_interpolated_for_signals() {
     let Some(py) = python() else { return };
-    let case = generate::generate(Plant::Ehvva, "none", 77_001).unwrap();
-    let dir = scratch("ehvva");
-    let csv = dir.join("estimation.csv");
-    std::fs::write(&csv, &case.estimation_csv).unwrap();
-    let mf4 = dir.join("estimation.mf4");
-    write_mf4(
+    let (dir, csv, mf4) = estimation_as_mf4(
         &py,
-        &csv,
-        &mf4,
+        (Plant::Ehvva, "none", 77_001),
+        "ehvva",
         &[
             "--compression",
             "2",
@@ -260,6 +272,7 @@ fn slower_channel_group_is_held_for_flags_and_interpolated_for_signals() {
     assert!(note("lift_high").contains("zero-order hold") && note("lift_high").contains("5000 Hz"));
     assert!(note("p_supply_MPa").contains("linear interpolation"));
     assert!(note("p_supply_MPa").contains("outside its recorded span") == (last < n - 1));
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// Errors name the file and the channel: a value out of its column's range (with the sample
@@ -305,15 +318,10 @@ fn errors_name_the_file_and_the_channel() {
 #[test]
 fn device_suffixed_channel_names_are_read_by_their_signal_name() {
     let Some(py) = python() else { return };
-    let case = generate::generate(Plant::Positioner, "none", 7).unwrap();
-    let dir = scratch("device-suffix");
-    let csv = dir.join("estimation.csv");
-    std::fs::write(&csv, &case.estimation_csv).unwrap();
-    let mf4 = dir.join("estimation.mf4");
-    write_mf4(
+    let (dir, csv, mf4) = estimation_as_mf4(
         &py,
-        &csv,
-        &mf4,
+        (Plant::Positioner, "none", 7),
+        "device-suffix",
         &["--rename", "pos_m=pos_m\\ETKC:1", "--rename", "force_N=force_N\\XCP:2"],
     );
     let log = read_log(&mf4, None).unwrap();
