@@ -769,8 +769,6 @@ fn round_base(selected: &[&str], added: bool) -> Vec<String> {
     selected[..k].iter().map(|s| s.to_string()).collect()
 }
 
-/// Keeps the lower of `floor` and the floor read from the residual of the model now selected
-/// (`current`, with the effects `selected`).
 /// Makes `refit`, a model refitted from a richer one's optimum, the model the selection
 /// extends: the current model, and with no effect selected yet also the baseline, whose noise
 /// floor follows it.
@@ -788,6 +786,8 @@ fn adopt_refit(
     *current = refit;
 }
 
+/// Keeps the lower of `floor` and the floor read from the residual of the model now selected
+/// (`current`, with the effects `selected`).
 fn lower_floor(floor: &mut NoiseFloor, family: &dyn Family, val: &Log, current: &Fit, selected: &[&str]) {
     let f = family.noise_floor(val, current);
     if f.rmse < floor.rmse {

@@ -306,7 +306,7 @@ fn rename_header(
             }
             continue;
         };
-        if let Some(j) = names.iter().position(|n| n == to) {
+        if let Some(j) = names.iter().position(|n| n == to).filter(|&j| j != i) {
             return Err(err(
                 to,
                 format!(
@@ -317,8 +317,10 @@ fn rename_header(
                 ),
             ));
         }
-        renamed.push(format!("`{from}` → `{to}`"));
-        names[i] = to.clone();
+        if from != to {
+            renamed.push(format!("`{from}` → `{to}`"));
+            names[i] = to.clone();
+        }
     }
     let required = plant
         .columns()
@@ -330,12 +332,18 @@ fn rename_header(
             continue;
         }
         if let Some((from, _)) = renames.columns.iter().find(|(_, to)| to == column) {
+            const SHOWN: usize = 20;
+            let more = if names.len() > SHOWN {
+                format!(", ... ({} columns)", names.len())
+            } else {
+                String::new()
+            };
             return Err(err(
                 column,
                 format!(
-                    "required `{plant}` column `{column}` is missing: no column `{from}` (channel map {}) or `{column}` in the header (its columns: {})",
+                    "required `{plant}` column `{column}` is missing: no column `{from}` (channel map {}) or `{column}` in the header (its columns: {}{more})",
                     renames.map_file,
-                    names.join(", ")
+                    names[..names.len().min(SHOWN)].join(", ")
                 ),
             ));
         }
