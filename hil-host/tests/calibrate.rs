@@ -609,6 +609,26 @@ fn the_command_line_calibrates_and_runs_the_unit_with_its_image() {
     for f in ["calibration.bin", "calibration.a2l", "calibration.json"] {
         assert!(cal.join(f).is_file(), "{f}");
     }
+    // Another unit's log into the same directory: refused (exit status 1), the image kept.
+    let other = dir.join("other-unit.csv");
+    std::fs::copy(&est, &other).unwrap();
+    let image = std::fs::read(cal.join("calibration.bin")).unwrap();
+    let o = std::process::Command::new(bin)
+        .arg("calibrate")
+        .arg(&other)
+        .arg("--out")
+        .arg(&cal)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("holds the outputs of `hil-host calibrate`")
+            && err.contains("other-unit.csv")
+            && err.contains("--force"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read(cal.join("calibration.bin")).unwrap(), image);
     let sweep = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/calibration-sweep.toml");
     let run = |extra: &[&Path], json: &Path| {
         let mut c = std::process::Command::new(bin);

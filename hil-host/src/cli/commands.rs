@@ -545,9 +545,21 @@ fn calibrate(a: CalibrateArgs) -> Result<()> {
     let flash_base = parse_flash_base(&a.flash_base).map_err(fail)?;
     let map = channel_map(a.channel_map.as_deref())?;
     output::protect_inputs(&a.logs);
+    // The run is its logs: another unit's calibration in the same directory needs --force,
+    // so one unit's image never silently replaces another's.
+    let logs: Vec<String> = a
+        .logs
+        .iter()
+        .map(|p| {
+            std::fs::canonicalize(p)
+                .unwrap_or_else(|_| p.clone())
+                .display()
+                .to_string()
+        })
+        .collect();
     let mut dir = OutputDir::open(
         &a.out,
-        Claim::new("calibrate", format!("{} logs", a.logs.len())),
+        Claim::new("calibrate", format!("logs {}", logs.join(", "))),
         a.force,
     )?;
     let o = {
