@@ -1,19 +1,30 @@
 use super::*;
 
+/// What every written-out test family below shares: a positioner-shaped log, no regressors
+/// for the residual tests.
+macro_rules! written_family_basics {
+    () => {
+        fn plant(&self) -> Plant {
+            Plant::Positioner
+        }
+        fn output(&self) -> &'static str {
+            "pos_m"
+        }
+        fn formulation(&self) -> &'static str {
+            "test"
+        }
+        fn regressors<'a>(&self, _val: &'a Log) -> Vec<(String, Cow<'a, [f64]>)> {
+            Vec::new()
+        }
+    };
+}
+
 /// A family whose fits are small solver runs: y = a·u (+ b·u² with the effect), so the
 /// progress reports can be checked against the solver's own iteration counts.
 struct Quadratic;
 
 impl Family for Quadratic {
-    fn plant(&self) -> Plant {
-        Plant::Positioner
-    }
-    fn output(&self) -> &'static str {
-        "pos_m"
-    }
-    fn formulation(&self) -> &'static str {
-        "test"
-    }
+    written_family_basics!();
     fn effects(&self) -> &'static [&'static str] {
         &["square", "square-again"]
     }
@@ -50,9 +61,6 @@ impl Family for Quadratic {
             predicted,
             r.iterations,
         ))
-    }
-    fn regressors<'a>(&self, _val: &'a Log) -> Vec<(String, Cow<'a, [f64]>)> {
-        Vec::new()
     }
 }
 
@@ -131,15 +139,7 @@ impl Masked {
 }
 
 impl Family for Masked {
-    fn plant(&self) -> Plant {
-        Plant::Positioner
-    }
-    fn output(&self) -> &'static str {
-        "pos_m"
-    }
-    fn formulation(&self) -> &'static str {
-        "test"
-    }
+    written_family_basics!();
     fn effects(&self) -> &'static [&'static str] {
         &["near", "decoy", "masked"]
     }
@@ -176,9 +176,6 @@ impl Family for Masked {
             })
             .sum();
         Ok(written_fit(effects, measured, predicted, est_cost))
-    }
-    fn regressors<'a>(&self, _val: &'a Log) -> Vec<(String, Cow<'a, [f64]>)> {
-        Vec::new()
     }
 }
 
@@ -222,15 +219,7 @@ impl Confirmed {
 }
 
 impl Family for Confirmed {
-    fn plant(&self) -> Plant {
-        Plant::Positioner
-    }
-    fn output(&self) -> &'static str {
-        "pos_m"
-    }
-    fn formulation(&self) -> &'static str {
-        "test"
-    }
+    written_family_basics!();
     fn effects(&self) -> &'static [&'static str] {
         &["snub"]
     }
@@ -245,9 +234,6 @@ impl Family for Confirmed {
         }
         let est_cost = if with { self.est_ratio } else { 1.0 };
         Ok(written_fit(effects, measured, predicted, est_cost))
-    }
-    fn regressors<'a>(&self, _val: &'a Log) -> Vec<(String, Cow<'a, [f64]>)> {
-        Vec::new()
     }
 }
 
@@ -296,15 +282,7 @@ impl Swapped {
 }
 
 impl Family for Swapped {
-    fn plant(&self) -> Plant {
-        Plant::Positioner
-    }
-    fn output(&self) -> &'static str {
-        "pos_m"
-    }
-    fn formulation(&self) -> &'static str {
-        "test"
-    }
+    written_family_basics!();
     fn effects(&self) -> &'static [&'static str] {
         &["stick", "gap"]
     }
@@ -329,9 +307,6 @@ impl Family for Swapped {
             predicted.push(w_stick * stick + w_gap * gap);
         }
         Ok(written_fit(effects, measured, predicted, est_cost))
-    }
-    fn regressors<'a>(&self, _val: &'a Log) -> Vec<(String, Cow<'a, [f64]>)> {
-        Vec::new()
     }
 }
 
@@ -380,15 +355,7 @@ impl Scoped {
 }
 
 impl Family for Scoped {
-    fn plant(&self) -> Plant {
-        Plant::Positioner
-    }
-    fn output(&self) -> &'static str {
-        "pos_m"
-    }
-    fn formulation(&self) -> &'static str {
-        "test"
-    }
+    written_family_basics!();
     fn effects(&self) -> &'static [&'static str] {
         &["exact"]
     }
@@ -417,9 +384,6 @@ impl Family for Scoped {
         }
         let est_cost = if effects.is_empty() { 100.0 } else { 1.0 };
         Ok(written_fit(effects, measured, predicted, est_cost))
-    }
-    fn regressors<'a>(&self, _val: &'a Log) -> Vec<(String, Cow<'a, [f64]>)> {
-        Vec::new()
     }
 }
 
@@ -490,15 +454,7 @@ impl Valley {
 }
 
 impl Family for Valley {
-    fn plant(&self) -> Plant {
-        Plant::Positioner
-    }
-    fn output(&self) -> &'static str {
-        "pos_m"
-    }
-    fn formulation(&self) -> &'static str {
-        "test"
-    }
+    written_family_basics!();
     fn effects(&self) -> &'static [&'static str] {
         &["idle"]
     }
@@ -520,9 +476,6 @@ impl Family for Valley {
         }
         let est_cost = if in_valley { 10.0 } else { 1.0 };
         Ok(written_fit(effects, measured, predicted, est_cost))
-    }
-    fn regressors<'a>(&self, _val: &'a Log) -> Vec<(String, Cow<'a, [f64]>)> {
-        Vec::new()
     }
 }
 
@@ -569,15 +522,7 @@ struct Shallow {
 }
 
 impl Family for Shallow {
-    fn plant(&self) -> Plant {
-        Plant::Positioner
-    }
-    fn output(&self) -> &'static str {
-        "pos_m"
-    }
-    fn formulation(&self) -> &'static str {
-        "test"
-    }
+    written_family_basics!();
     fn effects(&self) -> &'static [&'static str] {
         &["tiny"]
     }
@@ -603,9 +548,6 @@ impl Family for Shallow {
             (false, false) => 1.0,
         };
         Ok(written_fit(effects, measured, predicted, est_cost))
-    }
-    fn regressors<'a>(&self, _val: &'a Log) -> Vec<(String, Cow<'a, [f64]>)> {
-        Vec::new()
     }
 }
 
