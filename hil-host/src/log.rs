@@ -87,6 +87,14 @@ impl Plant {
         }
     }
 
+    /// The columns a log of this plant must have besides `t_s`: its inputs and primary output.
+    pub fn required_columns(self) -> impl Iterator<Item = &'static str> {
+        self.columns()
+            .iter()
+            .filter(|(_, role)| matches!(role, Role::Input | Role::PrimaryOutput))
+            .map(|(n, _)| *n)
+    }
+
     pub fn primary_output(self) -> &'static str {
         self.columns()
             .iter()

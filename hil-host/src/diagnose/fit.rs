@@ -117,6 +117,10 @@ impl Fit {
     pub fn n_params(&self) -> usize {
         self.params.len()
     }
+    /// The value of the internal parameter `name` at the optimum ([`Fit::internal`]).
+    pub fn internal_value(&self, name: &str) -> Option<f64> {
+        self.internal.iter().find(|(n, _)| n == name).map(|(_, v)| *v)
+    }
     /// The label of a model with `effects` (`baseline` when empty).
     pub fn label(effects: &[&str]) -> String {
         if effects.is_empty() {

@@ -321,8 +321,7 @@ pub(super) fn diagnose_fits(
                     && gain_over(c) >= rules.min_gain_pct
                     && z_over(c) >= rules.resolve_z
             };
-            let confirmed_by = by_gain.filter(|&i| confirmed(&candidates[i]));
-            if let Some(i) = confirmed_by {
+            if let Some(i) = by_gain.filter(|&i| confirmed(&candidates[i])) {
                 evidence.push(format!(
                     "`{}` takes the estimation cost from {:.3e} to {:.3e} and gains {:.1} % on validation at z = {:.1} (under {}): added",
                     last_of(&candidates[i]),

@@ -179,10 +179,7 @@ pub fn estimation_tests(rng: &mut Rng) -> Vec<Test> {
     // from a stream of its own so that every other draw of a seed's matrix is unchanged.
     let mut sweep_rng = Rng::new(rng.clone().next_u64() ^ 0x0BAC_4E55);
     let mut sweep = [1.0, 2.0, 3.0, 4.0, sweep_rng.uniform(2.0, 4.0)];
-    for i in (1..sweep.len()).rev() {
-        let j = (sweep_rng.next_u64() % (i as u64 + 1)) as usize;
-        sweep.swap(i, j);
-    }
+    sweep_rng.shuffle(&mut sweep);
     let mut tests = Vec::new();
     for ph in [5.0, 6.0, 7.0, 8.0] {
         for (k, t) in [-20.0, 0.0, 22.0, 60.0, 100.0].into_iter().enumerate() {
@@ -204,10 +201,7 @@ pub fn estimation_tests(rng: &mut Rng) -> Vec<Test> {
             }));
         }
     }
-    for i in (1..tests.len()).rev() {
-        let j = (rng.next_u64() % (i as u64 + 1)) as usize;
-        tests.swap(i, j);
-    }
+    rng.shuffle(&mut tests);
     tests
 }
 

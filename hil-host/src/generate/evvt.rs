@@ -237,10 +237,7 @@ fn estimation_points(rng: &mut Rng, count: usize) -> Vec<Point> {
                 u_batt_v: rng.uniform(v0, v1),
             })
             .collect();
-        for i in (1..grid.len()).rev() {
-            let j = (rng.next_u64() % (i as u64 + 1)) as usize;
-            grid.swap(i, j);
-        }
+        rng.shuffle(&mut grid);
         points.extend(grid);
     }
     points.truncate(count);
@@ -272,10 +269,7 @@ fn validation_points(rng: &mut Rng, count: usize) -> Vec<Point> {
             }
         })
         .collect();
-    for i in (1..points.len()).rev() {
-        let j = (rng.next_u64() % (i as u64 + 1)) as usize;
-        points.swap(i, j);
-    }
+    rng.shuffle(&mut points);
     points
 }
 

@@ -45,6 +45,13 @@ impl Rng {
     pub fn coin(&mut self) -> bool {
         self.next_u64() & 1 == 1
     }
+    /// Shuffles `v` in place (Fisher-Yates, from the last element down).
+    pub fn shuffle<T>(&mut self, v: &mut [T]) {
+        for i in (1..v.len()).rev() {
+            let j = (self.next_u64() % (i as u64 + 1)) as usize;
+            v.swap(i, j);
+        }
+    }
 }
 
 /// Quantizes to a multiple of `lsb` (a sensor's resolution).

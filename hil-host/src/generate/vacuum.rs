@@ -168,10 +168,7 @@ impl Profile {
 /// Four stitched test points at spread voltages: ramps up and down, then steps with a dip.
 fn estimation_profile(rng: &mut Rng, dt: f64, p_amb0: f64, nominal: &VacuumStaticModel<f64>) -> Profile {
     let mut volts = [10.2, 11.5, 12.8, 14.0];
-    for i in (1..volts.len()).rev() {
-        let j = (rng.next_u64() % (i as u64 + 1)) as usize;
-        volts.swap(i, j);
-    }
+    rng.shuffle(&mut volts);
     let mut pr = Profile::default();
     for v in volts {
         let u = v + rng.uniform(-0.2, 0.2);

@@ -6,7 +6,7 @@
 
 use std::collections::{BTreeMap, HashMap};
 
-use super::{column_range, Log, LogError, Plant, Role, FLAGS};
+use super::{column_range, Log, LogError, Plant, FLAGS};
 
 /// At most this many columns in a header (a wider header is an error, not a slow read).
 pub const MAX_COLUMNS: usize = 10_000;
@@ -292,8 +292,8 @@ pub fn select_columns(
     if !first_at.contains_key("t_s") {
         return Err(err("t_s", "required column `t_s` is missing".into()));
     }
-    for (name, role) in plant.columns() {
-        if matches!(role, Role::Input | Role::PrimaryOutput) && !first_at.contains_key(name) {
+    for name in plant.required_columns() {
+        if !first_at.contains_key(name) {
             return Err(err(name, format!("required `{plant}` column `{name}` is missing")));
         }
     }

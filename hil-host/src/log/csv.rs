@@ -9,7 +9,7 @@
 use std::io::{BufRead, Read};
 
 use super::check::{check_meta, finish, select_columns, MetaEntry, RowLines};
-use super::{Log, LogError, Plant, Role, FLAGS};
+use super::{Log, LogError, Plant, FLAGS};
 
 /// Longest accepted line (bytes, without its line end).
 pub const MAX_LINE_BYTES: usize = 1 << 20;
@@ -322,12 +322,7 @@ fn rename_header(
             names[i] = to.clone();
         }
     }
-    let required = plant
-        .columns()
-        .iter()
-        .filter(|(_, role)| matches!(role, Role::Input | Role::PrimaryOutput))
-        .map(|(n, _)| *n);
-    for column in std::iter::once("t_s").chain(required) {
+    for column in std::iter::once("t_s").chain(plant.required_columns()) {
         if names.iter().any(|n| n == column) {
             continue;
         }

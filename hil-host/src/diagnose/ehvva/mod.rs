@@ -187,14 +187,7 @@ impl EhvvaFamily {
             .knobs
             .iter()
             .zip(&b.x)
-            .map(|(k, v)| {
-                parent
-                    .internal
-                    .iter()
-                    .find(|(n, _)| n == k.name)
-                    .map_or(*v, |(_, p)| *p)
-                    .clamp(k.lo, k.hi)
-            })
+            .map(|(k, v)| parent.internal_value(k.name).unwrap_or(*v).clamp(k.lo, k.hi))
             .collect();
         let lsq = if b.paper_unit {
             self.lsq.clone()
@@ -362,7 +355,7 @@ impl Family for EhvvaFamily {
             // one it extends.
             let from_parent = |name: &str| {
                 parent
-                    .and_then(|f| f.internal.iter().find(|(n, _)| n == name).map(|(_, v)| *v))
+                    .and_then(|f| f.internal_value(name))
                     .or_else(|| base.knobs.iter().position(|k| k.name == name).map(|i| xb[i]))
             };
             let start =

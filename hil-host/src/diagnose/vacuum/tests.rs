@@ -354,7 +354,7 @@ fn friction_and_clearance_together_are_fitted_from_the_friction_fit() {
     let (cf, bl) = ("coulomb-friction", "backlash");
     let parent = fam.fit(&[cf], None, &est, &val).unwrap();
     let pair = fam.fit(&[cf, bl], Some(&parent), &est, &val).unwrap();
-    let got = |name: &str| pair.internal.iter().find(|(n, _)| n == name).unwrap().1;
+    let got = |name: &str| pair.internal_value(name).unwrap();
     for name in ["fc_kPa", "backlash_pct"] {
         let rel = got(name) / truth(&case, name) - 1.0;
         assert!(rel.abs() < 0.05, "{name} {} against {}", got(name), truth(&case, name));
@@ -375,7 +375,7 @@ fn friction_under_pressure_direction_leaves_the_parents_presliding_distance() {
     let baseline = fam.fit(&[], None, &est, &val).unwrap();
     let parent = fam.fit(&[cf], Some(&baseline), &est, &val).unwrap();
     let pair = fam.fit(&[cf, pd], Some(&parent), &est, &val).unwrap();
-    let got = |name: &str| pair.internal.iter().find(|(n, _)| n == name).unwrap().1;
+    let got = |name: &str| pair.internal_value(name).unwrap();
     for (name, tol) in [("fc_kPa", 0.05), ("dahl_x_pct", 0.15)] {
         let rel = got(name) / truth(&case, name) - 1.0;
         assert!(rel.abs() < tol, "{name} {} against {}", got(name), truth(&case, name));
@@ -422,7 +422,7 @@ fn friction_and_clearance_are_both_named_from_the_clearances_optimum() {
         pair.est_cost,
         clearance.fit.est_cost
     );
-    let fc = pair.internal.iter().find(|(n, _)| n == "fc_kPa").unwrap().1;
+    let fc = pair.internal_value("fc_kPa").unwrap();
     assert!(
         (fc / truth(&case, "fc_kPa") - 1.0).abs() < 0.15,
         "fc {fc} kPa against {}",

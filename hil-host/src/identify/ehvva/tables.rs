@@ -252,7 +252,7 @@ impl Identified {
         let left = self.left_out();
         if !left.is_empty() {
             s.push_str(&format!(
-                "\nleft out of the tables (pass 1 ended with Cd on its lower bound: the reduced model could not follow the lift there; or the joint fit slid along the td-tau_p ridge, td more than 0.5 ms from its onset reading: no delay for the tables): {}; the tables interpolate the other conditions there\n",
+                "\nleft out of the tables (pass 1 ended with Cd on its lower bound: the reduced model could not follow the lift there; or the joint fit slid along the td-tau_p ridge, td more than {RIDGE_SLIDE_MS} ms from its onset reading: no delay for the tables): {}; the tables interpolate the other conditions there\n",
                 left.join(", ")
             ));
         }
