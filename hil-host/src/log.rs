@@ -8,6 +8,7 @@
 
 pub mod check;
 pub mod csv;
+pub mod units;
 
 use std::collections::BTreeMap;
 use std::fmt;

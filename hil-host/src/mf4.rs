@@ -26,6 +26,8 @@ use std::path::Path;
 
 use falcon_mdf::{Channel, Mf4File};
 
+use crate::log::csv::column_conversion;
+use crate::log::units::Conversion;
 use crate::log::{log_from_columns, Log, LogError, Plant, FLAGS};
 
 /// True when `path` names an MF4 file: the `.mf4`/`.mdf` extension, or the MDF identification
@@ -214,6 +216,28 @@ fn header_meta(mdf: &Mf4File) -> Vec<(String, String)> {
     meta
 }
 
+/// The time stamps of `ch`'s channel group in seconds: its master channel's values, converted
+/// from the master's unit (`s`, or `ms`, `us`, `ns` as some loggers record it; a note of the
+/// conversion goes to `converted`). The error completes "time base ...".
+fn timestamps(mdf: &Mf4File, ch: &Channel, converted: &mut Vec<String>) -> Result<Vec<f64>, String> {
+    let mut t = mdf.channel_timestamps(ch).map_err(|e| format!("unreadable: {e}"))?;
+    let Some(master) = mdf.master_channel(ch.data_group_index, ch.channel_group_index) else {
+        return Ok(t);
+    };
+    let unit = master.unit.trim();
+    let conversion: Option<Conversion> =
+        column_conversion("t_s", unit, true).map_err(|m| format!("(master channel `{}`): {m}", master.name))?;
+    if let Some(c) = conversion {
+        t.iter_mut().for_each(|v| *v = c.apply(*v));
+        converted.push(format!(
+            "time (master channel `{}`) from {unit} ({})",
+            master.name,
+            c.describe()
+        ));
+    }
+    Ok(t)
+}
+
 /// Reads an MF4 log. `plant` overrides the file's `plant` metadata; `map` renames channels and
 /// adds metadata.
 pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> Result<Log, LogError> {
@@ -341,10 +365,11 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
         None => return Err(missing(&file, &mdf, map, primary, plant)),
     };
     let group = (primary_ch.data_group_index, primary_ch.channel_group_index);
-    let t_s = mdf.channel_timestamps(primary_ch).map_err(|e| {
+    let mut converted: Vec<String> = Vec::new();
+    let t_s = timestamps(&mdf, primary_ch, &mut converted).map_err(|m| {
         err(
             Some(primary.into()),
-            format!("{}: time base unreadable: {e}", describe(primary, primary_ch)),
+            format!("{}: time base {m}", describe(primary, primary_ch)),
         )
     })?;
     if mdf.data_groups()[group.0].channel_groups[group.1]
@@ -396,19 +421,29 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
                 }
             },
         };
-        let values = mdf.signal(ch).and_then(|s| s.values_f64()).map_err(|e| {
+        let mut values = mdf.signal(ch).and_then(|s| s.values_f64()).map_err(|e| {
             err(
                 Some((*column).into()),
                 format!("{}: unreadable: {e}", describe(column, ch)),
             )
         })?;
+        // A logger's channel is in the unit it recorded; one named as the column (before a
+        // measuring device's suffix) states the column's unit already.
+        let renamed = ch.name.split('\\').next() != Some(*column);
+        let unit = ch.unit.trim();
+        if let Some(c) = column_conversion(column, unit, renamed)
+            .map_err(|m| err(Some((*column).into()), format!("{}: {m}", describe(column, ch))))?
+        {
+            values.iter_mut().for_each(|v| *v = c.apply(*v));
+            converted.push(format!("`{column}` from {unit} ({})", c.describe()));
+        }
         let values = if (ch.data_group_index, ch.channel_group_index) == group {
             values
         } else {
-            let t_ch = mdf.channel_timestamps(ch).map_err(|e| {
+            let t_ch = timestamps(&mdf, ch, &mut Vec::new()).map_err(|m| {
                 err(
                     Some((*column).into()),
-                    format!("{}: time base unreadable: {e}", describe(column, ch)),
+                    format!("{}: time base {m}", describe(column, ch)),
                 )
             })?;
             let flag = FLAGS.contains(column);
@@ -448,6 +483,12 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
         columns.push(((*column).to_string(), values));
     }
     notices.extend(resampled);
+    if !converted.is_empty() {
+        notices.push(format!(
+            "units converted to the DATA-FORMAT columns' units: {}",
+            converted.join(", ")
+        ));
+    }
 
     let names: BTreeMap<&str, String> = by_column
         .iter()

@@ -337,3 +337,78 @@ fn device_suffixed_channel_names_are_read_by_their_signal_name() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A logger records each channel in its own unit (the CN block's unit): a channel the map
+/// renames is converted from it to the column's unit, with a notice; a channel under the
+/// column's own name whose unit says otherwise, or a unit of another quantity, is refused by
+/// name.
+#[test]
+fn a_loggers_units_are_converted_to_the_columns_units() {
+    let Some(py) = python() else { return };
+    let renames = [
+        "--rename",
+        "p_supply_MPa=P_Rail",
+        "--rename",
+        "lift_mm=Hub",
+        "--rename",
+        "temp_C=T_Oel",
+    ];
+    let units = [
+        "--unit",
+        "p_supply_MPa=bar,10",
+        "--unit",
+        "lift_mm=m,0.001",
+        "--unit",
+        "temp_C=K,1,273.15",
+    ];
+    let args: Vec<&str> = renames.iter().chain(&units).copied().collect();
+    let (dir, csv, mf4) = estimation_as_mf4(&py, (Plant::Ehvva, "none", 3), "units", &args);
+    let map = ChannelMap::parse(
+        "logger.toml",
+        "[channels]\n\"P_Rail\" = \"p_supply_MPa\"\n\"Hub\" = \"lift_mm\"\n\"T_Oel\" = \"temp_C\"\n",
+    )
+    .unwrap();
+    let want = read_log(&csv, None).unwrap();
+    let log = read_log_mapped(&mf4, None, Some(&map)).unwrap();
+    assert_eq!(want.order, log.order);
+    for name in &want.order {
+        let (a, b) = (want.col(name).unwrap(), log.col(name).unwrap());
+        assert_eq!(a.len(), b.len(), "{name}");
+        for (k, (x, y)) in a.iter().zip(b).enumerate() {
+            // Stored times a factor in f64 and converted back: within rounding.
+            assert!((x - y).abs() <= 1e-12 * x.abs().max(1.0), "{name}[{k}]: {x} vs {y}");
+        }
+    }
+    let notice = log
+        .notices
+        .iter()
+        .find(|n| n.starts_with("units converted"))
+        .unwrap_or_else(|| panic!("{:?}", log.notices));
+    assert!(
+        notice.contains("`p_supply_MPa` from bar (÷ 10)")
+            && notice.contains("`lift_mm` from m (× 1000)")
+            && notice.contains("`temp_C` from K (− 273.15)"),
+        "{notice}"
+    );
+
+    // The same lift in m under the column's own name: the name says mm, the channel m.
+    let own = dir.join("own-name.mf4");
+    write_mf4(&py, &csv, &own, &["--unit", "lift_mm=m,0.001"]);
+    let e = read_log(&own, None).unwrap_err();
+    assert_eq!(e.column.as_deref(), Some("lift_mm"), "{e}");
+    assert!(
+        e.message.contains("channel `lift_mm`") && e.message.contains("unit `m`") && e.message.contains("`mm`"),
+        "{e}"
+    );
+    // A unit of another quantity on a renamed channel.
+    let volts = dir.join("volts.mf4");
+    write_mf4(&py, &csv, &volts, &["--rename", "lift_mm=Hub", "--unit", "lift_mm=V,1"]);
+    let e = read_log_mapped(&volts, None, Some(&map)).unwrap_err();
+    assert_eq!(e.column.as_deref(), Some("lift_mm"), "{e}");
+    assert!(
+        e.message.contains("channel `Hub` (mapped to `lift_mm`)")
+            && e.message.contains("`V` is not a unit of `lift_mm`"),
+        "{e}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -295,3 +295,60 @@ fn a_channel_map_that_does_not_fit_the_header_is_named() {
         "{e}"
     );
 }
+
+/// A bench's own column names carry the bench's units: in the name (`Zeit [ms]`) or in the
+/// units row. Renamed by the channel map, each column is converted to the DATA-FORMAT unit:
+/// the same log as the plain file's, within rounding, and a notice names each conversion.
+#[test]
+fn a_bench_csvs_own_units_are_converted_to_the_columns_units() {
+    let base = read("plain.csv", &plain());
+    let map = "[channels]\n\"Zeit [ms]\" = \"t_s\"\n\"PWM\" = \"duty_pct\"\n\"U_Batt\" = \"u_batt_V\"\n\"p_Umgebung\" = \"p_amb_kPa\"\n\"p_Tank (bar)\" = \"p_tank_kPa\"\n\"Position\" = \"x_pct\"\n";
+    let mut text =
+        String::from("# plant: vacuum\nZeit [ms];PWM;U_Batt;p_Umgebung;p_Tank (bar);Position\nms;%;mV;mbar;;%\n");
+    for i in 0..6 {
+        let i = i as f64;
+        text.push_str(
+            &format!(
+                "{};{};{};1013.25;{};{}\n",
+                2.0 * i,
+                10.0 + 7.25 * i,
+                13_500.0 - 125.0 * i,
+                (35.0 + 1e-3 * i) / 100.0,
+                -0.5 + 12.75 * i
+            )
+            .replace('.', ","),
+        );
+    }
+    let log = read_mapped("bench-units.csv", &text, map).unwrap_or_else(|e| panic!("{e}"));
+    for name in &base.order {
+        let (a, b) = (base.col(name).unwrap(), log.col(name).unwrap());
+        for (x, y) in a.iter().zip(b) {
+            assert!((x - y).abs() <= 1e-12 * x.abs().max(1e-3), "{name}: {x} vs {y}");
+        }
+    }
+    assert!((base.dt_s - log.dt_s).abs() < 1e-15, "{} vs {}", base.dt_s, log.dt_s);
+    let notice = log
+        .notices
+        .iter()
+        .find(|n| n.starts_with("units converted"))
+        .unwrap_or_else(|| panic!("{:?}", log.notices));
+    for part in [
+        "`t_s` from ms (÷ 1000)",
+        "`p_tank_kPa` from bar (× 100)",
+        "`u_batt_V` from mV (÷ 1000)",
+        "`p_amb_kPa` from mbar (÷ 10)",
+    ] {
+        assert!(notice.contains(part), "{part}: {notice}");
+    }
+
+    // A unit of another quantity, named by its line and column.
+    let bad = text.replacen("ms;%;mV;mbar;;%", "ms;%;mV;mbar;;mm", 1);
+    let e = read_mapped("bad-unit.csv", &bad, map).unwrap_err();
+    assert_eq!((e.line, e.column.as_deref()), (Some(3), Some("x_pct")), "{e}");
+    assert!(e.message.contains("`mm` is not a unit of `x_pct`"), "{e}");
+    // The name's unit and the units row disagree: which one is right the file does not say.
+    let both = text.replacen("ms;%;mV;mbar;;%", "s;%;mV;mbar;;%", 1);
+    let e = read_mapped("two-units.csv", &both, map).unwrap_err();
+    assert_eq!((e.line, e.column.as_deref()), (Some(3), Some("t_s")), "{e}");
+    assert!(e.message.contains("`Zeit [ms]` says `ms`"), "{e}");
+}

@@ -15,6 +15,9 @@ that reading either gives the same log. Options reproduce what real loggers do:
                        metadata (`# key: value`) into the header comment as `key: value` lines
                        (default) or as <common_properties> entries
   --drop-meta K        leave metadata key K out of the file (repeatable; for the channel map test)
+  --unit COL=UNIT,FACTOR[,OFFSET]
+                       store column COL in the logger's unit UNIT: samples * FACTOR + OFFSET
+                       (repeatable; a logger recording pressure in bar, lift in m)
 
 The time column `t_s` becomes each group's master channel.
 """
@@ -66,6 +69,7 @@ def main():
     ap.add_argument("--flags", default="")
     ap.add_argument("--meta-as", choices=["text", "properties"], default="text")
     ap.add_argument("--drop-meta", action="append", default=[])
+    ap.add_argument("--unit", action="append", default=[])
     a = ap.parse_args()
 
     meta, header, cols = read_csv(a.csv)
@@ -73,11 +77,20 @@ def main():
     flags = set(filter(None, a.flags.split(",")))
     group2 = [c for c in filter(None, a.group2.split(",")) if c in cols]
     t = cols["t_s"]
+    units = {}
+    for u in a.unit:
+        col, spec = u.split("=", 1)
+        parts = spec.split(",")
+        units[col] = (parts[0], float(parts[1]), float(parts[2]) if len(parts) > 2 else 0.0)
 
     def signal(name, samples, stamps):
+        unit = unit_of(name)
+        if name in units:
+            unit, factor, offset = units[name]
+            samples = samples * factor + offset
         if name in flags:
             samples = samples.astype(np.uint8)
-        return Signal(samples=samples, timestamps=stamps, name=rename.get(name, name), unit=unit_of(name))
+        return Signal(samples=samples, timestamps=stamps, name=rename.get(name, name), unit=unit)
 
     mdf = MDF(version="4.10")
     primary = [signal(n, cols[n], t) for n in header if n != "t_s" and n not in group2]

@@ -9,7 +9,8 @@
 use std::io::{BufRead, Read};
 
 use super::check::{check_meta, finish, select_columns, MetaEntry, RowLines};
-use super::{Log, LogError, Plant, FLAGS};
+use super::units::{self, Conversion, UnitFit};
+use super::{Log, LogError, Plant};
 
 /// Longest accepted line (bytes, without its line end).
 pub const MAX_LINE_BYTES: usize = 1 << 20;
@@ -231,28 +232,6 @@ fn number(cell: &str, decimal_comma: bool) -> Option<f64> {
     s.parse().ok()
 }
 
-/// The unit spellings accepted in a units row under a column (from its name's suffix).
-fn units_for(name: &str) -> Option<&'static [&'static str]> {
-    if FLAGS.contains(&name) {
-        return Some(&["-", "1", "0/1", "bool", "flag"]);
-    }
-    let (_, suffix) = name.rsplit_once('_')?;
-    Some(match suffix {
-        "s" => &["s", "sec"],
-        "pct" => &["%", "pct"],
-        "V" => &["V"],
-        "kPa" => &["kPa"],
-        "MPa" => &["MPa"],
-        "C" => &["C", "°C", "degC", "deg C"],
-        "mm" => &["mm"],
-        "m" => &["m"],
-        "deg" => &["deg", "°", "°CA", "degCA", "deg CA", "°KW"],
-        "rpm" => &["rpm", "1/min", "min^-1", "U/min", "rev/min"],
-        "N" => &["N"],
-        _ => return None,
-    })
-}
-
 /// A unit cell without its brackets: `[kPa]` and `(kPa)` are `kPa`.
 fn bare_unit(cell: &str) -> &str {
     let s = cell.trim();
@@ -262,6 +241,38 @@ fn bare_unit(cell: &str) -> &str {
         }
     }
     s
+}
+
+/// The unit a bench writes into its own column name, `Zeit [ms]` or `p_Rail (bar)`: the
+/// text of a trailing bracket pair, if any.
+fn unit_in_name(name: &str) -> Option<&str> {
+    let s = name.trim_end();
+    let (open, close) = match s.chars().last()? {
+        ']' => ('[', ']'),
+        ')' => ('(', ')'),
+        _ => return None,
+    };
+    let inner = &s[s.rfind(open)? + open.len_utf8()..s.len() - close.len_utf8()];
+    Some(inner.trim()).filter(|u| !u.is_empty())
+}
+
+/// The conversion of a column recorded in `unit`: `None` for its own unit. Another unit of
+/// the quantity converts only where the column is read under a name of the bench's own
+/// (`renamed`); under its DATA-FORMAT name, whose suffix states the unit, another recorded
+/// unit contradicts it.
+pub(crate) fn column_conversion(column: &str, unit: &str, renamed: bool) -> Result<Option<Conversion>, String> {
+    match units::fit(column, unit) {
+        UnitFit::Same => Ok(None),
+        UnitFit::Convert(c) if renamed => Ok(Some(c)),
+        UnitFit::Convert(_) => Err(format!(
+            "unit `{unit}`, but the column's name says {} (a column the channel map renames from the bench's own name is converted from the unit it was recorded in)",
+            units::accepted(column).split(", or").next().unwrap_or_default()
+        )),
+        UnitFit::Foreign => Err(format!(
+            "unit `{unit}` is not a unit of `{column}` (it takes {})",
+            units::accepted(column)
+        )),
+    }
 }
 
 /// Reads a CSV log from `input`, checking it whole; `source` names it in errors.
@@ -455,11 +466,32 @@ pub fn read_csv_sized(
             }
         })
         .collect();
+    // A column renamed by the channel map is the bench's own: its values are in the unit it
+    // was recorded in (its name's bracket or the units row), converted to the column's.
+    let original = names.clone();
     let names = match renames {
         Some(r) => rename_header(source, plant, header_line, names, r, &mut notices)?,
         None => names,
     };
     let sel = select_columns(source, plant, &names, Some(header_line))?;
+    let renamed: Vec<bool> = original.iter().zip(&names).map(|(o, n)| o != n).collect();
+    let mut conversions: Vec<Option<Conversion>> = vec![None; sel.order.len()];
+    let mut recorded_units: Vec<Option<String>> = vec![None; sel.order.len()];
+    let mut converted: Vec<String> = Vec::new();
+    for (i, slot) in sel.keep.iter().enumerate() {
+        let (Some(slot), true) = (slot, renamed[i]) else {
+            continue;
+        };
+        if let Some(unit) = unit_in_name(&original[i]) {
+            let column = &sel.order[*slot];
+            conversions[*slot] = column_conversion(column, unit, true)
+                .map_err(|m| err(header_line, Some(column), format!("column `{}`: {m}", original[i])))?;
+            if let Some(c) = conversions[*slot] {
+                converted.push(format!("`{column}` from {unit} ({})", c.describe()));
+            }
+            recorded_units[*slot] = Some(unit.to_string());
+        }
+    }
     lines.sep = Some(dialect.sep);
     lines.names = names;
     let width = sel.keep.len();
@@ -507,7 +539,7 @@ pub fn read_csv_sized(
                 !t.is_empty() && number(t, dialect.decimal_comma).is_none()
             }) && cells.iter().all(|c| number(c.text(l), dialect.decimal_comma).is_none());
             if is_units {
-                for (c, slot) in cells.iter().zip(&sel.keep) {
+                for (i, (c, slot)) in cells.iter().zip(&sel.keep).enumerate() {
                     let Some(slot) = slot else { continue };
                     quoted_seen |= c.quoted;
                     let name = &sel.order[*slot];
@@ -515,17 +547,23 @@ pub fn read_csv_sized(
                     if unit.is_empty() {
                         continue;
                     }
-                    if let Some(ok) = units_for(name) {
-                        if !ok.contains(&unit) {
+                    if let Some(in_name) = &recorded_units[*slot] {
+                        if in_name != unit {
                             return Err(err(
                                 n,
                                 Some(name),
                                 format!(
-                                    "unit `{unit}` in the units row, but the column's name says `{}`",
-                                    ok.join("` or `")
+                                    "unit `{unit}` in the units row, but the column's name `{}` says `{in_name}`",
+                                    original[i]
                                 ),
                             ));
                         }
+                        continue;
+                    }
+                    conversions[*slot] = column_conversion(name, unit, renamed[i])
+                        .map_err(|m| err(n, Some(name), format!("units row: {m}")))?;
+                    if let Some(conv) = conversions[*slot] {
+                        converted.push(format!("`{name}` from {unit} ({})", conv.describe()));
                     }
                 }
                 units_line = Some(n);
@@ -554,7 +592,10 @@ pub fn read_csv_sized(
                 return Err(err(n, Some(name), what));
             };
             comma_decimals |= dialect.decimal_comma && text.contains(',');
-            columns[*slot].push(v);
+            columns[*slot].push(match conversions[*slot] {
+                Some(c) => c.apply(v),
+                None => v,
+            });
         }
         rows.push(n_rows, n);
         n_rows += 1;
@@ -598,6 +639,12 @@ pub fn read_csv_sized(
     let mut all_notices = Vec::new();
     if !normalised.is_empty() {
         all_notices.push(format!("dialect normalised: {}", normalised.join("; ")));
+    }
+    if !converted.is_empty() {
+        all_notices.push(format!(
+            "units converted to the DATA-FORMAT columns' units: {}",
+            converted.join(", ")
+        ));
     }
     all_notices.extend(meta_notices);
     all_notices.extend(notices);

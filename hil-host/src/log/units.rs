@@ -1,0 +1,354 @@
+//! Recorded units against the DATA-FORMAT columns' units (the column name's suffix:
+//! `p_supply_MPa`, `lift_mm`, `t_s`): which spellings mean the column's own unit, and which
+//! other units a bench or logger records the same quantity in, with the exact conversion.
+//!
+//! Used for a CSV units row and an MF4 channel's unit (`hil-host/src/mf4.rs`). A column read
+//! under a name of the bench's own (renamed by a channel map) or from a logger's channel takes
+//! its values in the unit that was recorded, converted here; a column whose own name already
+//! says its unit and whose recorded unit says another is a contradiction the reader refuses
+//! (which of the two is right the file does not say).
+
+use super::FLAGS;
+
+/// `v · num / den + offset`: the column's value of a recorded value `v`. A ratio of two
+/// numbers so that a decimal prefix divides (`v / 1000` is the correctly rounded value of a
+/// millisecond count in seconds; `v · 0.001` is not always).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Conversion {
+    num: f64,
+    den: f64,
+    offset: f64,
+}
+
+impl Conversion {
+    const fn times(num: f64) -> Self {
+        Self {
+            num,
+            den: 1.0,
+            offset: 0.0,
+        }
+    }
+    const fn per(den: f64) -> Self {
+        Self {
+            num: 1.0,
+            den,
+            offset: 0.0,
+        }
+    }
+
+    /// The column's value of the recorded value `v`.
+    pub fn apply(&self, v: f64) -> f64 {
+        v * self.num / self.den + self.offset
+    }
+
+    /// How a notice writes it: `× 0.1`, `÷ 1000`, `− 273.15`.
+    pub fn describe(&self) -> String {
+        let mut s = Vec::new();
+        if self.num != 1.0 {
+            s.push(format!("× {}", self.num));
+        }
+        if self.den != 1.0 {
+            s.push(format!("÷ {}", self.den));
+        }
+        if self.offset != 0.0 {
+            s.push(format!(
+                "{} {}",
+                if self.offset < 0.0 { "−" } else { "+" },
+                self.offset.abs()
+            ));
+        }
+        s.join(" ")
+    }
+}
+
+/// What a recorded unit means for a column.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum UnitFit {
+    /// The column's own unit (or no unit recorded).
+    Same,
+    /// Another unit of the same quantity: the values are converted.
+    Convert(Conversion),
+    /// Not a unit the column can be read in.
+    Foreign,
+}
+
+/// The units a column with this unit suffix is read in: the spellings of its own unit, and
+/// the other units of the quantity with their conversions. `None` for a name without a
+/// known suffix (nothing is checked).
+struct UnitTable {
+    same: &'static [&'static str],
+    other: &'static [(&'static str, Conversion)],
+}
+
+const PSI_IN_KPA: f64 = 6.894_757_293_168_361;
+const KELVIN: Conversion = Conversion {
+    num: 1.0,
+    den: 1.0,
+    offset: -273.15,
+};
+const FAHRENHEIT: Conversion = Conversion {
+    num: 5.0,
+    den: 9.0,
+    offset: -160.0 / 9.0,
+};
+
+/// Per unit suffix of a column name: its own unit's spellings, other units with conversions.
+const TABLES: &[(&str, UnitTable)] = &[
+    (
+        "s",
+        UnitTable {
+            same: &["s", "sec"],
+            other: &[
+                ("ms", Conversion::per(1e3)),
+                ("us", Conversion::per(1e6)),
+                ("µs", Conversion::per(1e6)),
+                ("ns", Conversion::per(1e9)),
+            ],
+        },
+    ),
+    (
+        "pct",
+        UnitTable {
+            same: &["%", "pct"],
+            other: &[],
+        },
+    ),
+    (
+        "V",
+        UnitTable {
+            same: &["V"],
+            other: &[("mV", Conversion::per(1e3))],
+        },
+    ),
+    (
+        "kPa",
+        UnitTable {
+            same: &["kPa"],
+            other: &[
+                ("Pa", Conversion::per(1e3)),
+                ("hPa", Conversion::per(10.0)),
+                ("mbar", Conversion::per(10.0)),
+                ("bar", Conversion::times(100.0)),
+                ("MPa", Conversion::times(1e3)),
+                ("psi", Conversion::times(PSI_IN_KPA)),
+            ],
+        },
+    ),
+    (
+        "MPa",
+        UnitTable {
+            same: &["MPa"],
+            other: &[
+                ("bar", Conversion::per(10.0)),
+                ("kPa", Conversion::per(1e3)),
+                ("Pa", Conversion::per(1e6)),
+                ("mbar", Conversion::per(1e4)),
+                (
+                    "psi",
+                    Conversion {
+                        num: PSI_IN_KPA,
+                        den: 1e3,
+                        offset: 0.0,
+                    },
+                ),
+            ],
+        },
+    ),
+    (
+        "C",
+        UnitTable {
+            same: &["C", "°C", "degC", "deg C"],
+            other: &[("K", KELVIN), ("°F", FAHRENHEIT), ("degF", FAHRENHEIT)],
+        },
+    ),
+    (
+        "mm",
+        UnitTable {
+            same: &["mm"],
+            other: &[
+                ("m", Conversion::times(1e3)),
+                ("cm", Conversion::times(10.0)),
+                ("um", Conversion::per(1e3)),
+                ("µm", Conversion::per(1e3)),
+            ],
+        },
+    ),
+    (
+        "m",
+        UnitTable {
+            same: &["m"],
+            other: &[
+                ("mm", Conversion::per(1e3)),
+                ("cm", Conversion::per(100.0)),
+                ("um", Conversion::per(1e6)),
+                ("µm", Conversion::per(1e6)),
+            ],
+        },
+    ),
+    (
+        "deg",
+        UnitTable {
+            same: &["deg", "°", "°CA", "degCA", "deg CA", "°KW"],
+            other: &[(
+                "rad",
+                Conversion {
+                    num: 180.0,
+                    den: core::f64::consts::PI,
+                    offset: 0.0,
+                },
+            )],
+        },
+    ),
+    (
+        "rpm",
+        UnitTable {
+            same: &["rpm", "1/min", "min^-1", "U/min", "rev/min"],
+            other: &[(
+                "rad/s",
+                Conversion {
+                    num: 30.0,
+                    den: core::f64::consts::PI,
+                    offset: 0.0,
+                },
+            )],
+        },
+    ),
+    (
+        "N",
+        UnitTable {
+            same: &["N"],
+            other: &[("kN", Conversion::times(1e3))],
+        },
+    ),
+];
+
+const FLAG_UNITS: UnitTable = UnitTable {
+    same: &["-", "1", "0/1", "bool", "flag"],
+    other: &[],
+};
+
+fn table(column: &str) -> Option<&'static UnitTable> {
+    if FLAGS.contains(&column) {
+        return Some(&FLAG_UNITS);
+    }
+    let (_, suffix) = column.rsplit_once('_')?;
+    TABLES.iter().find(|(s, _)| *s == suffix).map(|(_, t)| t)
+}
+
+/// What the recorded `unit` (brackets and blanks already removed) means for `column`. An
+/// empty unit, or a column without a known unit suffix, is [`UnitFit::Same`].
+pub fn fit(column: &str, unit: &str) -> UnitFit {
+    let Some(t) = table(column) else {
+        return UnitFit::Same;
+    };
+    if unit.is_empty() || t.same.contains(&unit) {
+        return UnitFit::Same;
+    }
+    t.other
+        .iter()
+        .find(|(u, _)| *u == unit)
+        .map_or(UnitFit::Foreign, |(_, c)| UnitFit::Convert(*c))
+}
+
+/// For messages: the column's own unit spellings, and the units it converts from.
+pub fn accepted(column: &str) -> String {
+    match table(column) {
+        None => "any unit".into(),
+        Some(t) => {
+            let same = format!("`{}`", t.same.join("` or `"));
+            if t.other.is_empty() {
+                same
+            } else {
+                let mut other: Vec<&str> = t.other.iter().map(|(u, _)| *u).collect();
+                other.dedup();
+                format!("{same}, or converted from `{}`", other.join("`, `"))
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn convert(column: &str, unit: &str, v: f64) -> f64 {
+        match fit(column, unit) {
+            UnitFit::Convert(c) => c.apply(v),
+            other => panic!("{column} in {unit}: {other:?}"),
+        }
+    }
+
+    #[test]
+    fn each_conversion_gives_the_columns_unit() {
+        // Physical identities, not the table's numbers read back.
+        let cases = [
+            ("p_supply_MPa", "bar", 72.0, 7.2),
+            ("p_supply_MPa", "kPa", 7200.0, 7.2),
+            ("p_supply_MPa", "Pa", 7.2e6, 7.2),
+            ("p_supply_MPa", "psi", 1000.0, 6.894_757_293),
+            ("p_amb_kPa", "bar", 1.013, 101.3),
+            ("p_amb_kPa", "mbar", 1013.0, 101.3),
+            ("p_amb_kPa", "hPa", 1013.0, 101.3),
+            ("p_amb_kPa", "MPa", 0.1013, 101.3),
+            ("p_amb_kPa", "psi", 14.695_948_775_5, 101.325),
+            ("t_s", "ms", 2.5, 0.0025),
+            ("t_s", "µs", 50.0, 5e-5),
+            ("lift_mm", "m", 0.0075, 7.5),
+            ("lift_mm", "µm", 7500.0, 7.5),
+            ("pos_m", "mm", 12.5, 0.0125),
+            ("phase_deg", "rad", core::f64::consts::FRAC_PI_2, 90.0),
+            ("motor_cmd_rpm", "rad/s", 2.0 * core::f64::consts::PI, 60.0),
+            ("temp_C", "K", 373.15, 100.0),
+            ("temp_C", "°F", 212.0, 100.0),
+            ("temp_C", "degF", -40.0, -40.0),
+            ("u_batt_V", "mV", 13_500.0, 13.5),
+            ("force_N", "kN", 0.25, 250.0),
+        ];
+        for (column, unit, recorded, want) in cases {
+            let got = convert(column, unit, recorded);
+            assert!(
+                (got - want).abs() <= 1e-9 * want.abs(),
+                "{column} from {recorded} {unit}: {got}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_decimal_prefix_divides_exactly() {
+        // 1 ms steps in ms are the same numbers as the seconds a DATA-FORMAT log writes.
+        for k in 0..10_000 {
+            let ms = k as f64;
+            assert_eq!(convert("t_s", "ms", ms), ms / 1000.0);
+        }
+    }
+
+    #[test]
+    fn own_spellings_are_the_same_and_strangers_are_foreign() {
+        assert_eq!(fit("p_supply_MPa", "MPa"), UnitFit::Same);
+        assert_eq!(fit("p_supply_MPa", ""), UnitFit::Same);
+        assert_eq!(fit("temp_C", "°C"), UnitFit::Same);
+        assert_eq!(fit("u_pilot", "-"), UnitFit::Same);
+        // SI prefixes are case-sensitive: millipascal is not megapascal.
+        assert_eq!(fit("p_supply_MPa", "mpa"), UnitFit::Foreign);
+        assert_eq!(fit("p_amb_kPa", "kpa"), UnitFit::Foreign);
+        assert_eq!(fit("lift_mm", "V"), UnitFit::Foreign);
+        assert_eq!(fit("u_pilot", "V"), UnitFit::Foreign);
+        // A percentage is not guessed from a ratio ("1" or "-" could be either).
+        assert_eq!(fit("x_pct", "1"), UnitFit::Foreign);
+        // A name without a unit suffix checks nothing.
+        assert_eq!(fit("whatever", "furlong"), UnitFit::Same);
+        let a = accepted("p_supply_MPa");
+        assert!(a.starts_with("`MPa`, or converted from `bar`"), "{a}");
+    }
+
+    #[test]
+    fn a_conversion_says_what_it_does() {
+        let d = |c: &str, u: &str| match fit(c, u) {
+            UnitFit::Convert(c) => c.describe(),
+            other => panic!("{other:?}"),
+        };
+        assert_eq!(d("p_supply_MPa", "bar"), "÷ 10");
+        assert_eq!(d("p_amb_kPa", "bar"), "× 100");
+        assert_eq!(d("temp_C", "K"), "− 273.15");
+    }
+}
