@@ -26,8 +26,7 @@ use std::path::Path;
 
 use falcon_mdf::{Channel, Mf4File};
 
-use crate::log::csv::column_conversion;
-use crate::log::units::Conversion;
+use crate::log::units::{self, reading, Reading};
 use crate::log::{log_from_columns, Log, LogError, Plant, FLAGS};
 
 /// True when `path` names an MF4 file: the `.mf4`/`.mdf` extension, or the MDF identification
@@ -225,9 +224,8 @@ fn timestamps(mdf: &Mf4File, ch: &Channel, converted: &mut Vec<String>) -> Resul
         return Ok(t);
     };
     let unit = master.unit.trim();
-    let conversion: Option<Conversion> =
-        column_conversion("t_s", unit, true).map_err(|m| format!("(master channel `{}`): {m}", master.name))?;
-    if let Some(c) = conversion {
+    let read = reading("t_s", unit, true).map_err(|m| format!("(master channel `{}`): {m}", master.name))?;
+    if let Reading::Convert(c) = read {
         t.iter_mut().for_each(|v| *v = c.apply(*v));
         converted.push(format!(
             "time (master channel `{}`) from {unit} ({})",
@@ -365,7 +363,7 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
         None => return Err(missing(&file, &mdf, map, primary, plant)),
     };
     let group = (primary_ch.data_group_index, primary_ch.channel_group_index);
-    let mut converted: Vec<String> = Vec::new();
+    let (mut converted, mut assumed): (Vec<String>, Vec<String>) = (Vec::new(), Vec::new());
     let t_s = timestamps(&mdf, primary_ch, &mut converted).map_err(|m| {
         err(
             Some(primary.into()),
@@ -431,11 +429,15 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
         // measuring device's suffix) states the column's unit already.
         let renamed = ch.name.split('\\').next() != Some(*column);
         let unit = ch.unit.trim();
-        if let Some(c) = column_conversion(column, unit, renamed)
+        match reading(column, unit, renamed)
             .map_err(|m| err(Some((*column).into()), format!("{}: {m}", describe(column, ch))))?
         {
-            values.iter_mut().for_each(|v| *v = c.apply(*v));
-            converted.push(format!("`{column}` from {unit} ({})", c.describe()));
+            Reading::Own => {}
+            Reading::Convert(c) => {
+                values.iter_mut().for_each(|v| *v = c.apply(*v));
+                converted.push(format!("`{column}` from {unit} ({})", c.describe()));
+            }
+            Reading::Assumed => assumed.push(format!("`{unit}` under `{column}`")),
         }
         let values = if (ch.data_group_index, ch.channel_group_index) == group {
             values
@@ -488,6 +490,9 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
             "units converted to the DATA-FORMAT columns' units: {}",
             converted.join(", ")
         ));
+    }
+    if !assumed.is_empty() {
+        notices.push(units::assumed_notice(&assumed));
     }
 
     let names: BTreeMap<&str, String> = by_column

@@ -9,7 +9,7 @@
 use std::io::{BufRead, Read};
 
 use super::check::{check_meta, finish, select_columns, MetaEntry, RowLines};
-use super::units::{self, Conversion, UnitFit};
+use super::units::{self, reading, Conversion, Reading};
 use super::{Log, LogError, Plant};
 
 /// Longest accepted line (bytes, without its line end).
@@ -256,25 +256,6 @@ fn unit_in_name(name: &str) -> Option<&str> {
     Some(inner.trim()).filter(|u| !u.is_empty())
 }
 
-/// The conversion of a column recorded in `unit`: `None` for its own unit. Another unit of
-/// the quantity converts only where the column is read under a name of the bench's own
-/// (`renamed`); under its DATA-FORMAT name, whose suffix states the unit, another recorded
-/// unit contradicts it.
-pub(crate) fn column_conversion(column: &str, unit: &str, renamed: bool) -> Result<Option<Conversion>, String> {
-    match units::fit(column, unit) {
-        UnitFit::Same => Ok(None),
-        UnitFit::Convert(c) if renamed => Ok(Some(c)),
-        UnitFit::Convert(_) => Err(format!(
-            "unit `{unit}`, but the column's name says {} (a column the channel map renames from the bench's own name is converted from the unit it was recorded in)",
-            units::accepted(column).split(", or").next().unwrap_or_default()
-        )),
-        UnitFit::Foreign => Err(format!(
-            "unit `{unit}` is not a unit of `{column}` (it takes {})",
-            units::accepted(column)
-        )),
-    }
-}
-
 /// Reads a CSV log from `input`, checking it whole; `source` names it in errors.
 /// `plant_override` (from `--plant`) wins over `# plant:`.
 pub fn read_csv(source: &str, input: impl BufRead, plant_override: Option<Plant>) -> Result<Log, LogError> {
@@ -477,16 +458,17 @@ pub fn read_csv_sized(
     let renamed: Vec<bool> = original.iter().zip(&names).map(|(o, n)| o != n).collect();
     let mut conversions: Vec<Option<Conversion>> = vec![None; sel.order.len()];
     let mut recorded_units: Vec<Option<String>> = vec![None; sel.order.len()];
-    let mut converted: Vec<String> = Vec::new();
+    let (mut converted, mut assumed): (Vec<String>, Vec<String>) = (Vec::new(), Vec::new());
     for (i, slot) in sel.keep.iter().enumerate() {
         let (Some(slot), true) = (slot, renamed[i]) else {
             continue;
         };
         if let Some(unit) = unit_in_name(&original[i]) {
             let column = &sel.order[*slot];
-            conversions[*slot] = column_conversion(column, unit, true)
+            let read = reading(column, unit, true)
                 .map_err(|m| err(header_line, Some(column), format!("column `{}`: {m}", original[i])))?;
-            if let Some(c) = conversions[*slot] {
+            if let Reading::Convert(c) = read {
+                conversions[*slot] = Some(c);
                 converted.push(format!("`{column}` from {unit} ({})", c.describe()));
             }
             recorded_units[*slot] = Some(unit.to_string());
@@ -560,10 +542,13 @@ pub fn read_csv_sized(
                         }
                         continue;
                     }
-                    conversions[*slot] = column_conversion(name, unit, renamed[i])
-                        .map_err(|m| err(n, Some(name), format!("units row: {m}")))?;
-                    if let Some(conv) = conversions[*slot] {
-                        converted.push(format!("`{name}` from {unit} ({})", conv.describe()));
+                    match reading(name, unit, renamed[i]).map_err(|m| err(n, Some(name), format!("units row: {m}")))? {
+                        Reading::Own => {}
+                        Reading::Convert(conv) => {
+                            conversions[*slot] = Some(conv);
+                            converted.push(format!("`{name}` from {unit} ({})", conv.describe()));
+                        }
+                        Reading::Assumed => assumed.push(format!("`{unit}` under `{name}`")),
                     }
                 }
                 units_line = Some(n);
@@ -645,6 +630,9 @@ pub fn read_csv_sized(
             "units converted to the DATA-FORMAT columns' units: {}",
             converted.join(", ")
         ));
+    }
+    if !assumed.is_empty() {
+        all_notices.push(units::assumed_notice(&assumed));
     }
     all_notices.extend(meta_notices);
     all_notices.extend(notices);

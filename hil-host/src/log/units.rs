@@ -68,8 +68,47 @@ pub enum UnitFit {
     Same,
     /// Another unit of the same quantity: the values are converted.
     Convert(Conversion),
-    /// Not a unit the column can be read in.
+    /// A unit of another quantity (`mm` under `x_pct`): not readable as the column.
     Foreign,
+    /// A spelling no table knows (`kpa`, `percent`).
+    Unknown,
+}
+
+/// How a column's values are read, given the unit recorded for them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Reading {
+    /// In the column's own unit (also where none was recorded).
+    Own,
+    /// Converted from another unit of the quantity.
+    Convert(Conversion),
+    /// An unrecognised spelling under the column's own name, which states the unit: read in
+    /// that unit, with a notice.
+    Assumed,
+}
+
+/// How `column` recorded in `unit` is read. Another unit of the quantity converts only where
+/// the column is read under a name of the bench's or logger's own (`renamed`); under its
+/// DATA-FORMAT name, whose suffix states the unit, another known unit contradicts it, and an
+/// unknown spelling is taken to mean what the name says. A unit of another quantity, or an
+/// unknown one on a renamed column (whose scale nothing states), is an error.
+pub fn reading(column: &str, unit: &str, renamed: bool) -> Result<Reading, String> {
+    match fit(column, unit) {
+        UnitFit::Same => Ok(Reading::Own),
+        UnitFit::Convert(c) if renamed => Ok(Reading::Convert(c)),
+        UnitFit::Unknown if !renamed => Ok(Reading::Assumed),
+        UnitFit::Convert(_) => Err(format!(
+            "unit `{unit}`, but the column's name says {} (a column the channel map renames from the bench's own name is converted from the unit it was recorded in)",
+            own_units(column)
+        )),
+        UnitFit::Foreign => Err(format!(
+            "unit `{unit}` is not a unit of `{column}` (it takes {})",
+            accepted(column)
+        )),
+        UnitFit::Unknown => Err(format!(
+            "unit `{unit}` of the renamed column `{column}` is not one the reader knows (it takes {})",
+            accepted(column)
+        )),
+    }
 }
 
 /// The units a column with this unit suffix is read in: the spellings of its own unit, and
@@ -109,7 +148,7 @@ const TABLES: &[(&str, UnitTable)] = &[
     (
         "pct",
         UnitTable {
-            same: &["%", "pct"],
+            same: &["%", "pct", "percent"],
             other: &[],
         },
     ),
@@ -157,7 +196,7 @@ const TABLES: &[(&str, UnitTable)] = &[
     (
         "C",
         UnitTable {
-            same: &["C", "°C", "degC", "deg C"],
+            same: &["C", "°C", "℃", "degC", "deg C"],
             other: &[("K", KELVIN), ("°F", FAHRENHEIT), ("degF", FAHRENHEIT)],
         },
     ),
@@ -202,7 +241,7 @@ const TABLES: &[(&str, UnitTable)] = &[
     (
         "rpm",
         UnitTable {
-            same: &["rpm", "1/min", "min^-1", "U/min", "rev/min"],
+            same: &["rpm", "1/min", "min^-1", "min-1", "U/min", "r/min", "rev/min"],
             other: &[(
                 "rad/s",
                 Conversion {
@@ -244,10 +283,28 @@ pub fn fit(column: &str, unit: &str) -> UnitFit {
     if unit.is_empty() || t.same.contains(&unit) {
         return UnitFit::Same;
     }
-    t.other
-        .iter()
-        .find(|(u, _)| *u == unit)
-        .map_or(UnitFit::Foreign, |(_, c)| UnitFit::Convert(*c))
+    if let Some((_, c)) = t.other.iter().find(|(u, _)| *u == unit) {
+        return UnitFit::Convert(*c);
+    }
+    let known = |t: &UnitTable| t.same.contains(&unit) || t.other.iter().any(|(u, _)| *u == unit);
+    if known(&FLAG_UNITS) || TABLES.iter().any(|(_, t)| known(t)) {
+        UnitFit::Foreign
+    } else {
+        UnitFit::Unknown
+    }
+}
+
+/// The notice for units read as their columns' names say (`assumed`: "`kpa` under `p_amb_kPa`").
+pub fn assumed_notice(assumed: &[String]) -> String {
+    format!(
+        "unit(s) not recognised, read in the unit the column's name states: {}",
+        assumed.join(", ")
+    )
+}
+
+/// The column's own unit spellings, for messages.
+fn own_units(column: &str) -> String {
+    table(column).map_or_else(|| "any unit".into(), |t| format!("`{}`", t.same.join("` or `")))
 }
 
 /// For messages: the column's own unit spellings, and the units it converts from.
@@ -255,7 +312,7 @@ pub fn accepted(column: &str) -> String {
     match table(column) {
         None => "any unit".into(),
         Some(t) => {
-            let same = format!("`{}`", t.same.join("` or `"));
+            let same = own_units(column);
             if t.other.is_empty() {
                 same
             } else {
@@ -329,12 +386,28 @@ mod tests {
         assert_eq!(fit("temp_C", "°C"), UnitFit::Same);
         assert_eq!(fit("u_pilot", "-"), UnitFit::Same);
         // SI prefixes are case-sensitive: millipascal is not megapascal.
-        assert_eq!(fit("p_supply_MPa", "mpa"), UnitFit::Foreign);
-        assert_eq!(fit("p_amb_kPa", "kpa"), UnitFit::Foreign);
+        assert_eq!(fit("p_supply_MPa", "mpa"), UnitFit::Unknown);
+        assert_eq!(fit("p_amb_kPa", "kpa"), UnitFit::Unknown);
         assert_eq!(fit("lift_mm", "V"), UnitFit::Foreign);
         assert_eq!(fit("u_pilot", "V"), UnitFit::Foreign);
         // A percentage is not guessed from a ratio ("1" or "-" could be either).
         assert_eq!(fit("x_pct", "1"), UnitFit::Foreign);
+        // Under the column's own name an unknown spelling means what the name says; renamed,
+        // nothing states the scale.
+        assert_eq!(reading("p_amb_kPa", "kpa", false), Ok(Reading::Assumed));
+        assert!(reading("p_amb_kPa", "kpa", true)
+            .unwrap_err()
+            .contains("not one the reader knows"));
+        assert!(reading("p_amb_kPa", "bar", false)
+            .unwrap_err()
+            .contains("name says `kPa`"));
+        assert_eq!(
+            reading("p_amb_kPa", "bar", true),
+            Ok(Reading::Convert(Conversion::times(100.0)))
+        );
+        assert!(reading("lift_mm", "V", false)
+            .unwrap_err()
+            .contains("not a unit of `lift_mm`"));
         // A name without a unit suffix checks nothing.
         assert_eq!(fit("whatever", "furlong"), UnitFit::Same);
         let a = accepted("p_supply_MPa");
