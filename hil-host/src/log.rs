@@ -299,6 +299,7 @@ pub fn read_log_mapped(path: &Path, plant: Option<Plant>, map: Option<&ChannelMa
     let renames = map.map(|m| csv::Renames {
         map_file: &m.file,
         columns: &m.channels,
+        units: &m.units,
     });
     let mut log = read_csv_log(path, plant.or(map_plant), renames)?;
     if let Some(map) = map {

@@ -12,6 +12,8 @@
 //! - Metadata (`plant`, bench constants such as `kp`) come from the header comment: `key: value`
 //!   lines of its text (a leading `#` allowed, as in the CSV), or `<common_properties>` entries
 //!   `<e name="kp">25</e>`; the map file's `[meta]` adds to them and wins over them.
+//! - Units: a channel's unit (its CN block's) is checked against the column's and converted
+//!   where the channel is the logger's own (`crate::log::units`); the map's `[units]` win.
 //! - The time base is the master channel of the channel group that holds the primary output.
 //!   Columns recorded in other channel groups (other rates) are resampled onto it: linearly for
 //!   continuous signals, by zero-order hold (the last value at or before each instant) for 0/1
@@ -49,7 +51,7 @@ fn has_mdf_signature(path: &Path) -> bool {
 }
 
 /// A channel map: the logger's channel names renamed to DATA-FORMAT column names, and metadata
-/// the file does not carry. Read from a small TOML file (`--channel-map FILE`):
+/// and units the file does not carry. Read from a small TOML file (`--channel-map FILE`):
 ///
 /// ```toml
 /// [channels]
@@ -59,6 +61,9 @@ fn has_mdf_signature(path: &Path) -> bool {
 /// [meta]
 /// plant = "evvt"
 /// kp = 25
+///
+/// [units]
+/// phase_deg = "rad"
 /// ```
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ChannelMap {
@@ -68,6 +73,9 @@ pub struct ChannelMap {
     pub channels: Vec<(String, String)>,
     /// Metadata `key = value` (numbers and booleans as their text), sorted by key.
     pub meta: Vec<(String, String)>,
+    /// (DATA-FORMAT column name, the unit its values were recorded in), sorted by column: for
+    /// a log that records no units, or wrong ones. Stated here, a unit wins over the file's.
+    pub units: Vec<(String, String)>,
 }
 
 impl ChannelMap {
@@ -112,7 +120,7 @@ impl ChannelMap {
                 return Err(err(
                     None,
                     Some(section.clone()),
-                    format!("`{section}` must be a table ([channels] or [meta])"),
+                    format!("`{section}` must be a table ([channels], [meta] or [units])"),
                 ));
             };
             match section.as_str() {
@@ -160,16 +168,38 @@ impl ChannelMap {
                         map.meta.push((key.clone(), v));
                     }
                 }
+                "units" => {
+                    for (column, unit) in entries {
+                        let key = Some(format!("units.{column}"));
+                        let toml::Value::String(unit) = unit else {
+                            return Err(err(None, key, "the unit must be a string".into()));
+                        };
+                        if !known_columns.contains(&column.as_str()) {
+                            return Err(err(
+                                None,
+                                key,
+                                format!("`{column}` is not a DATA-FORMAT column of any plant"),
+                            ));
+                        }
+                        reading(column, unit.trim(), true).map_err(|m| err(None, key, m))?;
+                        map.units.push((column.clone(), unit.trim().to_string()));
+                    }
+                }
                 _ => {
                     return Err(err(
                         None,
                         Some(section.clone()),
-                        format!("unknown section `[{section}]` (known: [channels], [meta])"),
+                        format!("unknown section `[{section}]` (known: [channels], [meta], [units])"),
                     ))
                 }
             }
         }
         Ok(map)
+    }
+
+    /// The unit the map states for `column`'s recorded values, if any.
+    pub fn unit_of(&self, column: &str) -> Option<&str> {
+        self.units.iter().find(|(c, _)| c == column).map(|(_, u)| u.as_str())
     }
 
     /// The column a logger channel is read as: its mapped name, else its own name.
@@ -217,13 +247,15 @@ fn header_meta(mdf: &Mf4File) -> Vec<(String, String)> {
 
 /// The time stamps of `ch`'s channel group in seconds: its master channel's values, converted
 /// from the master's unit (`s`, or `ms`, `us`, `ns` as some loggers record it; a note of the
-/// conversion goes to `converted`). The error completes "time base ...".
-fn timestamps(mdf: &Mf4File, ch: &Channel, converted: &mut Vec<String>) -> Result<Vec<f64>, String> {
+/// conversion goes to `converted`; a `t_s` unit in the channel `map` wins). The error
+/// completes "time base ...".
+fn timestamps(mdf: &Mf4File, ch: &Channel, map: &ChannelMap, converted: &mut Vec<String>) -> Result<Vec<f64>, String> {
     let mut t = mdf.channel_timestamps(ch).map_err(|e| format!("unreadable: {e}"))?;
     let Some(master) = mdf.master_channel(ch.data_group_index, ch.channel_group_index) else {
         return Ok(t);
     };
-    let unit = master.unit.trim();
+    // The map's `t_s` unit wins over the master's own.
+    let unit = map.unit_of("t_s").unwrap_or(master.unit.trim());
     let read = reading("t_s", unit, true).map_err(|m| format!("(master channel `{}`): {m}", master.name))?;
     if let Reading::Convert(c) = read {
         t.iter_mut().for_each(|v| *v = c.apply(*v));
@@ -364,7 +396,7 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
     };
     let group = (primary_ch.data_group_index, primary_ch.channel_group_index);
     let (mut converted, mut assumed): (Vec<String>, Vec<String>) = (Vec::new(), Vec::new());
-    let t_s = timestamps(&mdf, primary_ch, &mut converted).map_err(|m| {
+    let t_s = timestamps(&mdf, primary_ch, map, &mut converted).map_err(|m| {
         err(
             Some(primary.into()),
             format!("{}: time base {m}", describe(primary, primary_ch)),
@@ -428,7 +460,19 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
         // A logger's channel is in the unit it recorded; one named as the column (before a
         // measuring device's suffix) states the column's unit already.
         let renamed = ch.name.split('\\').next() != Some(*column);
-        let unit = ch.unit.trim();
+        let (unit, renamed) = match map.unit_of(column) {
+            Some(stated) => {
+                if !ch.unit.trim().is_empty() && ch.unit.trim() != stated {
+                    notices.push(format!(
+                        "channel map {}: `{column}` read in {stated} as it states; the file records {}",
+                        map.file,
+                        ch.unit.trim()
+                    ));
+                }
+                (stated, true)
+            }
+            None => (ch.unit.trim(), renamed),
+        };
         match reading(column, unit, renamed)
             .map_err(|m| err(Some((*column).into()), format!("{}: {m}", describe(column, ch))))?
         {
@@ -442,7 +486,7 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
         let values = if (ch.data_group_index, ch.channel_group_index) == group {
             values
         } else {
-            let t_ch = timestamps(&mdf, ch, &mut Vec::new()).map_err(|m| {
+            let t_ch = timestamps(&mdf, ch, map, &mut Vec::new()).map_err(|m| {
                 err(
                     Some((*column).into()),
                     format!("{}: time base {m}", describe(column, ch)),

@@ -400,6 +400,12 @@ fn a_loggers_units_are_converted_to_the_columns_units() {
         e.message.contains("channel `lift_mm`") && e.message.contains("unit `m`") && e.message.contains("`mm`"),
         "{e}"
     );
+    // The channel map states what the logger got wrong: its `[units]` win over the file's.
+    let stated = ChannelMap::parse("stated.toml", "[units]\nlift_mm = \"m\"\n").unwrap();
+    let log = read_log_mapped(&own, None, Some(&stated)).unwrap();
+    for (x, y) in want.col("lift_mm").unwrap().iter().zip(log.col("lift_mm").unwrap()) {
+        assert!((x - y).abs() <= 1e-12 * x.abs().max(1.0), "{x} vs {y}");
+    }
     // A unit of another quantity on a renamed channel.
     let volts = dir.join("volts.mf4");
     write_mf4(&py, &csv, &volts, &["--rename", "lift_mm=Hub", "--unit", "lift_mm=V,1"]);

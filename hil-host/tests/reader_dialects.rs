@@ -366,3 +366,55 @@ fn a_bench_csvs_own_units_are_converted_to_the_columns_units() {
     assert_eq!((e.line, e.column.as_deref()), (Some(3), Some("t_s")), "{e}");
     assert!(e.message.contains("`Zeit [ms]` says `ms`"), "{e}");
 }
+
+/// A bench that records no units (or wrong ones): the channel map's `[units]` states them,
+/// for renamed columns and DATA-FORMAT names alike, and wins over a units row (with a
+/// notice). A unit that does not fit its column is refused when the map is read.
+#[test]
+fn a_channel_maps_units_state_what_the_file_does_not() {
+    use hil_host::mf4::ChannelMap;
+    let base = read("plain.csv", &plain());
+    // No units row; time in ms, the tank in bar, the rest as DATA-FORMAT has them.
+    let mut text = String::from("# plant: vacuum\nZeit,duty_pct,u_batt_V,p_amb_kPa,p_tank_kPa,x_pct\n");
+    for i in 0..6 {
+        let i = i as f64;
+        text.push_str(&format!(
+            "{},{},{},101.325,{},{}\n",
+            2.0 * i,
+            10.0 + 7.25 * i,
+            13.5 - 0.125 * i,
+            (35.0 + 1e-3 * i) / 100.0,
+            -0.5 + 12.75 * i
+        ));
+    }
+    let map = "[channels]\n\"Zeit\" = \"t_s\"\n\n[units]\nt_s = \"ms\"\np_tank_kPa = \"bar\"\n";
+    let log = read_mapped("no-units.csv", &text, map).unwrap_or_else(|e| panic!("{e}"));
+    for name in &base.order {
+        for (x, y) in base.col(name).unwrap().iter().zip(log.col(name).unwrap()) {
+            assert!((x - y).abs() <= 1e-12 * x.abs().max(1e-3), "{name}: {x} vs {y}");
+        }
+    }
+    let notice = log.notices.iter().find(|n| n.starts_with("units converted")).unwrap();
+    assert!(
+        notice.contains("`t_s` from ms (÷ 1000, as the channel map states)")
+            && notice.contains("`p_tank_kPa` from bar (× 100, as the channel map states)"),
+        "{notice}"
+    );
+    // A units row that says otherwise is overruled, and named.
+    let with_row = text.replacen("x_pct\n", "x_pct\ns,%,V,kPa,kPa,%\n", 1);
+    let log = read_mapped("row.csv", &with_row, map).unwrap_or_else(|e| panic!("{e}"));
+    assert!(
+        log.notices
+            .iter()
+            .any(|n| n.contains("`p_tank_kPa` read in bar as the channel map states; the units row (line 3) says kPa")),
+        "{:?}",
+        log.notices
+    );
+    assert!((log.col("p_tank_kPa").unwrap()[0] - 35.0).abs() < 1e-12);
+    // The map is checked on its own: a unit of another quantity, a column no plant has.
+    let e = ChannelMap::parse("m.toml", "[units]\np_tank_kPa = \"mm\"\n").unwrap_err();
+    assert_eq!(e.column.as_deref(), Some("units.p_tank_kPa"), "{e}");
+    assert!(e.message.contains("`mm` is not a unit of `p_tank_kPa`"), "{e}");
+    let e = ChannelMap::parse("m.toml", "[units]\nZeit = \"ms\"\n").unwrap_err();
+    assert!(e.message.contains("not a DATA-FORMAT column"), "{e}");
+}

@@ -270,6 +270,9 @@ pub struct Renames<'a> {
     pub map_file: &'a str,
     /// (the file's column name, the DATA-FORMAT column name).
     pub columns: &'a [(String, String)],
+    /// (DATA-FORMAT column name, the unit its values were recorded in): the map's `[units]`,
+    /// which win over the file's own.
+    pub units: &'a [(String, String)],
 }
 
 /// The header's names with `renames` applied; a notice lists what was renamed. A renamed
@@ -474,6 +477,28 @@ pub fn read_csv_sized(
             recorded_units[*slot] = Some(unit.to_string());
         }
     }
+    // Units the channel map states win over the file's (a log that records none, or wrong ones).
+    let map_units: &[(String, String)] = renames.map_or(&[], |r| r.units);
+    let mut stated = vec![false; sel.order.len()];
+    for (column, unit) in map_units {
+        let Some(slot) = sel.order.iter().position(|c| c == column) else {
+            continue;
+        };
+        converted.retain(|c| !c.starts_with(&format!("`{column}` from ")));
+        // Checked when the map was read.
+        conversions[slot] = match reading(column, unit, true) {
+            Ok(Reading::Convert(c)) => {
+                converted.push(format!(
+                    "`{column}` from {unit} ({}, as the channel map states)",
+                    c.describe()
+                ));
+                Some(c)
+            }
+            _ => None,
+        };
+        recorded_units[slot] = Some(unit.clone());
+        stated[slot] = true;
+    }
     lines.sep = Some(dialect.sep);
     lines.names = names;
     let width = sel.keep.len();
@@ -530,6 +555,14 @@ pub fn read_csv_sized(
                         continue;
                     }
                     if let Some(in_name) = &recorded_units[*slot] {
+                        if stated[*slot] {
+                            if in_name != unit {
+                                notices.push(format!(
+                                    "`{name}` read in {in_name} as the channel map states; the units row (line {n}) says {unit}"
+                                ));
+                            }
+                            continue;
+                        }
                         if in_name != unit {
                             return Err(err(
                                 n,
