@@ -171,8 +171,8 @@ pub struct CheckArgs {
     /// The plant, when the log does not say
     #[arg(long, value_enum)]
     pub plant: Option<PlantArg>,
-    /// Rename an MF4 file's channels or a CSV file's columns to DATA-FORMAT columns and add metadata (TOML:
-    /// [channels] "Logger.Name" = "column", [meta] key = value; docs/data-format.md)
+    /// Rename an MF4 file's channels or a CSV file's columns to DATA-FORMAT columns and add metadata and units (TOML:
+    /// [channels] "Logger.Name" = "column", [meta] key = value, [units] column = "bar"; docs/data-format.md)
     #[arg(long, value_name = "FILE")]
     pub channel_map: Option<PathBuf>,
 }
@@ -196,8 +196,8 @@ pub struct DiagnoseArgs {
     /// Write one self-contained HTML page: verdict, evidence, plots, parameters, gain
     #[arg(long, value_name = "FILE")]
     pub report: Option<PathBuf>,
-    /// Rename an MF4 file's channels or a CSV file's columns to DATA-FORMAT columns and add metadata (TOML:
-    /// [channels] "Logger.Name" = "column", [meta] key = value; docs/data-format.md)
+    /// Rename an MF4 file's channels or a CSV file's columns to DATA-FORMAT columns and add metadata and units (TOML:
+    /// [channels] "Logger.Name" = "column", [meta] key = value, [units] column = "bar"; docs/data-format.md)
     #[arg(long, value_name = "FILE")]
     pub channel_map: Option<PathBuf>,
     /// Write the plots into a directory that holds other files or another run's outputs
@@ -233,8 +233,8 @@ pub struct CalibrateArgs {
     /// The calibration sector's address in the ECU's flash (hex)
     #[arg(long, value_name = "ADDR", default_value = "0x080E0000")]
     pub flash_base: String,
-    /// Rename an MF4 file's channels or a CSV file's columns to DATA-FORMAT columns and add metadata (TOML:
-    /// [channels] "Logger.Name" = "column", [meta] key = value; docs/data-format.md)
+    /// Rename an MF4 file's channels or a CSV file's columns to DATA-FORMAT columns and add metadata and units (TOML:
+    /// [channels] "Logger.Name" = "column", [meta] key = value, [units] column = "bar"; docs/data-format.md)
     #[arg(long, value_name = "FILE")]
     pub channel_map: Option<PathBuf>,
     /// Write into a directory that holds other files or another run's outputs
@@ -319,8 +319,8 @@ pub struct IdentifyArgs {
     /// Write the tables as JSON here
     #[arg(long, value_name = "FILE")]
     pub json: Option<PathBuf>,
-    /// Rename an MF4 file's channels or a CSV file's columns to DATA-FORMAT columns and add metadata (TOML:
-    /// [channels] "Logger.Name" = "column", [meta] key = value; docs/data-format.md)
+    /// Rename an MF4 file's channels or a CSV file's columns to DATA-FORMAT columns and add metadata and units (TOML:
+    /// [channels] "Logger.Name" = "column", [meta] key = value, [units] column = "bar"; docs/data-format.md)
     #[arg(long, value_name = "FILE")]
     pub channel_map: Option<PathBuf>,
 }
