@@ -418,3 +418,48 @@ fn a_channel_maps_units_state_what_the_file_does_not() {
     let e = ChannelMap::parse("m.toml", "[units]\nZeit = \"ms\"\n").unwrap_err();
     assert!(e.message.contains("not a DATA-FORMAT column"), "{e}");
 }
+
+/// Two more spreadsheet habits: a separator after the last column on every line, and each
+/// column's unit written into its name (`t_s [s]`). Both read to the plain numbers and are
+/// said; a unit in a DATA-FORMAT name that contradicts the name's suffix is refused.
+#[test]
+fn a_trailing_separator_and_units_in_the_column_names_read_to_the_plain_numbers() {
+    let base = read("plain.csv", &plain());
+    let trailing: String = plain()
+        .lines()
+        .map(|l| {
+            if l.starts_with('#') {
+                format!("{l}\n")
+            } else {
+                format!("{l},\n")
+            }
+        })
+        .collect();
+    let log = read("trailing.csv", &trailing);
+    same_numbers(&base, &log);
+    assert!(
+        normalised(&log).contains("a separator after the last column"),
+        "{:?}",
+        log.notices
+    );
+
+    let named = plain().replacen(
+        "t_s,duty_pct,u_batt_V,p_amb_kPa,p_tank_kPa,x_pct",
+        "t_s [s],duty_pct [%],u_batt_V (V),p_amb_kPa [kPa],p_tank_kPa,x_pct [%]",
+        1,
+    );
+    let log = read("named.csv", &named);
+    same_numbers(&base, &log);
+    let n = normalised(&log);
+    assert!(
+        n.contains("units taken off the column names (`t_s [s]`, `duty_pct [%]`, `u_batt_V (V)`"),
+        "{n}"
+    );
+    let wrong = named.replacen("p_amb_kPa [kPa]", "p_amb_kPa [bar]", 1);
+    let e = error("wrong.csv", &wrong);
+    assert_eq!((e.line, e.column.as_deref()), (Some(3), Some("p_amb_kPa")), "{e}");
+    assert!(
+        e.message.contains("`p_amb_kPa [bar]`") && e.message.contains("unit `bar`"),
+        "{e}"
+    );
+}

@@ -246,14 +246,20 @@ fn bare_unit(cell: &str) -> &str {
 /// The unit a bench writes into its own column name, `Zeit [ms]` or `p_Rail (bar)`: the
 /// text of a trailing bracket pair, if any.
 fn unit_in_name(name: &str) -> Option<&str> {
+    split_unit(name).map(|(_, unit)| unit)
+}
+
+/// A name with a unit in a trailing bracket pair split into (the name before it, the unit).
+fn split_unit(name: &str) -> Option<(&str, &str)> {
     let s = name.trim_end();
     let (open, close) = match s.chars().last()? {
         ']' => ('[', ']'),
         ')' => ('(', ')'),
         _ => return None,
     };
-    let inner = &s[s.rfind(open)? + open.len_utf8()..s.len() - close.len_utf8()];
-    Some(inner.trim()).filter(|u| !u.is_empty())
+    let at = s.rfind(open)?;
+    let inner = s[at + open.len_utf8()..s.len() - close.len_utf8()].trim();
+    Some((s[..at].trim_end(), inner)).filter(|(_, u)| !u.is_empty())
 }
 
 /// Reads a CSV log from `input`, checking it whole; `source` names it in errors.
@@ -438,6 +444,15 @@ pub fn read_csv_sized(
     let mut quoted_seen = false;
     split(&header, dialect.sep, &mut cells)
         .map_err(|(at, what)| err(header_line, None, format!("{what} (byte {at})")))?;
+    // A separator after the last column on every line (some spreadsheet exports): an empty
+    // last header cell, and rows one empty cell longer.
+    let trailing_sep = cells.len() > 1
+        && cells
+            .last()
+            .is_some_and(|c| !c.quoted && c.text(&header).trim().is_empty());
+    if trailing_sep {
+        cells.pop();
+    }
     let names: Vec<String> = cells
         .iter()
         .map(|c| {
@@ -457,15 +472,47 @@ pub fn read_csv_sized(
         Some(r) => rename_header(source, plant, header_line, names, r, &mut notices)?,
         None => names,
     };
-    let sel = select_columns(source, plant, &names, Some(header_line))?;
     let renamed: Vec<bool> = original.iter().zip(&names).map(|(o, n)| o != n).collect();
+    // A bench that writes each column's unit into its name, `t_s [s]`, `lift_mm (mm)`: the
+    // DATA-FORMAT name with the unit taken off (where the header has not that name already).
+    let known: Vec<&str> = std::iter::once("t_s")
+        .chain(plant.columns().iter().map(|(n, _)| *n))
+        .collect();
+    let mut names = names;
+    let mut unit_named: Vec<Option<String>> = vec![None; names.len()];
+    for i in 0..names.len() {
+        let Some((bare, unit)) =
+            split_unit(&names[i]).filter(|(b, _)| !known.contains(&names[i].as_str()) && known.contains(b))
+        else {
+            continue;
+        };
+        if names.iter().any(|n| n == bare) {
+            continue;
+        }
+        let (bare, unit) = (bare.to_string(), unit.to_string());
+        unit_named[i] = Some(unit);
+        names[i] = bare;
+    }
+    let sel = select_columns(source, plant, &names, Some(header_line))?;
     let mut conversions: Vec<Option<Conversion>> = vec![None; sel.order.len()];
     let mut recorded_units: Vec<Option<String>> = vec![None; sel.order.len()];
     let (mut converted, mut assumed): (Vec<String>, Vec<String>) = (Vec::new(), Vec::new());
     for (i, slot) in sel.keep.iter().enumerate() {
-        let (Some(slot), true) = (slot, renamed[i]) else {
+        let Some(slot) = slot else { continue };
+        if let Some(unit) = &unit_named[i] {
+            // The DATA-FORMAT name with its unit: the name states the unit, as without it.
+            let column = &sel.order[*slot];
+            if let Reading::Assumed = reading(column, unit, false)
+                .map_err(|m| err(header_line, Some(column), format!("column `{}`: {m}", original[i])))?
+            {
+                assumed.push(format!("`{unit}` under `{column}`"));
+            }
+            recorded_units[*slot] = Some(unit.clone());
             continue;
-        };
+        }
+        if !renamed[i] {
+            continue;
+        }
         if let Some(unit) = unit_in_name(&original[i]) {
             let column = &sel.order[*slot];
             let read = reading(column, unit, true)
@@ -536,6 +583,9 @@ pub fn read_csv_sized(
             }
         }
         split(l, dialect.sep, &mut cells).map_err(|(at, what)| err(n, None, format!("{what} (byte {at})")))?;
+        if trailing_sep && cells.len() == width + 1 && cells.last().is_some_and(|c| c.text(l).trim().is_empty()) {
+            cells.pop();
+        }
         if cells.len() != width {
             return Err(err(n, None, format!("{} cells, header has {width}", cells.len())));
         }
@@ -645,6 +695,21 @@ pub fn read_csv_sized(
             }
         )),
         _ => {}
+    }
+    if trailing_sep {
+        normalised.push("a separator after the last column".to_string());
+    }
+    if unit_named.iter().any(Option::is_some) {
+        normalised.push(format!(
+            "units taken off the column names ({})",
+            original
+                .iter()
+                .zip(&unit_named)
+                .filter(|(_, u)| u.is_some())
+                .map(|(o, _)| format!("`{o}`"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
     }
     if let Some(u) = units_line {
         normalised.push(format!(
