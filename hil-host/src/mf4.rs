@@ -415,7 +415,19 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
         ));
     }
 
-    let mut columns: Vec<(String, Vec<f64>)> = vec![("t_s".into(), t_s.clone())];
+    // A logger's time stamps jitter (event-driven rasters, bus timing): the columns go onto a
+    // uniform grid, as DATA-FORMAT's log is sampled; a gap the grid would bridge is left to the
+    // uniformity check below, which names it.
+    let uniform = uniform_grid(&t_s);
+    if let Some((grid, jitter)) = &uniform {
+        notices.push(format!(
+            "`{primary}`'s channel group is not uniformly sampled: {jitter}; every column resampled onto a uniform {} Hz grid from its first time stamp ({} samples), signals by linear interpolation, flags by zero-order hold",
+            fmt_hz(rate_hz(grid)),
+            grid.len()
+        ));
+    }
+    let base: &[f64] = uniform.as_ref().map_or(&t_s, |(grid, _)| grid);
+    let mut columns: Vec<(String, Vec<f64>)> = vec![("t_s".into(), base.to_vec())];
     let mut resampled: Vec<String> = Vec::new();
     for (column, _) in plant.columns() {
         let Some(found) = by_column.get(column) else {
@@ -483,8 +495,27 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
             }
             Reading::Assumed => assumed.push(format!("`{unit}` under `{column}`")),
         }
+        let flag = FLAGS.contains(column);
         let values = if (ch.data_group_index, ch.channel_group_index) == group {
-            values
+            if values.len() != t_s.len() {
+                return Err(err(
+                    Some((*column).into()),
+                    format!(
+                        "{} has {} samples, its time channel {}",
+                        describe(column, ch),
+                        values.len(),
+                        t_s.len()
+                    ),
+                ));
+            }
+            match &uniform {
+                Some((grid, _)) => {
+                    resample(&t_s, &values, grid, flag)
+                        .map_err(|m| err(Some((*column).into()), format!("{}: {m}", describe(column, ch))))?
+                        .0
+                }
+                None => values,
+            }
         } else {
             let t_ch = timestamps(&mdf, ch, map, &mut Vec::new()).map_err(|m| {
                 err(
@@ -492,15 +523,14 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
                     format!("{}: time base {m}", describe(column, ch)),
                 )
             })?;
-            let flag = FLAGS.contains(column);
-            let (out, outside) = resample(&t_ch, &values, &t_s, flag)
+            let (out, outside) = resample(&t_ch, &values, base, flag)
                 .map_err(|m| err(Some((*column).into()), format!("{}: {m}", describe(column, ch))))?;
             let rate = rate_hz(&t_ch);
             let mut note = format!(
                 "`{column}` ({}) is in another channel group at {} Hz: resampled onto `{primary}`'s {} Hz time base by {}",
                 describe(column, ch),
                 fmt_hz(rate),
-                fmt_hz(rate_hz(&t_s)),
+                fmt_hz(rate_hz(base)),
                 if flag {
                     "zero-order hold (the last value at or before each instant)"
                 } else {
@@ -515,17 +545,6 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
             resampled.push(note);
             out
         };
-        if values.len() != t_s.len() {
-            return Err(err(
-                Some((*column).into()),
-                format!(
-                    "{} has {} samples, its time channel {}",
-                    describe(column, ch),
-                    values.len(),
-                    t_s.len()
-                ),
-            ));
-        }
         columns.push(((*column).to_string(), values));
     }
     notices.extend(resampled);
@@ -552,7 +571,7 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
         // A sample's time helps find it in the logger's tool.
         if let Some((head, tail)) = e.message.split_once(" (0-based)") {
             let k = head.rsplit(' ').next().and_then(|k| k.parse::<usize>().ok());
-            if let Some(t) = k.and_then(|k| t_s.get(k)) {
+            if let Some(t) = k.and_then(|k| base.get(k)) {
                 e.message = format!("{head} (0-based, t = {t} s){tail}");
             }
         }
@@ -633,6 +652,48 @@ fn resample(t_from: &[f64], values: &[f64], t_to: &[f64], hold: bool) -> Result<
     Ok((out, outside))
 }
 
+/// Steps up to this many median steps are bridged by [`uniform_grid`] (up to two samples a
+/// logger lost in a row, with its jitter); a longer gap is an error of the log's uniformity
+/// check.
+const MAX_BRIDGED_PERIODS: f64 = 3.5;
+
+/// A uniform grid for time stamps `t` that jitter beyond DATA-FORMAT's 1 % (some step more than
+/// 1 % off the mean step), with what the jitter is, for the notice: the grid's step is the
+/// logger's period (below), the grid starts at the first time stamp and ends at or before the
+/// last. `None` for a uniform time base, and where
+/// a step is not positive or longer than [`MAX_BRIDGED_PERIODS`] medians (the log's check names
+/// it).
+fn uniform_grid(t: &[f64]) -> Option<(Vec<f64>, String)> {
+    let n = t.len();
+    if n < 3 {
+        return None;
+    }
+    let span = t[n - 1] - t[0];
+    let mean = span / (n - 1) as f64;
+    let mut steps: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+    if steps.iter().all(|&s| (s - mean).abs() <= 0.01 * mean) || steps.iter().any(|&s| !(s > 0.0)) {
+        return None;
+    }
+    steps.sort_by(f64::total_cmp);
+    let (shortest, median, longest) = (steps[0], steps[steps.len() / 2], steps[steps.len() - 1]);
+    if !(longest <= MAX_BRIDGED_PERIODS * median) {
+        return None;
+    }
+    // The logger's period: the span over the nominal intervals it holds, each step counted as
+    // the whole number of medians nearest to it (1 for a jittered step, 2 or 3 across lost
+    // samples). The median alone is off by the jitter's skew; the span is not.
+    let intervals: f64 = t.windows(2).map(|w| ((w[1] - w[0]) / median).round().max(1.0)).sum();
+    let dt = span / intervals;
+    let count = (span / dt * (1.0 + 1e-12)).floor() as usize + 1;
+    let grid: Vec<f64> = (0..count)
+        .map(|k| t[0] + k as f64 * dt)
+        .filter(|&g| g <= t[n - 1])
+        .collect();
+    let what =
+        format!("its steps range {shortest:.4e}..{longest:.4e} s around a median of {median:.4e} s (1 % accepted)");
+    Some((grid, what))
+}
+
 fn rate_hz(t: &[f64]) -> f64 {
     match (t.first(), t.last()) {
         (Some(a), Some(b)) if t.len() > 1 && b > a => (t.len() - 1) as f64 / (b - a),
@@ -651,6 +712,39 @@ fn fmt_hz(hz: f64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_jittered_time_base_gets_a_uniform_grid_and_a_gap_does_not() {
+        let dt = 1e-3;
+        let uniform: Vec<f64> = (0..1000).map(|k| k as f64 * dt).collect();
+        assert!(uniform_grid(&uniform).is_none());
+        // ±20 % jitter, first and last kept: the grid is the nominal one.
+        let jittered: Vec<f64> = uniform
+            .iter()
+            .enumerate()
+            .map(|(k, &t)| {
+                if k == 0 || k == 999 {
+                    t
+                } else {
+                    t + 0.2 * dt * ((k * 7919 % 100) as f64 / 50.0 - 1.0)
+                }
+            })
+            .collect();
+        let (grid, what) = uniform_grid(&jittered).unwrap();
+        assert_eq!(grid.len(), 1000, "{what}");
+        for (g, t) in grid.iter().zip(&uniform) {
+            assert!((g - t).abs() < 1e-12, "{g} vs {t}");
+        }
+        // Two samples lost: bridged at the median step. Ten lost: left to the log's check.
+        let mut lost: Vec<f64> = jittered.clone();
+        lost.drain(500..502);
+        let (grid, _) = uniform_grid(&lost).unwrap();
+        assert_eq!(grid.len(), 1000);
+        assert!((grid[1] - grid[0] - dt).abs() < 1e-12 && *grid.last().unwrap() <= 0.999 + 1e-12);
+        let mut gap: Vec<f64> = jittered.clone();
+        gap.drain(500..510);
+        assert!(uniform_grid(&gap).is_none());
+    }
 
     #[test]
     fn resampling_is_linear_for_signals_and_holds_flags() {

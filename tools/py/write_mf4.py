@@ -15,6 +15,9 @@ that reading either gives the same log. Options reproduce what real loggers do:
                        metadata (`# key: value`) into the header comment as `key: value` lines
                        (default) or as <common_properties> entries
   --drop-meta K        leave metadata key K out of the file (repeatable; for the channel map test)
+  --jitter F           the primary group's time stamps jitter by up to +-F/2 of the period (first and
+                       last kept; values read at the jittered instants: signals interpolated,
+                       flags held), as a logger's event-driven raster records them
   --unit COL=UNIT,FACTOR[,OFFSET]
                        store column COL in the logger's unit UNIT: samples * FACTOR + OFFSET
                        (repeatable; a logger recording pressure in bar, lift in m)
@@ -70,6 +73,7 @@ def main():
     ap.add_argument("--meta-as", choices=["text", "properties"], default="text")
     ap.add_argument("--drop-meta", action="append", default=[])
     ap.add_argument("--unit", action="append", default=[])
+    ap.add_argument("--jitter", type=float, default=0.0)
     a = ap.parse_args()
 
     meta, header, cols = read_csv(a.csv)
@@ -93,7 +97,15 @@ def main():
         return Signal(samples=samples, timestamps=stamps, name=rename.get(name, name), unit=unit)
 
     mdf = MDF(version="4.10")
-    primary = [signal(n, cols[n], t) for n in header if n != "t_s" and n not in group2]
+    t1, at = t, {n: cols[n] for n in header}
+    if a.jitter > 0:
+        rng = np.random.default_rng(1)
+        dt = (t[-1] - t[0]) / (len(t) - 1)
+        t1 = t.copy()
+        t1[1:-1] += (rng.random(len(t) - 2) - 0.5) * a.jitter * dt
+        held = np.clip(np.searchsorted(t, t1, side="right") - 1, 0, len(t) - 1)
+        at = {n: (cols[n][held] if n in flags else np.interp(t1, t, cols[n])) for n in header}
+    primary = [signal(n, at[n], t1) for n in header if n != "t_s" and n not in group2]
     mdf.append(primary, comment="primary rate", common_timebase=True)
     if group2:
         f = a.group2_factor
