@@ -108,6 +108,43 @@ impl ResidualTests {
     }
 }
 
+/// At which lag a remainder follows a signal, for [`locate`]. A slow signal (a set-point held
+/// through each event, an oil temperature) correlates alike at every lag of the window, and its
+/// largest value falls on the window's edge by chance: that is its level, not a timing, and
+/// said so. A peak on the edge of a correlation that falls towards lag 0 is a lag at least
+/// that long.
+fn lag_words(c: &CrossCheck, dt_s: f64) -> String {
+    let half = (c.correlation.len() / 2) as isize;
+    let at = |lag: isize| c.correlation.get((half + lag) as usize).copied().unwrap_or(0.0);
+    let peak = at(c.at_lag);
+    let on_edge = half > 0 && c.at_lag.abs() == half;
+    // Every lag of the window within a fifth of the peak, of its sign.
+    let flat = half > 0 && (-half..=half).all(|k| at(k) * peak.signum() >= 0.8 * peak.abs());
+    let window = secs(half as f64 * dt_s);
+    if flat {
+        return format!(
+            ", alike at every lag within ±{half} samples = ±{window}: it follows the signal's level, not its timing"
+        );
+    }
+    let lag_s = c.at_lag as f64 * dt_s;
+    let beyond = if on_edge {
+        " or more (the edge of the ±{half}-sample window searched)".replace("{half}", &half.to_string())
+    } else {
+        String::new()
+    };
+    if c.at_lag == 0 {
+        ", at no lag".to_string()
+    } else if c.at_lag > 0 {
+        format!(", the signal leading by {} samples = {}{beyond}", c.at_lag, secs(lag_s))
+    } else {
+        format!(
+            ", the signal lagging by {} samples = {}{beyond}",
+            -c.at_lag,
+            secs(-lag_s)
+        )
+    }
+}
+
 /// Where a remainder lives, in words a calibration engineer can act on: the signals it follows
 /// (and at which lag), the regimes where its mean or its size differs, and its colour (the lag
 /// of its strongest self-correlation and its dominant period).
@@ -116,7 +153,6 @@ pub(super) fn locate(t: &ResidualTests, e: &[f64], floor: f64, dt_s: f64) -> Vec
     let mut cross: Vec<&CrossCheck> = t.cross.iter().filter(|c| !c.pass).collect();
     cross.sort_by(|a, b| b.max_abs.total_cmp(&a.max_abs));
     for c in cross.iter().take(3) {
-        let lag_s = c.at_lag as f64 * dt_s;
         out.push(format!(
             "it follows {} (correlation {:+.2}{}; accounts for an RMS of about {:.3} against a noise floor of {:.3})",
             c.name,
@@ -127,13 +163,7 @@ pub(super) fn locate(t: &ResidualTests, e: &[f64], floor: f64, dt_s: f64) -> Vec
                     .get(((c.correlation.len() / 2) as isize + c.at_lag) as usize))
                 .copied()
                 .unwrap_or(c.max_abs),
-            if c.at_lag == 0 {
-                ", at no lag".to_string()
-            } else if c.at_lag > 0 {
-                format!(", the signal leading by {} samples = {}", c.at_lag, secs(lag_s))
-            } else {
-                format!(", the signal lagging by {} samples = {}", -c.at_lag, secs(-lag_s))
-            },
+            lag_words(c, dt_s),
             c.max_abs * t.rmse,
             floor
         ));
@@ -214,5 +244,41 @@ fn secs(s: f64) -> String {
         format!("{:.2} ms", s * 1e3)
     } else {
         format!("{s:.3} s")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_slow_signals_level_is_not_reported_as_a_lag() {
+        let n = 8000;
+        // A remainder that is a slow signal's level (held for 2000 samples at a time, as an oil
+        // temperature through a run of events) plus a little white-ish wiggle: its correlation
+        // is flat over the window, its largest value wherever the wiggle puts it.
+        let level: Vec<f64> = (0..n).map(|k| if (k / 2000) % 2 == 0 { 1.0 } else { -1.0 }).collect();
+        let e: Vec<f64> = level
+            .iter()
+            .enumerate()
+            .map(|(k, l)| l + 0.05 * ((k * 7919 % 101) as f64 / 50.0 - 1.0))
+            .collect();
+        let c = cross_check("temp_C", &e, &level, 50);
+        let w = lag_words(&c, 5e-5);
+        assert!(w.contains("alike at every lag within ±50 samples"), "{w}");
+        // A remainder that is a fast signal delayed by 10 samples: a lag, and its length.
+        let fast: Vec<f64> = (0..n).map(|k| ((k * 7919 % 101) as f64 / 50.0) - 1.0).collect();
+        let delayed: Vec<f64> = (0..n).map(|k| if k >= 10 { fast[k - 10] } else { 0.0 }).collect();
+        let c = cross_check("duty_pct", &delayed, &fast, 50);
+        let w = lag_words(&c, 1e-3);
+        assert_eq!(c.at_lag, 10, "{w}");
+        assert!(w.contains("leading by 10 samples") && !w.contains("edge"), "{w}");
+        // A smooth signal delayed by more than the window: the peak sits on its edge, and that
+        // is said.
+        let smooth: Vec<f64> = (0..n).map(|k| (k as f64 * 0.02).sin()).collect();
+        let late_smooth: Vec<f64> = (0..n).map(|k| if k >= 60 { smooth[k - 60] } else { 0.0 }).collect();
+        let c = cross_check("duty_pct", &late_smooth, &smooth, 50);
+        let w = lag_words(&c, 1e-3);
+        assert!(w.contains("leading by 50 samples") && w.contains("or more"), "{w}");
     }
 }
