@@ -181,8 +181,8 @@ impl ChannelMap {
                                 format!("`{column}` is not a DATA-FORMAT column of any plant"),
                             ));
                         }
-                        reading(column, unit.trim(), true).map_err(|m| err(None, key, m))?;
-                        map.units.push((column.clone(), unit.trim().to_string()));
+                        reading(column, units::bare(unit), true).map_err(|m| err(None, key, m))?;
+                        map.units.push((column.clone(), units::bare(unit).to_string()));
                     }
                 }
                 _ => {
@@ -255,7 +255,7 @@ fn timestamps(mdf: &Mf4File, ch: &Channel, map: &ChannelMap, converted: &mut Vec
         return Ok(t);
     };
     // The map's `t_s` unit wins over the master's own.
-    let unit = map.unit_of("t_s").unwrap_or(master.unit.trim());
+    let unit = map.unit_of("t_s").unwrap_or(units::bare(&master.unit));
     let read = reading("t_s", unit, true).map_err(|m| format!("(master channel `{}`): {m}", master.name))?;
     if let Reading::Convert(c) = read {
         t.iter_mut().for_each(|v| *v = c.apply(*v));
@@ -474,16 +474,16 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
         let renamed = ch.name.split('\\').next() != Some(*column);
         let (unit, renamed) = match map.unit_of(column) {
             Some(stated) => {
-                if !ch.unit.trim().is_empty() && ch.unit.trim() != stated {
+                if !units::bare(&ch.unit).is_empty() && units::bare(&ch.unit) != stated {
                     notices.push(format!(
                         "channel map {}: `{column}` read in {stated} as it states; the file records {}",
                         map.file,
-                        ch.unit.trim()
+                        units::bare(&ch.unit)
                     ));
                 }
                 (stated, true)
             }
-            None => (ch.unit.trim(), renamed),
+            None => (units::bare(&ch.unit), renamed),
         };
         match reading(column, unit, renamed)
             .map_err(|m| err(Some((*column).into()), format!("{}: {m}", describe(column, ch))))?

@@ -355,7 +355,8 @@ fn a_loggers_units_are_converted_to_the_columns_units() {
     ];
     let units = [
         "--unit",
-        "p_supply_MPa=bar,10",
+        // In brackets, as some loggers write a unit.
+        "p_supply_MPa=[bar],10",
         "--unit",
         "lift_mm=m,0.001",
         "--unit",

@@ -232,17 +232,6 @@ fn number(cell: &str, decimal_comma: bool) -> Option<f64> {
     s.parse().ok()
 }
 
-/// A unit cell without its brackets: `[kPa]` and `(kPa)` are `kPa`.
-fn bare_unit(cell: &str) -> &str {
-    let s = cell.trim();
-    for (open, close) in [('[', ']'), ('(', ')')] {
-        if let Some(inner) = s.strip_prefix(open).and_then(|r| r.strip_suffix(close)) {
-            return inner.trim();
-        }
-    }
-    s
-}
-
 /// The unit a bench writes into its own column name, `Zeit [ms]` or `p_Rail (bar)`: the
 /// text of a trailing bracket pair, if any.
 fn unit_in_name(name: &str) -> Option<&str> {
@@ -600,7 +589,7 @@ pub fn read_csv_sized(
                     let Some(slot) = slot else { continue };
                     quoted_seen |= c.quoted;
                     let name = &sel.order[*slot];
-                    let unit = bare_unit(c.text(l));
+                    let unit = units::bare(c.text(l));
                     if unit.is_empty() {
                         continue;
                     }

@@ -274,6 +274,17 @@ fn table(column: &str) -> Option<&'static UnitTable> {
     TABLES.iter().find(|(s, _)| *s == suffix).map(|(_, t)| t)
 }
 
+/// A recorded unit without its brackets and blanks: `[kPa]` and `(kPa)` are `kPa`.
+pub fn bare(cell: &str) -> &str {
+    let s = cell.trim();
+    for (open, close) in [('[', ']'), ('(', ')')] {
+        if let Some(inner) = s.strip_prefix(open).and_then(|r| r.strip_suffix(close)) {
+            return inner.trim();
+        }
+    }
+    s
+}
+
 /// What the recorded `unit` (brackets and blanks already removed) means for `column`. An
 /// empty unit, or a column without a known unit suffix, is [`UnitFit::Same`].
 pub fn fit(column: &str, unit: &str) -> UnitFit {
