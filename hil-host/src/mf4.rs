@@ -28,7 +28,7 @@ use std::path::Path;
 
 use falcon_mdf::{Channel, Mf4File};
 
-use crate::log::units::{self, reading, Reading};
+use crate::log::units::{self, reading, Reading, UnitNotes};
 use crate::log::{log_from_columns, Log, LogError, Plant, FLAGS};
 
 /// True when `path` names an MF4 file: the `.mf4`/`.mdf` extension, or the MDF identification
@@ -247,9 +247,9 @@ fn header_meta(mdf: &Mf4File) -> Vec<(String, String)> {
 
 /// The time stamps of `ch`'s channel group in seconds: its master channel's values, converted
 /// from the master's unit (`s`, or `ms`, `us`, `ns` as some loggers record it; a note of the
-/// conversion goes to `converted`; a `t_s` unit in the channel `map` wins). The error
+/// conversion goes to `notes`; a `t_s` unit in the channel `map` wins). The error
 /// completes "time base ...".
-fn timestamps(mdf: &Mf4File, ch: &Channel, map: &ChannelMap, converted: &mut Vec<String>) -> Result<Vec<f64>, String> {
+fn timestamps(mdf: &Mf4File, ch: &Channel, map: &ChannelMap, notes: &mut UnitNotes) -> Result<Vec<f64>, String> {
     let mut t = mdf.channel_timestamps(ch).map_err(|e| format!("unreadable: {e}"))?;
     let Some(master) = mdf.master_channel(ch.data_group_index, ch.channel_group_index) else {
         return Ok(t);
@@ -259,11 +259,7 @@ fn timestamps(mdf: &Mf4File, ch: &Channel, map: &ChannelMap, converted: &mut Vec
     let read = reading("t_s", unit, true).map_err(|m| format!("(master channel `{}`): {m}", master.name))?;
     if let Reading::Convert(c) = read {
         t.iter_mut().for_each(|v| *v = c.apply(*v));
-        converted.push(format!(
-            "time (master channel `{}`) from {unit} ({})",
-            master.name,
-            c.describe()
-        ));
+        notes.converted(&format!("time (master channel `{}`)", master.name), unit, &c, "");
     }
     Ok(t)
 }
@@ -395,8 +391,8 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
         None => return Err(missing(&file, &mdf, map, primary, plant)),
     };
     let group = (primary_ch.data_group_index, primary_ch.channel_group_index);
-    let (mut converted, mut assumed): (Vec<String>, Vec<String>) = (Vec::new(), Vec::new());
-    let t_s = timestamps(&mdf, primary_ch, map, &mut converted).map_err(|m| {
+    let mut unit_notes = UnitNotes::default();
+    let t_s = timestamps(&mdf, primary_ch, map, &mut unit_notes).map_err(|m| {
         err(
             Some(primary.into()),
             format!("{}: time base {m}", describe(primary, primary_ch)),
@@ -491,9 +487,9 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
             Reading::Own => {}
             Reading::Convert(c) => {
                 values.iter_mut().for_each(|v| *v = c.apply(*v));
-                converted.push(format!("`{column}` from {unit} ({})", c.describe()));
+                unit_notes.converted(&format!("`{column}`"), unit, &c, "");
             }
-            Reading::Assumed => assumed.push(format!("`{unit}` under `{column}`")),
+            Reading::Assumed => unit_notes.assumed(column, unit),
         }
         let flag = FLAGS.contains(column);
         let values = if (ch.data_group_index, ch.channel_group_index) == group {
@@ -517,7 +513,7 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
                 None => values,
             }
         } else {
-            let t_ch = timestamps(&mdf, ch, map, &mut Vec::new()).map_err(|m| {
+            let t_ch = timestamps(&mdf, ch, map, &mut UnitNotes::default()).map_err(|m| {
                 err(
                     Some((*column).into()),
                     format!("{}: time base {m}", describe(column, ch)),
@@ -548,15 +544,7 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
         columns.push(((*column).to_string(), values));
     }
     notices.extend(resampled);
-    if !converted.is_empty() {
-        notices.push(format!(
-            "units converted to the DATA-FORMAT columns' units: {}",
-            converted.join(", ")
-        ));
-    }
-    if !assumed.is_empty() {
-        notices.push(units::assumed_notice(&assumed));
-    }
+    notices.extend(unit_notes.into_notices());
 
     let names: BTreeMap<&str, String> = by_column
         .iter()

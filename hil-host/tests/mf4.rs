@@ -42,6 +42,33 @@ fn estimation_as_mf4(
     (dir, csv, mf4)
 }
 
+/// A generated case's estimation and validation logs, each as CSV and as MF4 (written with
+/// the same write_mf4.py options `args`), in the scratch directory `name`.
+struct Pair {
+    dir: PathBuf,
+    est_csv: PathBuf,
+    val_csv: PathBuf,
+    est_mf4: PathBuf,
+    val_mf4: PathBuf,
+}
+
+fn pair_as_mf4(py: &Path, (plant, effect, seed): (Plant, &str, u64), name: &str, args: &[&str]) -> Pair {
+    let case = generate::generate(plant, effect, seed).unwrap();
+    let dir = scratch(name);
+    let pair = Pair {
+        est_csv: dir.join("estimation.csv"),
+        val_csv: dir.join("validation.csv"),
+        est_mf4: dir.join("estimation.mf4"),
+        val_mf4: dir.join("validation.mf4"),
+        dir,
+    };
+    std::fs::write(&pair.est_csv, &case.estimation_csv).unwrap();
+    std::fs::write(&pair.val_csv, &case.validation_csv).unwrap();
+    write_mf4(py, &pair.est_csv, &pair.est_mf4, args);
+    write_mf4(py, &pair.val_csv, &pair.val_mf4, args);
+    pair
+}
+
 /// Writes `csv` as an MF4 file with asammdf; `args` are write_mf4.py's options.
 fn write_mf4(py: &Path, csv: &Path, out: &Path, args: &[&str]) {
     let o = Command::new(py)
@@ -113,20 +140,6 @@ fn assert_same_columns(csv: &Log, mf4: &Log) {
 #[test]
 fn compressed_mapped_two_rate_mf4_diagnoses_like_its_csv() {
     let Some(py) = python() else { return };
-    let case = generate::generate(Plant::Positioner, "coulomb-friction", 2024).unwrap();
-    let dir = scratch("positioner");
-    let (est_csv, val_csv) = (dir.join("estimation.csv"), dir.join("validation.csv"));
-    std::fs::write(&est_csv, &case.estimation_csv).unwrap();
-    std::fs::write(&val_csv, &case.validation_csv).unwrap();
-    let csv_est = read_log(&est_csv, None).unwrap();
-    let gtau = csv_est.meta("gtau").expect("the generator writes gtau").to_string();
-    let map_path = dir.join("map.toml");
-    std::fs::write(
-        &map_path,
-        format!("[channels]\n\"Axis1.Pos_m\" = \"pos_m\"\n\n[meta]\ngtau = {gtau}\n"),
-    )
-    .unwrap();
-    let map = ChannelMap::read(&map_path).unwrap();
     let logger = [
         "--compression",
         "2",
@@ -141,9 +154,27 @@ fn compressed_mapped_two_rate_mf4_diagnoses_like_its_csv() {
         "--group2-factor",
         "2",
     ];
-    let (est_mf4, val_mf4) = (dir.join("estimation.mf4"), dir.join("validation.mf4"));
-    write_mf4(&py, &est_csv, &est_mf4, &logger);
-    write_mf4(&py, &val_csv, &val_mf4, &logger);
+    let Pair {
+        dir,
+        est_csv,
+        val_csv,
+        est_mf4,
+        val_mf4,
+    } = pair_as_mf4(
+        &py,
+        (Plant::Positioner, "coulomb-friction", 2024),
+        "positioner",
+        &logger,
+    );
+    let csv_est = read_log(&est_csv, None).unwrap();
+    let gtau = csv_est.meta("gtau").expect("the generator writes gtau").to_string();
+    let map_path = dir.join("map.toml");
+    std::fs::write(
+        &map_path,
+        format!("[channels]\n\"Axis1.Pos_m\" = \"pos_m\"\n\n[meta]\ngtau = {gtau}\n"),
+    )
+    .unwrap();
+    let map = ChannelMap::read(&map_path).unwrap();
     // Compressed: the samples are in DZ (zipped data) blocks.
     let bytes = std::fs::read(&est_mf4).unwrap();
     assert!(bytes.windows(4).any(|w| w == b"##DZ"), "no DZ block in the file");
@@ -186,14 +217,18 @@ fn compressed_mapped_two_rate_mf4_diagnoses_like_its_csv() {
 #[test]
 fn deflate_mf4_with_header_comment_metadata_diagnoses_like_its_csv() {
     let Some(py) = python() else { return };
-    let case = generate::generate(Plant::Evvt, "supply-voltage", 11).unwrap();
-    let dir = scratch("evvt");
-    let (est_csv, val_csv) = (dir.join("estimation.csv"), dir.join("validation.csv"));
-    std::fs::write(&est_csv, &case.estimation_csv).unwrap();
-    std::fs::write(&val_csv, &case.validation_csv).unwrap();
-    let (est_mf4, val_mf4) = (dir.join("estimation.mf4"), dir.join("validation.mf4"));
-    write_mf4(&py, &est_csv, &est_mf4, &["--compression", "1"]);
-    write_mf4(&py, &val_csv, &val_mf4, &["--compression", "1"]);
+    let Pair {
+        est_csv,
+        val_csv,
+        est_mf4,
+        val_mf4,
+        ..
+    } = pair_as_mf4(
+        &py,
+        (Plant::Evvt, "supply-voltage", 11),
+        "evvt",
+        &["--compression", "1"],
+    );
     let (csv_est, csv_val) = (read_log(&est_csv, None).unwrap(), read_log(&val_csv, None).unwrap());
     let (mf4_est, mf4_val) = (read_log(&est_mf4, None).unwrap(), read_log(&val_mf4, None).unwrap());
     assert_same_columns(&csv_est, &mf4_est);
@@ -427,14 +462,18 @@ fn a_loggers_units_are_converted_to_the_columns_units() {
 #[test]
 fn a_jittered_loggers_time_base_is_resampled_onto_a_uniform_grid() {
     let Some(py) = python() else { return };
-    let case = generate::generate(Plant::Positioner, "coulomb-friction", 4).unwrap();
-    let dir = scratch("jitter");
-    let (est_csv, val_csv) = (dir.join("estimation.csv"), dir.join("validation.csv"));
-    std::fs::write(&est_csv, &case.estimation_csv).unwrap();
-    std::fs::write(&val_csv, &case.validation_csv).unwrap();
-    let (est_mf4, val_mf4) = (dir.join("estimation.mf4"), dir.join("validation.mf4"));
-    write_mf4(&py, &est_csv, &est_mf4, &["--jitter", "0.3"]);
-    write_mf4(&py, &val_csv, &val_mf4, &["--jitter", "0.3"]);
+    let Pair {
+        dir,
+        est_csv,
+        val_csv,
+        est_mf4,
+        val_mf4,
+    } = pair_as_mf4(
+        &py,
+        (Plant::Positioner, "coulomb-friction", 4),
+        "jitter",
+        &["--jitter", "0.3"],
+    );
     let (csv_est, csv_val) = (read_log(&est_csv, None).unwrap(), read_log(&val_csv, None).unwrap());
     let (mf4_est, mf4_val) = (read_log(&est_mf4, None).unwrap(), read_log(&val_mf4, None).unwrap());
     let notice = mf4_est

@@ -9,7 +9,7 @@
 use std::io::{BufRead, Read};
 
 use super::check::{check_meta, finish, select_columns, MetaEntry, RowLines};
-use super::units::{self, reading, Conversion, Reading};
+use super::units::{self, reading, Conversion, Reading, UnitNotes};
 use super::{Log, LogError, Plant};
 
 /// Longest accepted line (bytes, without its line end).
@@ -485,7 +485,7 @@ pub fn read_csv_sized(
     let sel = select_columns(source, plant, &names, Some(header_line))?;
     let mut conversions: Vec<Option<Conversion>> = vec![None; sel.order.len()];
     let mut recorded_units: Vec<Option<String>> = vec![None; sel.order.len()];
-    let (mut converted, mut assumed): (Vec<String>, Vec<String>) = (Vec::new(), Vec::new());
+    let mut unit_notes = UnitNotes::default();
     for (i, slot) in sel.keep.iter().enumerate() {
         let Some(slot) = slot else { continue };
         if let Some(unit) = &unit_named[i] {
@@ -494,7 +494,7 @@ pub fn read_csv_sized(
             if let Reading::Assumed = reading(column, unit, false)
                 .map_err(|m| err(header_line, Some(column), format!("column `{}`: {m}", original[i])))?
             {
-                assumed.push(format!("`{unit}` under `{column}`"));
+                unit_notes.assumed(column, unit);
             }
             recorded_units[*slot] = Some(unit.clone());
             continue;
@@ -508,7 +508,7 @@ pub fn read_csv_sized(
                 .map_err(|m| err(header_line, Some(column), format!("column `{}`: {m}", original[i])))?;
             if let Reading::Convert(c) = read {
                 conversions[*slot] = Some(c);
-                converted.push(format!("`{column}` from {unit} ({})", c.describe()));
+                unit_notes.converted(&format!("`{column}`"), unit, &c, "");
             }
             recorded_units[*slot] = Some(unit.to_string());
         }
@@ -520,14 +520,11 @@ pub fn read_csv_sized(
         let Some(slot) = sel.order.iter().position(|c| c == column) else {
             continue;
         };
-        converted.retain(|c| !c.starts_with(&format!("`{column}` from ")));
+        unit_notes.forget(column);
         // Checked when the map was read.
         conversions[slot] = match reading(column, unit, true) {
             Ok(Reading::Convert(c)) => {
-                converted.push(format!(
-                    "`{column}` from {unit} ({}, as the channel map states)",
-                    c.describe()
-                ));
+                unit_notes.converted(&format!("`{column}`"), unit, &c, ", as the channel map states");
                 Some(c)
             }
             _ => None,
@@ -618,9 +615,9 @@ pub fn read_csv_sized(
                         Reading::Own => {}
                         Reading::Convert(conv) => {
                             conversions[*slot] = Some(conv);
-                            converted.push(format!("`{name}` from {unit} ({})", conv.describe()));
+                            unit_notes.converted(&format!("`{name}`"), unit, &conv, "");
                         }
-                        Reading::Assumed => assumed.push(format!("`{unit}` under `{name}`")),
+                        Reading::Assumed => unit_notes.assumed(name, unit),
                     }
                 }
                 units_line = Some(n);
@@ -712,15 +709,7 @@ pub fn read_csv_sized(
     if !normalised.is_empty() {
         all_notices.push(format!("dialect normalised: {}", normalised.join("; ")));
     }
-    if !converted.is_empty() {
-        all_notices.push(format!(
-            "units converted to the DATA-FORMAT columns' units: {}",
-            converted.join(", ")
-        ));
-    }
-    if !assumed.is_empty() {
-        all_notices.push(units::assumed_notice(&assumed));
-    }
+    all_notices.extend(unit_notes.into_notices());
     all_notices.extend(meta_notices);
     all_notices.extend(notices);
     all_notices.extend(sel.notices);

@@ -305,12 +305,49 @@ pub fn fit(column: &str, unit: &str) -> UnitFit {
     }
 }
 
-/// The notice for units read as their columns' names say (`assumed`: "`kpa` under `p_amb_kPa`").
-pub fn assumed_notice(assumed: &[String]) -> String {
-    format!(
-        "unit(s) not recognised, read in the unit the column's name states: {}",
-        assumed.join(", ")
-    )
+/// What a reader did with the recorded units, for its notices: the columns it converted and
+/// the unknown spellings it read as their columns' names say.
+#[derive(Debug, Default)]
+pub struct UnitNotes {
+    converted: Vec<String>,
+    assumed: Vec<String>,
+}
+
+impl UnitNotes {
+    /// `what` (`` `t_s` ``, a master channel) was converted from `unit` by `c`; `why` is added
+    /// to the conversion's description (`, as the channel map states`).
+    pub fn converted(&mut self, what: &str, unit: &str, c: &Conversion, why: &str) {
+        self.converted
+            .push(format!("{what} from {unit} ({}{why})", c.describe()));
+    }
+
+    /// `column`'s unknown unit `unit` was read as its name says.
+    pub fn assumed(&mut self, column: &str, unit: &str) {
+        self.assumed.push(format!("`{unit}` under `{column}`"));
+    }
+
+    /// Forgets what was noted of `column` (a unit the channel map states replaces it).
+    pub fn forget(&mut self, column: &str) {
+        let head = format!("`{column}` from ");
+        self.converted.retain(|c| !c.starts_with(&head));
+    }
+
+    /// The notices: one for the conversions, one for the assumed units, each if any.
+    pub fn into_notices(self) -> impl Iterator<Item = String> {
+        let converted = (!self.converted.is_empty()).then(|| {
+            format!(
+                "units converted to the DATA-FORMAT columns' units: {}",
+                self.converted.join(", ")
+            )
+        });
+        let assumed = (!self.assumed.is_empty()).then(|| {
+            format!(
+                "unit(s) not recognised, read in the unit the column's name states: {}",
+                self.assumed.join(", ")
+            )
+        });
+        converted.into_iter().chain(assumed)
+    }
 }
 
 /// The column's own unit spellings, for messages.
