@@ -251,6 +251,137 @@ fn split_unit(name: &str) -> Option<(&str, &str)> {
     Some((s[..at].trim_end(), inner)).filter(|(_, u)| !u.is_empty())
 }
 
+/// Columns whose names carry their unit, `t_s [s]`, `lift_mm (mm)`: the DATA-FORMAT name with
+/// the unit taken off (where the header has not that name already), and the units, per header
+/// column.
+fn units_off_names(plant: Plant, mut names: Vec<String>) -> (Vec<String>, Vec<Option<String>>) {
+    let known: Vec<&str> = std::iter::once("t_s")
+        .chain(plant.columns().iter().map(|(n, _)| *n))
+        .collect();
+    let mut unit_named: Vec<Option<String>> = vec![None; names.len()];
+    for i in 0..names.len() {
+        let Some((bare, unit)) =
+            split_unit(&names[i]).filter(|(b, _)| !known.contains(&names[i].as_str()) && known.contains(b))
+        else {
+            continue;
+        };
+        if names.iter().any(|n| n == bare) {
+            continue;
+        }
+        let (bare, unit) = (bare.to_string(), unit.to_string());
+        unit_named[i] = Some(unit);
+        names[i] = bare;
+    }
+    (names, unit_named)
+}
+
+/// How each kept column's recorded values become the column's, per slot of the selection:
+/// from a unit in the column's name, the channel map's `[units]` (which win) and the units
+/// row, whichever the file and the map give.
+struct ColumnUnits {
+    conversions: Vec<Option<Conversion>>,
+    /// The unit the header or the map states for the slot: a units row is checked against it.
+    recorded: Vec<Option<String>>,
+    /// Whether the map states it (a units row that says otherwise is overruled, with a notice).
+    stated: Vec<bool>,
+    notes: UnitNotes,
+}
+
+impl ColumnUnits {
+    /// From the header: `original` and `renamed` per header column (the file's names, and
+    /// whether the channel map renamed them), `unit_named` from [`units_off_names`], `map_units`
+    /// the map's `[units]`. `err` names a column's error.
+    fn from_header(
+        sel: &super::check::Selection,
+        original: &[String],
+        renamed: &[bool],
+        unit_named: &[Option<String>],
+        map_units: &[(String, String)],
+        err: impl Fn(&str, String) -> LogError,
+    ) -> Result<Self, LogError> {
+        let n = sel.order.len();
+        let mut u = ColumnUnits {
+            conversions: vec![None; n],
+            recorded: vec![None; n],
+            stated: vec![false; n],
+            notes: UnitNotes::default(),
+        };
+        for (i, slot) in sel.keep.iter().enumerate() {
+            let Some(slot) = *slot else { continue };
+            let column = &sel.order[slot];
+            let (unit, renamed) = match (&unit_named[i], renamed[i]) {
+                // The DATA-FORMAT name with its unit: the name states the unit, as without it.
+                (Some(unit), _) => (unit.as_str(), false),
+                // Renamed by the map from the bench's own name, which may carry the unit.
+                (None, true) => match unit_in_name(&original[i]) {
+                    Some(unit) => (unit, true),
+                    None => continue,
+                },
+                (None, false) => continue,
+            };
+            match reading(column, unit, renamed).map_err(|m| err(column, format!("column `{}`: {m}", original[i])))? {
+                Reading::Own => {}
+                Reading::Convert(c) => {
+                    u.conversions[slot] = Some(c);
+                    u.notes.converted(&format!("`{column}`"), unit, &c, "");
+                }
+                Reading::Assumed => u.notes.assumed(column, unit),
+            }
+            u.recorded[slot] = Some(unit.to_string());
+        }
+        for (column, unit) in map_units {
+            let Some(slot) = sel.order.iter().position(|c| c == column) else {
+                continue;
+            };
+            u.notes.forget(column);
+            // Checked when the map was read.
+            u.conversions[slot] = match reading(column, unit, true) {
+                Ok(Reading::Convert(c)) => {
+                    u.notes
+                        .converted(&format!("`{column}`"), unit, &c, ", as the channel map states");
+                    Some(c)
+                }
+                _ => None,
+            };
+            u.recorded[slot] = Some(unit.clone());
+            u.stated[slot] = true;
+        }
+        Ok(u)
+    }
+
+    /// A units row's (on `line`) `unit` under the column `name` (slot `slot`, the header's
+    /// `original` name, renamed by the map or not): checked against what the header or the map
+    /// state, else read. A notice where the map overrules it.
+    fn units_row_cell(
+        &mut self,
+        (slot, name, original): (usize, &str, &str),
+        unit: &str,
+        renamed: bool,
+        line: usize,
+    ) -> Result<Option<String>, String> {
+        if let Some(recorded) = &self.recorded[slot] {
+            return match (self.stated[slot], recorded == unit) {
+                (_, true) => Ok(None),
+                (true, false) => Ok(Some(format!(
+                    "`{name}` read in {recorded} as the channel map states; the units row (line {line}) says {unit}"
+                ))),
+                (false, false) => Err(format!(
+                    "unit `{unit}` in the units row, but the column's name `{original}` says `{recorded}`"
+                )),
+            };
+        }
+        match reading(name, unit, renamed).map_err(|m| format!("units row: {m}"))? {
+            Reading::Own => {}
+            Reading::Convert(c) => {
+                self.conversions[slot] = Some(c);
+                self.notes.converted(&format!("`{name}`"), unit, &c, "");
+            }
+            Reading::Assumed => self.notes.assumed(name, unit),
+        }
+        Ok(None)
+    }
+}
+
 /// Reads a CSV log from `input`, checking it whole; `source` names it in errors.
 /// `plant_override` (from `--plant`) wins over `# plant:`.
 pub fn read_csv(source: &str, input: impl BufRead, plant_override: Option<Plant>) -> Result<Log, LogError> {
@@ -462,76 +593,17 @@ pub fn read_csv_sized(
         None => names,
     };
     let renamed: Vec<bool> = original.iter().zip(&names).map(|(o, n)| o != n).collect();
-    // A bench that writes each column's unit into its name, `t_s [s]`, `lift_mm (mm)`: the
-    // DATA-FORMAT name with the unit taken off (where the header has not that name already).
-    let known: Vec<&str> = std::iter::once("t_s")
-        .chain(plant.columns().iter().map(|(n, _)| *n))
-        .collect();
-    let mut names = names;
-    let mut unit_named: Vec<Option<String>> = vec![None; names.len()];
-    for i in 0..names.len() {
-        let Some((bare, unit)) =
-            split_unit(&names[i]).filter(|(b, _)| !known.contains(&names[i].as_str()) && known.contains(b))
-        else {
-            continue;
-        };
-        if names.iter().any(|n| n == bare) {
-            continue;
-        }
-        let (bare, unit) = (bare.to_string(), unit.to_string());
-        unit_named[i] = Some(unit);
-        names[i] = bare;
-    }
+    let (names, unit_named) = units_off_names(plant, names);
     let sel = select_columns(source, plant, &names, Some(header_line))?;
-    let mut conversions: Vec<Option<Conversion>> = vec![None; sel.order.len()];
-    let mut recorded_units: Vec<Option<String>> = vec![None; sel.order.len()];
-    let mut unit_notes = UnitNotes::default();
-    for (i, slot) in sel.keep.iter().enumerate() {
-        let Some(slot) = slot else { continue };
-        if let Some(unit) = &unit_named[i] {
-            // The DATA-FORMAT name with its unit: the name states the unit, as without it.
-            let column = &sel.order[*slot];
-            if let Reading::Assumed = reading(column, unit, false)
-                .map_err(|m| err(header_line, Some(column), format!("column `{}`: {m}", original[i])))?
-            {
-                unit_notes.assumed(column, unit);
-            }
-            recorded_units[*slot] = Some(unit.clone());
-            continue;
-        }
-        if !renamed[i] {
-            continue;
-        }
-        if let Some(unit) = unit_in_name(&original[i]) {
-            let column = &sel.order[*slot];
-            let read = reading(column, unit, true)
-                .map_err(|m| err(header_line, Some(column), format!("column `{}`: {m}", original[i])))?;
-            if let Reading::Convert(c) = read {
-                conversions[*slot] = Some(c);
-                unit_notes.converted(&format!("`{column}`"), unit, &c, "");
-            }
-            recorded_units[*slot] = Some(unit.to_string());
-        }
-    }
-    // Units the channel map states win over the file's (a log that records none, or wrong ones).
-    let map_units: &[(String, String)] = renames.map_or(&[], |r| r.units);
-    let mut stated = vec![false; sel.order.len()];
-    for (column, unit) in map_units {
-        let Some(slot) = sel.order.iter().position(|c| c == column) else {
-            continue;
-        };
-        unit_notes.forget(column);
-        // Checked when the map was read.
-        conversions[slot] = match reading(column, unit, true) {
-            Ok(Reading::Convert(c)) => {
-                unit_notes.converted(&format!("`{column}`"), unit, &c, ", as the channel map states");
-                Some(c)
-            }
-            _ => None,
-        };
-        recorded_units[slot] = Some(unit.clone());
-        stated[slot] = true;
-    }
+    let header_err = |column: &str, m: String| err(header_line, Some(column), m);
+    let mut units = ColumnUnits::from_header(
+        &sel,
+        &original,
+        &renamed,
+        &unit_named,
+        renames.map_or(&[], |r| r.units),
+        header_err,
+    )?;
     lines.sep = Some(dialect.sep);
     lines.names = names;
     let width = sel.keep.len();
@@ -590,34 +662,11 @@ pub fn read_csv_sized(
                     if unit.is_empty() {
                         continue;
                     }
-                    if let Some(in_name) = &recorded_units[*slot] {
-                        if stated[*slot] {
-                            if in_name != unit {
-                                notices.push(format!(
-                                    "`{name}` read in {in_name} as the channel map states; the units row (line {n}) says {unit}"
-                                ));
-                            }
-                            continue;
-                        }
-                        if in_name != unit {
-                            return Err(err(
-                                n,
-                                Some(name),
-                                format!(
-                                    "unit `{unit}` in the units row, but the column's name `{}` says `{in_name}`",
-                                    original[i]
-                                ),
-                            ));
-                        }
-                        continue;
-                    }
-                    match reading(name, unit, renamed[i]).map_err(|m| err(n, Some(name), format!("units row: {m}")))? {
-                        Reading::Own => {}
-                        Reading::Convert(conv) => {
-                            conversions[*slot] = Some(conv);
-                            unit_notes.converted(&format!("`{name}`"), unit, &conv, "");
-                        }
-                        Reading::Assumed => unit_notes.assumed(name, unit),
+                    if let Some(notice) = units
+                        .units_row_cell((*slot, name, &original[i]), unit, renamed[i], n)
+                        .map_err(|m| err(n, Some(name), m))?
+                    {
+                        notices.push(notice);
                     }
                 }
                 units_line = Some(n);
@@ -646,7 +695,7 @@ pub fn read_csv_sized(
                 return Err(err(n, Some(name), what));
             };
             comma_decimals |= dialect.decimal_comma && text.contains(',');
-            columns[*slot].push(match conversions[*slot] {
+            columns[*slot].push(match units.conversions[*slot] {
                 Some(c) => c.apply(v),
                 None => v,
             });
@@ -709,7 +758,7 @@ pub fn read_csv_sized(
     if !normalised.is_empty() {
         all_notices.push(format!("dialect normalised: {}", normalised.join("; ")));
     }
-    all_notices.extend(unit_notes.into_notices());
+    all_notices.extend(units.notes.into_notices());
     all_notices.extend(meta_notices);
     all_notices.extend(notices);
     all_notices.extend(sel.notices);
