@@ -6,7 +6,10 @@
 //! under a name of the bench's own (renamed by a channel map) or from a logger's channel takes
 //! its values in the unit that was recorded, converted here; a column whose own name already
 //! says its unit and whose recorded unit says another is a contradiction the reader refuses
-//! (which of the two is right the file does not say).
+//! (which of the two is right the file does not say), and an unknown spelling under it is
+//! read as the name says. A channel map's `[units]` state the unit where the file records
+//! none or a wrong one. Tests: each conversion against a physical identity (below),
+//! `hil-host/tests/reader_dialects.rs` and `hil-host/tests/mf4.rs` through the readers.
 
 use super::FLAGS;
 
