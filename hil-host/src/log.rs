@@ -88,6 +88,11 @@ impl Plant {
         }
     }
 
+    /// Every column name a log of this plant can have: `t_s`, then [`Plant::columns`].
+    pub fn column_names(self) -> impl Iterator<Item = &'static str> {
+        std::iter::once("t_s").chain(self.columns().iter().map(|(n, _)| *n))
+    }
+
     /// The columns a log of this plant must have besides `t_s`: its inputs and primary output.
     pub fn required_columns(self) -> impl Iterator<Item = &'static str> {
         self.columns()

@@ -112,9 +112,7 @@ impl ChannelMap {
         };
         // `t_s` too: a bench's CSV names its time column its own way (an MF4 file's time is
         // its master channel's, whatever the map says).
-        let known_columns: Vec<&str> = std::iter::once("t_s")
-            .chain(Plant::ALL.iter().flat_map(|p| p.columns().iter().map(|(n, _)| *n)))
-            .collect();
+        let known_columns: Vec<&str> = Plant::ALL.iter().flat_map(|p| p.column_names()).collect();
         for (section, value) in &table {
             let toml::Value::Table(entries) = value else {
                 return Err(err(

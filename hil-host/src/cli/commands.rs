@@ -82,7 +82,7 @@ fn write_json(path: &Path, mut value: serde_json::Value) -> Result<()> {
 }
 
 fn check(a: CheckArgs) -> Result<()> {
-    let map = channel_map(a.channel_map.as_deref())?;
+    let map = channel_map(a.map.channel_map.as_deref())?;
     let log = read(&a.log, a.plant.map(Plant::from), map.as_ref())?;
     println!(
         "{}: plant {}, {} samples at {} s, columns {}",
@@ -108,7 +108,7 @@ fn diagnose(a: DiagnoseArgs) -> Result<()> {
     if let Some(page) = &a.report {
         output::check_not_input(page)?;
     }
-    let map = channel_map(a.channel_map.as_deref())?;
+    let map = channel_map(a.map.channel_map.as_deref())?;
     let plant = a.plant.map(Plant::from);
     let est_full = read(&a.estimation, plant, map.as_ref())?;
     let plant = est_full.plant;
@@ -318,7 +318,7 @@ fn identify_evvt(a: IdentifyArgs) -> Result<()> {
     if let Some(json) = &a.json {
         output::check_not_input(json)?;
     }
-    let map = channel_map(a.channel_map.as_deref())?;
+    let map = channel_map(a.map.channel_map.as_deref())?;
     let opts = evvt::EvvtIdentifyOptions::default();
     let counter = Counter::new("identify evvt: log", a.logs.len() as u64);
     let mut points = Vec::new();
@@ -352,7 +352,7 @@ fn identify_ehvva(args: IdentifyEhvvaArgs) -> Result<()> {
     if let Some(json) = &a.json {
         output::check_not_input(json)?;
     }
-    let map = channel_map(a.channel_map.as_deref())?;
+    let map = channel_map(a.map.channel_map.as_deref())?;
     let mut logs = Vec::new();
     for path in &a.logs {
         let log = read(path, Some(Plant::Ehvva), map.as_ref())?;
@@ -543,7 +543,7 @@ fn summary_json(a: &CalibrationArgs, s: &hil_host::run::Summary, name: &str) -> 
 fn calibrate(a: CalibrateArgs) -> Result<()> {
     use hil_host::calibrate::{self as cal, parse_flash_base};
     let flash_base = parse_flash_base(&a.flash_base).map_err(fail)?;
-    let map = channel_map(a.channel_map.as_deref())?;
+    let map = channel_map(a.map.channel_map.as_deref())?;
     output::protect_inputs(&a.logs);
     // The run is its logs: another unit's calibration in the same directory needs --force,
     // so one unit's image never silently replaces another's.

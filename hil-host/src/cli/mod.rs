@@ -164,6 +164,15 @@ fn generate_help() -> String {
     s
 }
 
+/// `--channel-map`, as every command that reads logs takes it.
+#[derive(Debug, Args)]
+pub struct ChannelMapArg {
+    /// Rename an MF4 file's channels or a CSV file's columns to DATA-FORMAT columns and add metadata and units (TOML:
+    /// [channels] "Logger.Name" = "column", [meta] key = value, [units] column = "bar"; docs/data-format.md)
+    #[arg(long, value_name = "FILE")]
+    pub channel_map: Option<PathBuf>,
+}
+
 #[derive(Debug, Args)]
 pub struct CheckArgs {
     /// The log (DATA-FORMAT.md: CSV, or ASAM MDF 4 .mf4)
@@ -171,10 +180,8 @@ pub struct CheckArgs {
     /// The plant, when the log does not say
     #[arg(long, value_enum)]
     pub plant: Option<PlantArg>,
-    /// Rename an MF4 file's channels or a CSV file's columns to DATA-FORMAT columns and add metadata and units (TOML:
-    /// [channels] "Logger.Name" = "column", [meta] key = value, [units] column = "bar"; docs/data-format.md)
-    #[arg(long, value_name = "FILE")]
-    pub channel_map: Option<PathBuf>,
+    #[command(flatten)]
+    pub map: ChannelMapArg,
 }
 
 #[derive(Debug, Args)]
@@ -196,10 +203,8 @@ pub struct DiagnoseArgs {
     /// Write one self-contained HTML page: verdict, evidence, plots, parameters, gain
     #[arg(long, value_name = "FILE")]
     pub report: Option<PathBuf>,
-    /// Rename an MF4 file's channels or a CSV file's columns to DATA-FORMAT columns and add metadata and units (TOML:
-    /// [channels] "Logger.Name" = "column", [meta] key = value, [units] column = "bar"; docs/data-format.md)
-    #[arg(long, value_name = "FILE")]
-    pub channel_map: Option<PathBuf>,
+    #[command(flatten)]
+    pub map: ChannelMapArg,
     /// Write the plots into a directory that holds other files or another run's outputs
     #[arg(long)]
     pub force: bool,
@@ -233,10 +238,8 @@ pub struct CalibrateArgs {
     /// The calibration sector's address in the ECU's flash (hex)
     #[arg(long, value_name = "ADDR", default_value = "0x080E0000")]
     pub flash_base: String,
-    /// Rename an MF4 file's channels or a CSV file's columns to DATA-FORMAT columns and add metadata and units (TOML:
-    /// [channels] "Logger.Name" = "column", [meta] key = value, [units] column = "bar"; docs/data-format.md)
-    #[arg(long, value_name = "FILE")]
-    pub channel_map: Option<PathBuf>,
+    #[command(flatten)]
+    pub map: ChannelMapArg,
     /// Write into a directory that holds other files or another run's outputs
     #[arg(long)]
     pub force: bool,
@@ -319,10 +322,8 @@ pub struct IdentifyArgs {
     /// Write the tables as JSON here
     #[arg(long, value_name = "FILE")]
     pub json: Option<PathBuf>,
-    /// Rename an MF4 file's channels or a CSV file's columns to DATA-FORMAT columns and add metadata and units (TOML:
-    /// [channels] "Logger.Name" = "column", [meta] key = value, [units] column = "bar"; docs/data-format.md)
-    #[arg(long, value_name = "FILE")]
-    pub channel_map: Option<PathBuf>,
+    #[command(flatten)]
+    pub map: ChannelMapArg,
 }
 
 #[derive(Debug, Args)]

@@ -255,9 +255,7 @@ fn split_unit(name: &str) -> Option<(&str, &str)> {
 /// the unit taken off (where the header has not that name already), and the units, per header
 /// column.
 fn units_off_names(plant: Plant, mut names: Vec<String>) -> (Vec<String>, Vec<Option<String>>) {
-    let known: Vec<&str> = std::iter::once("t_s")
-        .chain(plant.columns().iter().map(|(n, _)| *n))
-        .collect();
+    let known: Vec<&str> = plant.column_names().collect();
     let mut unit_named: Vec<Option<String>> = vec![None; names.len()];
     for i in 0..names.len() {
         let Some((bare, unit)) =

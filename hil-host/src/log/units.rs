@@ -66,7 +66,7 @@ impl Conversion {
 
 /// What a recorded unit means for a column.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum UnitFit {
+enum UnitFit {
     /// The column's own unit (or no unit recorded).
     Same,
     /// Another unit of the same quantity: the values are converted.
@@ -290,7 +290,7 @@ pub fn bare(cell: &str) -> &str {
 
 /// What the recorded `unit` (brackets and blanks already removed) means for `column`. An
 /// empty unit, or a column without a known unit suffix, is [`UnitFit::Same`].
-pub fn fit(column: &str, unit: &str) -> UnitFit {
+fn fit(column: &str, unit: &str) -> UnitFit {
     let Some(t) = table(column) else {
         return UnitFit::Same;
     };

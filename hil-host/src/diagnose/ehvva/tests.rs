@@ -372,7 +372,7 @@ fn trapezoid_log(name: &str, held_at: &[f64]) -> Log {
         }
     }
     // The rows above are in the layout's column order, after the time.
-    let names = std::iter::once("t_s").chain(Plant::Ehvva.columns().iter().map(|(n, _)| *n));
+    let names = Plant::Ehvva.column_names();
     let columns: Vec<(&str, &[f64])> = names.zip(cols.iter().map(|c| &c[..])).collect();
     let text = crate::log::format_log(&[("plant".into(), "ehvva".into())], &columns);
     crate::log::parse_log(name, &text, None).unwrap()
