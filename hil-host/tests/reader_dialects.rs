@@ -92,7 +92,7 @@ fn every_dialect_reads_to_the_plain_numbers_and_says_what_it_normalised() {
     let base = read("plain.csv", &plain());
     assert_eq!(base.len(), 6);
     assert_eq!(normalised(&base), "", "{:?}", base.notices);
-    let cases: [(&str, String, &[&str]); 9] = [
+    let cases: [(&str, String, &[&str]); 10] = [
         (
             "bom.csv",
             dialect(",", false, false, None, false, true),
@@ -133,6 +133,16 @@ fn every_dialect_reads_to_the_plain_numbers_and_says_what_it_normalised() {
             "quoted.csv",
             dialect(",", false, true, None, false, false),
             &["quoted cells"],
+        ),
+        (
+            // Excel's separator line; the header alone would be taken for `;` separated (an
+            // ignored column's name holds a `;`).
+            "excel-sep.csv",
+            format!(
+                "\"sep=,\"\n{}",
+                dialect(",", false, false, None, false, false).replacen("u_pilot_extra", "note;s", 1)
+            ),
+            &["Excel's separator line (line 1) read"],
         ),
     ];
     for (name, text, says) in cases {
@@ -233,6 +243,10 @@ fn broken_quoting_and_ragged_rows_name_the_line() {
     let e = error("r.csv", &text);
     assert_eq!(e.line, Some(5), "{e}");
     assert!(e.message.contains("8 cells, header has 7"), "{e}");
+    // A separator line naming a separator no dialect uses.
+    let e = error("p.csv", &format!("sep=|\n{}", plain()));
+    assert_eq!(e.line, Some(1), "{e}");
+    assert!(e.message.contains("`sep=|`"), "{e}");
 }
 
 /// The bench's own column names in the `;` dialect with decimal commas and a units row, and
@@ -250,12 +264,17 @@ fn bench_csv() -> String {
 
 /// Reads `text` as the file `name` in a scratch directory through `map`.
 fn read_mapped(name: &str, text: &str, map: &str) -> Result<Log, LogError> {
+    read_mapped_bytes(name, text.as_bytes(), map)
+}
+
+/// [`read_mapped`] of a file's bytes (another encoding than UTF-8).
+fn read_mapped_bytes(name: &str, bytes: &[u8], map: &str) -> Result<Log, LogError> {
     use hil_host::log::read_log_mapped;
     use hil_host::mf4::ChannelMap;
     let dir = std::env::temp_dir().join(format!("hil-dialect-map-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join(name);
-    std::fs::write(&path, text).unwrap();
+    std::fs::write(&path, bytes).unwrap();
     let map = ChannelMap::parse("bench.toml", map).unwrap();
     let r = read_log_mapped(&path, None, Some(&map));
     std::fs::remove_file(&path).ok();
@@ -285,6 +304,51 @@ fn a_channel_map_renames_a_bench_csvs_own_column_names() {
     assert_ne!(text, bench_csv());
     let e = read_mapped("cell.csv", &text, BENCH_MAP).unwrap_err();
     assert_eq!((e.line, e.column.as_deref()), (Some(8), Some("x_pct")), "{e}");
+}
+
+/// A bench CSV exported on Windows in its code page, Windows-1252 (umlauts in the column names
+/// and the metadata, `°C`: one byte each there, which UTF-8 does not allow alone), reads as
+/// its UTF-8 twin: the same numbers and metadata, the channel map (UTF-8 TOML) renaming the
+/// decoded names, and a notice naming the first such byte. A file that is UTF-8 in one line
+/// and Windows-1252 in a later one is refused at that line.
+#[test]
+fn a_windows_1252_export_reads_as_its_utf8_twin() {
+    let header = "Zeit;PWM Tastverhältnis;U_Batt;p_Umgebung;p_Tank;Position";
+    let map = BENCH_MAP.replace("\"PWM Tastgrad\"", "\"PWM Tastverhältnis\"");
+    let utf8 = bench_csv().replacen(BENCH_HEADER, header, 1).replacen(
+        "# source: dialect test",
+        "# source: Prüfstand 3, Öl 90 °C",
+        1,
+    );
+    let twin = read_mapped("utf8.csv", &utf8, &map).unwrap();
+    assert!(
+        twin.meta
+            .iter()
+            .any(|(k, v)| k == "source" && v == "Prüfstand 3, Öl 90 °C"),
+        "{:?}",
+        twin.meta
+    );
+    let (cp1252, _, unmappable) = encoding_rs::WINDOWS_1252.encode(&utf8);
+    assert!(!unmappable && cp1252.len() + 4 == utf8.len() && std::str::from_utf8(&cp1252).is_err());
+    let log = read_mapped_bytes("cp1252.csv", &cp1252, &map).unwrap_or_else(|e| panic!("{e}"));
+    same_numbers(&twin, &log);
+    assert!(
+        normalised(&log).contains("read as Windows-1252, not UTF-8 (line 2 has byte 0xFC"),
+        "{:?}",
+        log.notices
+    );
+    assert!(!normalised(&twin).contains("Windows-1252"), "{:?}", twin.notices);
+
+    // UTF-8 up to the metadata, Windows-1252 from the header on: refused there, by line.
+    let (meta, rest) = utf8.split_at(utf8.find(header).unwrap());
+    let mut mixed = meta.as_bytes().to_vec();
+    mixed.extend_from_slice(&encoding_rs::WINDOWS_1252.encode(rest).0);
+    let e = read_mapped_bytes("mixed.csv", &mixed, &map).unwrap_err();
+    assert_eq!(e.line, Some(3), "{e}");
+    assert!(
+        e.message.contains("byte 0xE4") && e.message.contains("mixes encodings"),
+        "{e}"
+    );
 }
 
 #[test]

@@ -20,7 +20,9 @@ pub const MAX_META_LINES: usize = 10_000;
 pub const MAX_ROWS: usize = 50_000_000;
 
 /// Reads the file's lines: bounded length, line ends (`\n`, `\r\n`) and a leading UTF-8
-/// byte-order mark removed, UTF-8 checked, blank lines counted.
+/// byte-order mark removed, UTF-8 checked, blank lines counted. A file whose first line outside
+/// ASCII is not UTF-8 is read as Windows-1252, the code page bench tools and spreadsheets
+/// export in on Windows (`°C` is one byte there, 0xB0, which UTF-8 does not allow alone).
 struct Lines<R: BufRead> {
     input: R,
     buf: Vec<u8>,
@@ -29,6 +31,13 @@ struct Lines<R: BufRead> {
     source: String,
     crlf: bool,
     bom: bool,
+    /// A line with bytes outside ASCII that are valid UTF-8 was read (or a byte-order mark):
+    /// the file is UTF-8, and a later invalid byte is an error, not another encoding.
+    utf8_seen: bool,
+    /// The file is read as Windows-1252: the line and byte that UTF-8 does not allow.
+    windows_1252: Option<(usize, u8)>,
+    /// A Windows-1252 line decoded.
+    decoded: String,
     /// Set once the header is known, so that a bad byte is named by its column.
     sep: Option<u8>,
     names: Vec<String>,
@@ -79,6 +88,38 @@ impl<R: BufRead> Lines<R> {
                 ));
             }
         }
+        if self.bom {
+            self.utf8_seen = true;
+        }
+        if !self.buf[start..].is_ascii() {
+            match (std::str::from_utf8(&self.buf[start..]), self.windows_1252) {
+                (Ok(_), None) => self.utf8_seen = true,
+                (Err(e), None) if !self.utf8_seen => {
+                    self.windows_1252 = Some((self.number, self.buf[start + e.valid_up_to()]));
+                }
+                _ => {}
+            }
+            if self.windows_1252.is_some() {
+                // Control bytes and the five bytes Windows-1252 leaves undefined are binary
+                // data, not a bench's text in either encoding.
+                let binary =
+                    |b: u8| matches!(b, 0..=8 | 0x0B | 0x0C | 0x0E..=0x1F | 0x7F | 0x81 | 0x8D | 0x8F | 0x90 | 0x9D);
+                if let Some(at) = self.buf[start..].iter().position(|&b| binary(b)) {
+                    return Err(self.error(
+                        None,
+                        format!(
+                            "not text: byte 0x{:02X} at byte {} of the line is neither UTF-8 nor Windows-1252 text",
+                            self.buf[start + at],
+                            start + at + 1
+                        ),
+                    ));
+                }
+                let (text, _) = encoding_rs::WINDOWS_1252.decode_without_bom_handling(&self.buf[start..]);
+                self.decoded.clear();
+                self.decoded.push_str(&text);
+                return Ok(Some((self.number, &self.decoded)));
+            }
+        }
         match std::str::from_utf8(&self.buf[start..]) {
             Ok(s) => Ok(Some((self.number, s))),
             Err(e) => {
@@ -90,7 +131,8 @@ impl<R: BufRead> Lines<R> {
                 Err(self.error(
                     column,
                     format!(
-                        "not valid UTF-8 (byte 0x{:02X} at byte {} of the line)",
+                        "not valid UTF-8 (byte 0x{:02X} at byte {} of the line) in a file that is UTF-8 (its \
+                         byte-order mark or an earlier line): it mixes encodings",
                         self.buf[at],
                         at + 1
                     ),
@@ -125,6 +167,15 @@ struct Dialect {
 }
 
 impl Dialect {
+    /// The dialect of a file that names its separator (Excel's `sep=` line): `,` as decimal
+    /// mark where the separator is not `,`.
+    fn with_sep(sep: u8) -> Dialect {
+        Dialect {
+            sep,
+            decimal_comma: sep != b',',
+        }
+    }
+
     /// `;` if the header has one outside quotes, else tab if it has one, else `,`.
     fn detect(header: &str) -> Dialect {
         let (mut semicolons, mut tabs, mut quoted) = (0, 0, false);
@@ -150,6 +201,24 @@ impl Dialect {
                 decimal_comma: false,
             },
         }
+    }
+}
+
+/// Excel's separator line, `sep=;` (also quoted, `"sep=;"`), which it writes first and
+/// reads as the file's separator: the separator, `None` when `line` is no such line; an error
+/// for a separator that is not one of DATA-FORMAT's (`,`, `;`, tab).
+fn excel_sep_line(line: &str) -> Result<Option<u8>, String> {
+    let l = line.trim_matches(|c| c == ' ' || c == '\r');
+    let l = l.strip_prefix('"').and_then(|l| l.strip_suffix('"')).unwrap_or(l);
+    let Some(sep) = l.get(..4).filter(|p| p.eq_ignore_ascii_case("sep=")).map(|_| &l[4..]) else {
+        return Ok(None);
+    };
+    match sep.as_bytes() {
+        [b @ (b',' | b';' | b'\t')] => Ok(Some(*b)),
+        _ => Err(format!(
+            "separator line `{}`: the separator must be `,`, `;` or a tab",
+            truncate(l, 20)
+        )),
     }
 }
 
@@ -500,6 +569,9 @@ pub fn read_csv_sized(
         source: source.to_string(),
         crlf: false,
         bom: false,
+        utf8_seen: false,
+        windows_1252: None,
+        decoded: String::new(),
         sep: None,
         names: Vec::new(),
     };
@@ -514,6 +586,7 @@ pub fn read_csv_sized(
     let mut entries: Vec<MetaEntry> = Vec::new();
     let mut notices: Vec<String> = Vec::new();
     let mut comments = Vec::new();
+    let mut sep_line = None;
     let header = loop {
         let Some((number, l)) = lines.next_line()? else {
             return Err(LogError {
@@ -532,6 +605,12 @@ pub fn read_csv_sized(
         }
         if l.trim().is_empty() {
             continue;
+        }
+        if number == 1 {
+            if let Some(sep) = excel_sep_line(l).map_err(|m| err(number, None, m))? {
+                sep_line = Some(sep);
+                continue;
+            }
         }
         if let Some(body) = l.strip_prefix('#') {
             match body.trim_start_matches('#').split_once(':') {
@@ -557,7 +636,7 @@ pub fn read_csv_sized(
     let (plant, meta, meta_notices) = check_meta(source, &entries, plant_override)?;
     drop(entries);
 
-    let dialect = Dialect::detect(&header);
+    let dialect = sep_line.map_or_else(|| Dialect::detect(&header), Dialect::with_sep);
     let mut cells: Vec<Cell> = Vec::new();
     let mut quoted_seen = false;
     split(&header, dialect.sep, &mut cells)
@@ -704,8 +783,16 @@ pub fn read_csv_sized(
 
     // What was normalised, in the order a reader meets it.
     let mut normalised = Vec::new();
+    if sep_line.is_some() {
+        normalised.push("Excel's separator line (line 1) read".to_string());
+    }
     if lines.bom {
         normalised.push("UTF-8 byte-order mark removed".to_string());
+    }
+    if let Some((line, byte)) = lines.windows_1252 {
+        normalised.push(format!(
+            "read as Windows-1252, not UTF-8 (line {line} has byte 0x{byte:02X}, which UTF-8 does not allow there)"
+        ));
     }
     if lines.crlf {
         normalised.push("CRLF line ends".to_string());
