@@ -175,6 +175,102 @@ fn every_dialect_reads_to_the_plain_numbers_and_says_what_it_normalised() {
     }
 }
 
+/// The plain log with its time column written by `stamp` (the sample's index to its cell)
+/// and its separator and decimal mark as `dialect(sep, decimal_comma, ..)` writes them.
+fn with_clock(sep: &str, decimal_comma: bool, stamp: impl Fn(usize) -> String) -> String {
+    let text = dialect(sep, decimal_comma, false, None, false, false);
+    let mut row = 0;
+    let lines: Vec<String> = text
+        .lines()
+        .enumerate()
+        .map(|(k, line)| {
+            if line.starts_with('#') || k == 2 {
+                return line.to_string();
+            }
+            let (_, rest) = line.split_once(sep).unwrap();
+            row += 1;
+            format!("{}{sep}{rest}", stamp(row - 1))
+        })
+        .collect();
+    lines.join("\n") + "\n"
+}
+
+/// A bench's time column in clock time stamps (its wall clock: a time of day, or a date and
+/// time) reads as the seconds since the first row's stamp, the other columns as the plain
+/// log's, across midnight too; a cell of another kind in that column is named by its line.
+#[test]
+fn a_time_column_in_clock_time_stamps_reads_as_the_seconds_since_the_first() {
+    let base = read("plain.csv", &plain());
+    // The plain log's rows are 2 ms apart; the time of day starts 3 ms before midnight.
+    let time_of_day = |i: usize| {
+        let ms = (86_399_997 + 2 * i as u64) % 86_400_000;
+        let (h, m, s) = (ms / 3_600_000, ms / 60_000 % 60, ms / 1000 % 60);
+        format!("{h:02}:{m:02}:{s:02}.{:03}", ms % 1000)
+    };
+    let cases = [
+        (
+            "time-of-day.csv",
+            with_clock(",", false, time_of_day),
+            "across midnight",
+        ),
+        (
+            "iso.csv",
+            with_clock(",", false, |i| format!("2026-11-29T10:15:30.{:06}Z", 2000 * i)),
+            "line 4's `2026-11-29T10:15:30.000000Z`",
+        ),
+        (
+            "german.csv",
+            with_clock(";", true, |i| format!("29.11.2026 10:15:30,{:03}", 2 * i)),
+            "line 4's `29.11.2026 10:15:30,000`",
+        ),
+    ];
+    for (name, text, says) in cases {
+        let log = read(name, &text);
+        assert!(
+            normalised(&log).contains("time column in clock time stamps"),
+            "{name}: {:?}",
+            log.notices
+        );
+        assert!(normalised(&log).contains(says), "{name}: {:?}", log.notices);
+        assert_eq!(log.order, base.order);
+        for col in &base.order {
+            let (x, y) = (base.col(col).unwrap(), log.col(col).unwrap());
+            for (p, q) in x.iter().zip(y) {
+                if col == "t_s" {
+                    assert!((p - q).abs() < 1e-12, "{name}: t_s {p} vs {q}");
+                } else {
+                    assert_eq!(p.to_bits(), q.to_bits(), "{name}: {col} {p} vs {q}");
+                }
+            }
+        }
+        assert!((log.dt_s - 0.002).abs() < 1e-12, "{name}: {}", log.dt_s);
+    }
+    // A number among the stamps, and a time of day among dated stamps: line and column.
+    let text = with_clock(",", false, |i| {
+        if i == 3 {
+            "0.006".into()
+        } else {
+            format!("10:15:30.{:03}", 2 * i)
+        }
+    });
+    let e = error("mixed.csv", &text);
+    assert_eq!((e.line, e.column.as_deref()), (Some(7), Some("t_s")), "{e}");
+    assert!(
+        e.message
+            .contains("`0.006` is not a clock time like line 4's `10:15:30.000`"),
+        "{e}"
+    );
+    let text = with_clock(",", false, |i| {
+        if i == 2 {
+            "10:15:30.004".into()
+        } else {
+            format!("2026-11-29 10:15:30.{:03}", 2 * i)
+        }
+    });
+    let e = error("undated.csv", &text);
+    assert_eq!((e.line, e.column.as_deref()), (Some(6), Some("t_s")), "{e}");
+}
+
 fn error(name: &str, text: &str) -> LogError {
     match parse_log(name, text, None) {
         Ok(_) => panic!("{name} was accepted"),

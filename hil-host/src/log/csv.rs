@@ -204,6 +204,93 @@ impl Dialect {
     }
 }
 
+/// One day, ns.
+const DAY_NS: i64 = 86_400_000_000_000;
+
+/// A clock time stamp in ns and whether it has a date: a time of day (`10:15:30.125`) since
+/// midnight, a date and time (`2026-11-29 10:15:30.125`, ISO 8601's `T` and `Z`, or
+/// `29.11.2026 10:15:30.125`) since 1970. The seconds' fraction may take `,` in a
+/// decimal-comma dialect (`10:15:30,125`). `None` when `cell` is none of these.
+fn clock_ns(cell: &str, decimal_comma: bool) -> Option<(i64, bool)> {
+    use chrono::{NaiveDateTime, NaiveTime, Timelike};
+    if !cell.contains(':') {
+        return None;
+    }
+    let s = cell.trim();
+    let s = s.strip_suffix('Z').unwrap_or(s);
+    let dotted;
+    let s = if decimal_comma && s.contains(',') {
+        dotted = s.replace(',', ".");
+        &dotted
+    } else {
+        s
+    };
+    if let Ok(t) = NaiveTime::parse_from_str(s, "%H:%M:%S%.f") {
+        let ns = i64::from(t.num_seconds_from_midnight()) * 1_000_000_000 + i64::from(t.nanosecond());
+        return Some((ns, false));
+    }
+    ["%Y-%m-%d %H:%M:%S%.f", "%Y-%m-%dT%H:%M:%S%.f", "%d.%m.%Y %H:%M:%S%.f"]
+        .iter()
+        .find_map(|f| NaiveDateTime::parse_from_str(s, f).ok())
+        .and_then(|t| t.and_utc().timestamp_nanos_opt())
+        .map(|ns| (ns, true))
+}
+
+/// A time column in clock time stamps (a bench's wall clock): each row's time since the first
+/// row's stamp, s. The differences are taken in whole ns, so a 20 kHz record keeps its period
+/// exactly however late in the day or the century it was taken.
+struct ClockColumn {
+    origin_ns: i64,
+    /// The first stamp's line and text, for the notice and the errors.
+    line: usize,
+    text: String,
+    dated: bool,
+    /// Days added to times of day for the midnights passed, ns.
+    days_ns: i64,
+    last_ns: i64,
+    midnights: usize,
+}
+
+impl ClockColumn {
+    fn new(ns: i64, dated: bool, line: usize, text: &str) -> Self {
+        ClockColumn {
+            origin_ns: ns,
+            line,
+            text: truncate(text, 40),
+            dated,
+            days_ns: 0,
+            last_ns: ns,
+            midnights: 0,
+        }
+    }
+
+    /// The time since the first stamp of the stamp `text`, s; an error for a cell that is
+    /// not a clock time of the first one's kind.
+    fn seconds(&mut self, text: &str, decimal_comma: bool) -> Result<f64, String> {
+        let ns = match clock_ns(text, decimal_comma) {
+            Some((ns, dated)) if dated == self.dated => ns,
+            _ => {
+                return Err(format!(
+                    "`{}` is not a clock time like line {}'s `{}`",
+                    truncate(text, 40),
+                    self.line,
+                    self.text
+                ))
+            }
+        };
+        let mut ns = ns + self.days_ns;
+        // A time of day that falls by more than half a day: the clock passed midnight.
+        if !self.dated && ns < self.last_ns - DAY_NS / 2 {
+            self.days_ns += DAY_NS;
+            self.midnights += 1;
+            ns += DAY_NS;
+        }
+        self.last_ns = ns;
+        // In i128: dated stamps centuries apart would overflow i64's difference.
+        Ok((i128::from(ns) - i128::from(self.origin_ns)) as f64 * 1e-9)
+    }
+}
+
 /// Excel's separator line, `sep=;` (also quoted, `"sep=;"`), which it writes first and
 /// reads as the file's separator: the separator, `None` when `line` is no such line; an error
 /// for a separator that is not one of DATA-FORMAT's (`,`, `;`, tab).
@@ -693,6 +780,7 @@ pub fn read_csv_sized(
     let mut comma_decimals = false;
     let mut first_data = true;
     let mut sizing_bytes = 0usize;
+    let mut clock: Option<ClockColumn> = None;
     while let Some((n, l)) = lines.next_line()? {
         if l.trim().is_empty() {
             continue;
@@ -753,15 +841,27 @@ pub fn read_csv_sized(
         if n_rows == MAX_ROWS {
             return Err(err(n, None, format!("more than {MAX_ROWS} data rows")));
         }
-        for (c, slot) in cells.iter().zip(&sel.keep) {
+        for (i, (c, slot)) in cells.iter().zip(&sel.keep).enumerate() {
             let Some(slot) = slot else { continue };
             quoted_seen |= c.quoted;
             let text = c.text(l).trim();
             let name = &sel.order[*slot];
+            let is_time = Some(i) == t_index;
             let v = if c.escaped {
                 None
+            } else if let (Some(clock), true) = (clock.as_mut(), is_time) {
+                Some(
+                    clock
+                        .seconds(text, dialect.decimal_comma)
+                        .map_err(|m| err(n, Some(name), m))?,
+                )
             } else {
-                number(text, dialect.decimal_comma)
+                number(text, dialect.decimal_comma).or_else(|| {
+                    // The first row's time a clock time stamp: the column is read so from here on.
+                    let (ns, dated) = clock_ns(text, dialect.decimal_comma).filter(|_| is_time && n_rows == 0)?;
+                    clock = Some(ClockColumn::new(ns, dated, n, text));
+                    Some(0.0)
+                })
             };
             let Some(v) = v else {
                 let what = if text.is_empty() {
@@ -773,8 +873,9 @@ pub fn read_csv_sized(
             };
             comma_decimals |= dialect.decimal_comma && text.contains(',');
             columns[*slot].push(match units.conversions[*slot] {
-                Some(c) => c.apply(v),
-                None => v,
+                // A clock's stamps are read in seconds, whatever unit the column's name states.
+                Some(c) if !(is_time && clock.is_some()) => c.apply(v),
+                _ => v,
             });
         }
         rows.push(n_rows, n);
@@ -796,6 +897,18 @@ pub fn read_csv_sized(
     }
     if lines.crlf {
         normalised.push("CRLF line ends".to_string());
+    }
+    if let Some(c) = &clock {
+        normalised.push(format!(
+            "time column in clock time stamps read as the time since line {}'s `{}` (t_s = 0){}",
+            c.line,
+            c.text,
+            match c.midnights {
+                0 => String::new(),
+                1 => ", across midnight".to_string(),
+                k => format!(", across {k} midnights"),
+            }
+        ));
     }
     match dialect.sep {
         b';' => normalised.push(format!(
