@@ -1,9 +1,53 @@
-//! Signal processing for identification from measured data: Butterworth low-pass filters
+//! Signal processing: resampling onto another time base (the log readers), and for
+//! identification from measured data: Butterworth low-pass filters
 //! (cascaded second-order sections by the bilinear transform), zero-phase forward-backward
 //! filtering, central differences, and decimation (the EMPS description's "bandpass filtering"
 //! and "decimate process", Sec. 3.1-3.2).
 
 use std::f64::consts::PI;
+
+/// `values` recorded at `t_from` onto the instants `t_to`: linear, or the last value at or
+/// before each instant for flags. Instants outside the recorded span take the first or last
+/// value; their count is returned. The recorded times must increase.
+pub fn resample(t_from: &[f64], values: &[f64], t_to: &[f64], hold: bool) -> Result<(Vec<f64>, usize), String> {
+    if t_from.is_empty() || t_from.len() != values.len() {
+        return Err(format!("{} samples against {} time stamps", values.len(), t_from.len()));
+    }
+    if let Some(k) = t_from.windows(2).position(|w| !(w[1] > w[0])) {
+        return Err(format!(
+            "its time stamps do not increase at sample {} ({} then {})",
+            k + 1,
+            t_from[k],
+            t_from[k + 1]
+        ));
+    }
+    let last = t_from.len() - 1;
+    let mut out = Vec::with_capacity(t_to.len());
+    let mut outside = 0;
+    let mut j = 0; // t_from[j] <= t < t_from[j + 1] for the current t (instants increase).
+    for &t in t_to {
+        if t < t_from[0] {
+            outside += 1;
+            out.push(values[0]);
+            continue;
+        }
+        if t > t_from[last] {
+            outside += 1;
+            out.push(values[last]);
+            continue;
+        }
+        while j < last && t_from[j + 1] <= t {
+            j += 1;
+        }
+        if j == last || hold || t == t_from[j] {
+            out.push(values[j]);
+        } else {
+            let w = (t - t_from[j]) / (t_from[j + 1] - t_from[j]);
+            out.push(values[j] + w * (values[j + 1] - values[j]));
+        }
+    }
+    Ok((out, outside))
+}
 
 /// Σ aᵢbᵢ over the common length, summed in eight interleaved lanes so that the compiler can
 /// vectorise it (one running sum may not be reordered); the order is fixed, so the bits are

@@ -271,6 +271,92 @@ fn a_time_column_in_clock_time_stamps_reads_as_the_seconds_since_the_first() {
     assert_eq!((e.line, e.column.as_deref()), (Some(6), Some("t_s")), "{e}");
 }
 
+/// A sparse export (CANape's, INCA's multi-rate CSV: a channel slower than the rows leaves its
+/// cell empty between its samples) reads as the plain log: the blank cells filled at each row's
+/// time from the column's own samples (linearly; flags held), rows without the primary output
+/// left out (its samples are the time base, as for an MF4 logger's channel groups), errors
+/// still named by the file's line; a column with no value at all is named.
+#[test]
+fn a_sparse_exports_blank_cells_are_filled_from_the_slower_channels_samples() {
+    let base = read("plain.csv", &plain());
+    let rows: Vec<Vec<String>> = plain()
+        .lines()
+        .skip(3)
+        .map(|l| l.split(',').map(String::from).collect())
+        .collect();
+    let head =
+        "# plant: vacuum\n# source: dialect test\nt_s,duty_pct,u_batt_V,p_amb_kPa,p_tank_kPa,x_pct,u_pilot_extra\n";
+    // The supply voltage at rows 0, 2, 4 and 5, the tank pressure at the first and last row
+    // only (both linear in time, so the interpolation gives the plain values).
+    let mut text = head.to_string();
+    for (i, r) in rows.iter().enumerate() {
+        let mut r = r.clone();
+        if i == 1 || i == 3 {
+            r[2].clear();
+        }
+        if i != 0 && i != 5 {
+            r[4].clear();
+        }
+        text.push_str(&(r.join(",") + "\n"));
+    }
+    let log = read("sparse.csv", &text);
+    for name in &base.order {
+        for (p, q) in base.col(name).unwrap().iter().zip(log.col(name).unwrap()) {
+            assert!((p - q).abs() <= 1e-12 * p.abs().max(1.0), "{name}: {p} vs {q}");
+        }
+    }
+    let note = log.notices.iter().find(|n| n.starts_with("sparse export")).unwrap();
+    assert!(
+        note.contains("`u_batt_V` (4 of 6 rows, interpolated)") && note.contains("`p_tank_kPa` (2 of 6 rows"),
+        "{note}"
+    );
+
+    // Rows of a faster channel (the duty) between the primary output's: left out, the rest
+    // as in the plain log; a bad cell after them is named by its own line of the file.
+    let mut text = head.to_string();
+    for r in &rows {
+        text.push_str(&(r.join(",") + "\n"));
+        text.push_str(&format!("{},50,,,,,\n", r[0].parse::<f64>().unwrap() + 0.001));
+    }
+    let log = read("fast.csv", &text);
+    same_numbers(&base, &log);
+    assert!(
+        log.notices
+            .iter()
+            .any(|n| n.contains("6 of 12 rows without `x_pct` (the primary output) left out")),
+        "{:?}",
+        log.notices
+    );
+    let bad = text.replacen(",101.325,", ",NaN,", 3).replacen(",NaN,", ",101.325,", 2);
+    let e = error("fast-bad.csv", &bad);
+    assert_eq!((e.line, e.column.as_deref()), (Some(8), Some("p_amb_kPa")), "{e}");
+
+    // A flag recorded at two rows only: held from each sample on.
+    let mut text =
+        String::from("# plant: ehvva\nt_s,u_pilot,p_supply_MPa,p_back_MPa,temp_C,lift_high,snubber_on,lift_mm\n");
+    for i in 0..6 {
+        let u = match i {
+            0 => "0",
+            3 => "1",
+            _ => "",
+        };
+        text.push_str(&format!("{},{u},7,1,22,1,0,{}\n", i as f64 * 5e-5, 0.1 * i as f64));
+    }
+    let log = read("flag.csv", &text);
+    assert_eq!(log.col("u_pilot").unwrap(), &[0.0, 0.0, 0.0, 1.0, 1.0, 1.0]);
+    assert!(
+        log.notices.iter().any(|n| n.contains("`u_pilot` (2 of 6 rows, held)")),
+        "{:?}",
+        log.notices
+    );
+
+    // A column with no value in any row.
+    let text = text.replace(",22,", ",,");
+    let e = error("empty.csv", &text);
+    assert_eq!((e.line, e.column.as_deref()), (Some(2), Some("temp_C")), "{e}");
+    assert!(e.message.contains("no value in any row"), "{e}");
+}
+
 fn error(name: &str, text: &str) -> LogError {
     match parse_log(name, text, None) {
         Ok(_) => panic!("{name} was accepted"),
