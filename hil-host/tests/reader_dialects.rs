@@ -344,6 +344,19 @@ fn a_sparse_exports_blank_cells_are_filled_from_the_slower_channels_samples() {
     }
     let log = read("flag.csv", &text);
     assert_eq!(log.col("u_pilot").unwrap(), &[0.0, 0.0, 0.0, 1.0, 1.0, 1.0]);
+    // The same flags as words (LabVIEW writes its booleans so): the same log, said once.
+    let words = text.replace("\n0,0,", "\n0,FALSE,").replace(",1,7,", ",True,7,");
+    assert_ne!(words, text);
+    let worded = read("words.csv", &words);
+    assert_eq!(worded.col("u_pilot"), log.col("u_pilot"));
+    assert!(
+        normalised(&worded).contains("read as 1/0 in `u_pilot`"),
+        "{:?}",
+        worded.notices
+    );
+    // Not in a signal's column.
+    let e = error("word.csv", &words.replacen(",7,", ",on,", 1));
+    assert_eq!((e.line, e.column.as_deref()), (Some(3), Some("p_supply_MPa")), "{e}");
     assert!(
         log.notices.iter().any(|n| n.contains("`u_pilot` (2 of 6 rows, held)")),
         "{:?}",

@@ -204,6 +204,20 @@ impl Dialect {
     }
 }
 
+/// A 0/1 flag written as a word: `true`, `on`, `high` are 1; `false`, `off`, `low` are 0
+/// (any case). `None` for another word.
+fn flag_word(cell: &str) -> Option<f64> {
+    let w = cell.trim();
+    let is = |words: [&str; 3]| words.iter().any(|x| w.eq_ignore_ascii_case(x));
+    if is(["true", "on", "high"]) {
+        Some(1.0)
+    } else if is(["false", "off", "low"]) {
+        Some(0.0)
+    } else {
+        None
+    }
+}
+
 /// One day, ns.
 const DAY_NS: i64 = 86_400_000_000_000;
 
@@ -782,6 +796,7 @@ pub fn read_csv_sized(
     let mut sizing_bytes = 0usize;
     let mut clock: Option<ClockColumn> = None;
     let mut blanks = false;
+    let mut flag_words: Vec<String> = Vec::new();
     while let Some((n, l)) = lines.next_line()? {
         if l.trim().is_empty() {
             continue;
@@ -857,12 +872,21 @@ pub fn read_csv_sized(
                         .map_err(|m| err(n, Some(name), m))?,
                 )
             } else {
-                number(text, dialect.decimal_comma).or_else(|| {
-                    // The first row's time a clock time stamp: the column is read so from here on.
-                    let (ns, dated) = clock_ns(text, dialect.decimal_comma).filter(|_| is_time && n_rows == 0)?;
-                    clock = Some(ClockColumn::new(ns, dated, n, text));
-                    Some(0.0)
-                })
+                number(text, dialect.decimal_comma)
+                    .or_else(|| {
+                        // The first row's time a clock time stamp: the column is read so from here on.
+                        let (ns, dated) = clock_ns(text, dialect.decimal_comma).filter(|_| is_time && n_rows == 0)?;
+                        clock = Some(ClockColumn::new(ns, dated, n, text));
+                        Some(0.0)
+                    })
+                    .or_else(|| {
+                        // A flag written as a word (LabVIEW's booleans, a bench's switch states).
+                        let v = flag_word(text).filter(|_| super::FLAGS.contains(&name.as_str()))?;
+                        if !flag_words.contains(name) {
+                            flag_words.push(name.clone());
+                        }
+                        Some(v)
+                    })
             };
             if v.is_none() && text.is_empty() && !is_time {
                 // A sparse export's slower channel: filled once every row is read.
@@ -938,6 +962,16 @@ pub fn read_csv_sized(
     }
     if trailing_sep {
         normalised.push("a separator after the last column".to_string());
+    }
+    if !flag_words.is_empty() {
+        normalised.push(format!(
+            "flags written as words (`TRUE`/`FALSE`, `on`/`off`, `high`/`low`) read as 1/0 in {}",
+            flag_words
+                .iter()
+                .map(|f| format!("`{f}`"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
     }
     if unit_named.iter().any(Option::is_some) {
         normalised.push(format!(
