@@ -119,6 +119,21 @@ impl fmt::Display for Plant {
 /// The columns that are 0/1 flags (no unit suffix).
 pub const FLAGS: [&str; 3] = ["u_pilot", "lift_high", "snubber_on"];
 
+/// A 0/1 flag written as a word (a CSV's LabVIEW booleans, an MF4 channel's value-to-text
+/// conversion): `true`, `on`, `high` are 1; `false`, `off`, `low` are 0 (any case). `None` for
+/// another word.
+pub(crate) fn flag_word(cell: &str) -> Option<f64> {
+    let w = cell.trim();
+    let is = |words: [&str; 3]| words.iter().any(|x| w.eq_ignore_ascii_case(x));
+    if is(["true", "on", "high"]) {
+        Some(1.0)
+    } else if is(["false", "off", "low"]) {
+        Some(0.0)
+    } else {
+        None
+    }
+}
+
 /// The accepted range of a column (DATA-FORMAT.md range table), `None` when unconstrained.
 pub fn column_range(name: &str) -> Option<(f64, f64)> {
     if FLAGS.contains(&name) {

@@ -26,7 +26,7 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use falcon_mdf::{Channel, Mf4File};
+use falcon_mdf::{Channel, Mf4File, SignalValues};
 
 use crate::log::units::{self, reading, Reading, UnitNotes};
 use crate::log::{log_from_columns, Log, LogError, Plant, FLAGS};
@@ -424,6 +424,7 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
     let base: &[f64] = uniform.as_ref().map_or(&t_s, |(grid, _)| grid);
     let mut columns: Vec<(String, Vec<f64>)> = vec![("t_s".into(), base.to_vec())];
     let mut resampled: Vec<String> = Vec::new();
+    let mut text_notes: Vec<String> = Vec::new();
     for (column, _) in plant.columns() {
         let Some(found) = by_column.get(column) else {
             continue; // A missing required column is the CSV check's error below.
@@ -458,12 +459,24 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
                 }
             },
         };
-        let mut values = mdf.signal(ch).and_then(|s| s.values_f64()).map_err(|e| {
+        let unreadable = |e: falcon_mdf::Mf4Error| {
             err(
                 Some((*column).into()),
                 format!("{}: unreadable: {e}", describe(column, ch)),
             )
-        })?;
+        };
+        let signal = mdf.signal(ch).map_err(unreadable)?;
+        let mut values = match signal.values().map_err(unreadable)? {
+            SignalValues::F64(v) => v,
+            // A value-to-text conversion (a logger's `ON`/`OFF` states).
+            SignalValues::Str(texts) => {
+                let (v, note) = text_flag(column, &texts, || signal.raw_values().map(|r| r.to_f64()))
+                    .map_err(|m| err(Some((*column).into()), format!("{}: {m}", describe(column, ch))))?;
+                text_notes.push(format!("`{column}` ({}) {note}", describe(column, ch)));
+                v
+            }
+            other => other.to_f64(),
+        };
         // A logger's channel is in the unit it recorded; one named as the column (before a
         // measuring device's suffix) states the column's unit already.
         let renamed = ch.name.split('\\').next() != Some(*column);
@@ -542,6 +555,7 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
         };
         columns.push(((*column).to_string(), values));
     }
+    notices.extend(text_notes);
     notices.extend(resampled);
     notices.extend(unit_notes.into_notices());
 
@@ -594,6 +608,40 @@ fn missing(file: &str, mdf: &Mf4File, map: &ChannelMap, column: &str, plant: Pla
             have.join(", ")
         ),
     }
+}
+
+/// A flag channel recorded with a value-to-text conversion, as loggers record a digital
+/// state: its texts read as 1/0 where each is a flag's word ([`crate::log::flag_word`]: `ON`,
+/// `OFF`, `TRUE`, ...), else its raw (unconverted) values, which the log's check then holds
+/// to 0/1; with what was done, for the notice. A text channel under a signal's column is an
+/// error naming a text.
+fn text_flag(
+    column: &str,
+    texts: &[String],
+    raw: impl FnOnce() -> Result<Vec<f64>, falcon_mdf::Mf4Error>,
+) -> Result<(Vec<f64>, String), String> {
+    let first = texts.first().map_or("", String::as_str);
+    if !FLAGS.contains(&column) {
+        return Err(format!(
+            "holds text (`{first}`), not numbers: a value-to-text conversion on a signal"
+        ));
+    }
+    let words: Option<Vec<f64>> = texts.iter().map(|t| crate::log::flag_word(t)).collect();
+    if let Some(v) = words {
+        return Ok((
+            v,
+            "recorded as words (`ON`/`OFF`, `TRUE`/`FALSE`, `HIGH`/`LOW`): read as 1/0".into(),
+        ));
+    }
+    let v = raw().map_err(|e| format!("unreadable raw values: {e}"))?;
+    let other = texts
+        .iter()
+        .find(|t| crate::log::flag_word(t).is_none())
+        .map_or("", String::as_str);
+    Ok((
+        v,
+        format!("recorded as text (`{other}` is no flag's word): its raw values read"),
+    ))
 }
 
 /// Steps up to this many median steps are bridged by [`uniform_grid`] (up to two samples a

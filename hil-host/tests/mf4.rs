@@ -373,6 +373,42 @@ fn device_suffixed_channel_names_are_read_by_their_signal_name() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// A logger records a digital state with a value-to-text conversion (`OFF`/`ON`): a flag's
+/// texts that are flag words read as 1/0, other texts by the raw values they name; both give
+/// the CSV's columns, each said in a notice. A text channel under a signal's column is refused
+/// by name.
+#[test]
+fn flags_recorded_as_text_read_as_their_0_1_states() {
+    let Some(py) = python() else { return };
+    let (dir, csv, mf4) = estimation_as_mf4(
+        &py,
+        (Plant::Ehvva, "none", 3),
+        "text-flags",
+        &["--text", "u_pilot=OFF,ON", "--text", "snubber_on=closed,open"],
+    );
+    let log = read_log(&mf4, None).unwrap();
+    assert_same_columns(&read_log(&csv, None).unwrap(), &log);
+    assert!(log.col("u_pilot").unwrap().contains(&1.0), "the pilot never on");
+    let said = |what: &str| log.notices.iter().any(|n| n.contains(what));
+    assert!(
+        said("`u_pilot` (channel `u_pilot`) recorded as words"),
+        "{:?}",
+        log.notices
+    );
+    assert!(
+        said("`snubber_on` (channel `snubber_on`) recorded as text (`")
+            && said("is no flag's word): its raw values read"),
+        "{:?}",
+        log.notices
+    );
+    let bad = dir.join("bad.mf4");
+    write_mf4(&py, &csv, &bad, &["--text", "p_back_MPa=low,high"]);
+    let e = read_log(&bad, None).unwrap_err();
+    assert_eq!(e.column.as_deref(), Some("p_back_MPa"), "{e}");
+    assert!(e.message.contains("holds text"), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// A logger records each channel in its own unit (the CN block's unit): a channel the map
 /// renames is converted from it to the column's unit, with a notice; a channel under the
 /// column's own name whose unit says otherwise, or a unit of another quantity, is refused by

@@ -18,6 +18,9 @@ that reading either gives the same log. Options reproduce what real loggers do:
   --jitter F           the primary group's time stamps jitter by up to +-F/2 of the period (first and
                        last kept; values read at the jittered instants: signals interpolated,
                        flags held), as a logger's event-driven raster records them
+  --text COL=TEXT0,TEXT1
+                       store the 0/1 column COL as an 8-bit integer with a value-to-text conversion
+                       (0 -> TEXT0, 1 -> TEXT1), as loggers record a digital state (repeatable)
   --unit COL=UNIT,FACTOR[,OFFSET]
                        store column COL in the logger's unit UNIT: samples * FACTOR + OFFSET
                        (repeatable; a logger recording pressure in bar, lift in m)
@@ -74,6 +77,7 @@ def main():
     ap.add_argument("--drop-meta", action="append", default=[])
     ap.add_argument("--unit", action="append", default=[])
     ap.add_argument("--jitter", type=float, default=0.0)
+    ap.add_argument("--text", action="append", default=[])
     a = ap.parse_args()
 
     meta, header, cols = read_csv(a.csv)
@@ -87,14 +91,25 @@ def main():
         parts = spec.split(",")
         units[col] = (parts[0], float(parts[1]), float(parts[2]) if len(parts) > 2 else 0.0)
 
+    texts = {}
+    for x in a.text:
+        col, spec = x.split("=", 1)
+        texts[col] = spec.split(",", 1)
+
     def signal(name, samples, stamps):
         unit = unit_of(name)
         if name in units:
             unit, factor, offset = units[name]
             samples = samples * factor + offset
+        conversion = None
+        if name in texts:
+            off, on = texts[name]
+            samples = samples.astype(np.uint8)
+            conversion = {"val_0": 0, "text_0": off, "val_1": 1, "text_1": on, "default": b""}
         if name in flags:
             samples = samples.astype(np.uint8)
-        return Signal(samples=samples, timestamps=stamps, name=rename.get(name, name), unit=unit)
+        return Signal(samples=samples, timestamps=stamps, name=rename.get(name, name), unit=unit,
+                      conversion=conversion)
 
     mdf = MDF(version="4.10")
     t1, at = t, {n: cols[n] for n in header}

@@ -204,20 +204,6 @@ impl Dialect {
     }
 }
 
-/// A 0/1 flag written as a word: `true`, `on`, `high` are 1; `false`, `off`, `low` are 0
-/// (any case). `None` for another word.
-fn flag_word(cell: &str) -> Option<f64> {
-    let w = cell.trim();
-    let is = |words: [&str; 3]| words.iter().any(|x| w.eq_ignore_ascii_case(x));
-    if is(["true", "on", "high"]) {
-        Some(1.0)
-    } else if is(["false", "off", "low"]) {
-        Some(0.0)
-    } else {
-        None
-    }
-}
-
 /// One day, ns.
 const DAY_NS: i64 = 86_400_000_000_000;
 
@@ -881,7 +867,7 @@ pub fn read_csv_sized(
                     })
                     .or_else(|| {
                         // A flag written as a word (LabVIEW's booleans, a bench's switch states).
-                        let v = flag_word(text).filter(|_| super::FLAGS.contains(&name.as_str()))?;
+                        let v = super::flag_word(text).filter(|_| super::FLAGS.contains(&name.as_str()))?;
                         if !flag_words.contains(name) {
                             flag_words.push(name.clone());
                         }
