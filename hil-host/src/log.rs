@@ -7,7 +7,9 @@
 //! ([`check`], entry point [`log_from_columns`]). What is guaranteed: docs/reliability.md.
 
 pub mod check;
+mod clock;
 pub mod csv;
+mod sparse;
 pub mod units;
 
 use std::collections::BTreeMap;

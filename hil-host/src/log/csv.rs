@@ -9,6 +9,8 @@
 use std::io::{BufRead, Read};
 
 use super::check::{check_meta, finish, select_columns, MetaEntry, RowLines};
+use super::clock::{clock_ns, ClockColumn};
+use super::sparse::{fill_blanks, is_blank, BLANK_BITS};
 use super::units::{self, reading, Conversion, Reading, UnitNotes};
 use super::{Log, LogError, Plant};
 
@@ -204,90 +206,62 @@ impl Dialect {
     }
 }
 
-/// One day, ns.
-const DAY_NS: i64 = 86_400_000_000_000;
-
-/// A clock time stamp in ns and whether it has a date: a time of day (`10:15:30.125`) since
-/// midnight, a date and time (`2026-11-29 10:15:30.125`, ISO 8601's `T` and `Z`, or
-/// `29.11.2026 10:15:30.125`) since 1970. The seconds' fraction may take `,` in a
-/// decimal-comma dialect (`10:15:30,125`). `None` when `cell` is none of these.
-fn clock_ns(cell: &str, decimal_comma: bool) -> Option<(i64, bool)> {
-    use chrono::{NaiveDateTime, NaiveTime, Timelike};
-    if !cell.contains(':') {
-        return None;
-    }
-    let s = cell.trim();
-    let s = s.strip_suffix('Z').unwrap_or(s);
-    let dotted;
-    let s = if decimal_comma && s.contains(',') {
-        dotted = s.replace(',', ".");
-        &dotted
-    } else {
-        s
-    };
-    if let Ok(t) = NaiveTime::parse_from_str(s, "%H:%M:%S%.f") {
-        let ns = i64::from(t.num_seconds_from_midnight()) * 1_000_000_000 + i64::from(t.nanosecond());
-        return Some((ns, false));
-    }
-    ["%Y-%m-%d %H:%M:%S%.f", "%Y-%m-%dT%H:%M:%S%.f", "%d.%m.%Y %H:%M:%S%.f"]
-        .iter()
-        .find_map(|f| NaiveDateTime::parse_from_str(s, f).ok())
-        .and_then(|t| t.and_utc().timestamp_nanos_opt())
-        .map(|ns| (ns, true))
+/// What a data row's cells hold beyond plain numbers, for the values and the notices: the
+/// time column in clock time stamps, flags written as words, a sparse export's blanks.
+#[derive(Default)]
+struct CellKinds {
+    clock: Option<ClockColumn>,
+    /// The flag columns where words were read.
+    flag_words: Vec<String>,
+    blanks: bool,
 }
 
-/// A time column in clock time stamps (a bench's wall clock): each row's time since the first
-/// row's stamp, s. The differences are taken in whole ns, so a 20 kHz record keeps its period
-/// exactly however late in the day or the century it was taken.
-struct ClockColumn {
-    origin_ns: i64,
-    /// The first stamp's line and text, for the notice and the errors.
-    line: usize,
-    text: String,
-    dated: bool,
-    /// Days added to times of day for the midnights passed, ns.
-    days_ns: i64,
-    last_ns: i64,
-    midnights: usize,
-}
-
-impl ClockColumn {
-    fn new(ns: i64, dated: bool, line: usize, text: &str) -> Self {
-        ClockColumn {
-            origin_ns: ns,
-            line,
-            text: truncate(text, 40),
-            dated,
-            days_ns: 0,
-            last_ns: ns,
-            midnights: 0,
+impl CellKinds {
+    /// A data cell's value (`text` trimmed, `escaped` when it held a quote), in column `name`:
+    /// a number; in the time column (`at`: whether it is the time column, the first data row,
+    /// the file's line) a clock time stamp where the first row's is one; a flag's word; or, for
+    /// an empty cell outside the time column, the blank placeholder ([`BLANK_BITS`]). An error
+    /// says what the cell is not.
+    fn read(
+        &mut self,
+        text: &str,
+        escaped: bool,
+        (is_time, first_row, line): (bool, bool, usize),
+        name: &str,
+        decimal_comma: bool,
+    ) -> Result<f64, String> {
+        if escaped {
+            return Err(format!("`{}` is not a number", truncate(text, 40)));
         }
-    }
-
-    /// The time since the first stamp of the stamp `text`, s; an error for a cell that is
-    /// not a clock time of the first one's kind.
-    fn seconds(&mut self, text: &str, decimal_comma: bool) -> Result<f64, String> {
-        let ns = match clock_ns(text, decimal_comma) {
-            Some((ns, dated)) if dated == self.dated => ns,
-            _ => {
-                return Err(format!(
-                    "`{}` is not a clock time like line {}'s `{}`",
-                    truncate(text, 40),
-                    self.line,
-                    self.text
-                ))
+        if let (Some(clock), true) = (self.clock.as_mut(), is_time) {
+            return clock.seconds(text, decimal_comma);
+        }
+        if let Some(v) = number(text, decimal_comma) {
+            return Ok(v);
+        }
+        if is_time && first_row {
+            if let Some((ns, dated)) = clock_ns(text, decimal_comma) {
+                // The column is read as clock time stamps from here on.
+                self.clock = Some(ClockColumn::new(ns, dated, line, text));
+                return Ok(0.0);
             }
-        };
-        let mut ns = ns + self.days_ns;
-        // A time of day that falls by more than half a day: the clock passed midnight.
-        if !self.dated && ns < self.last_ns - DAY_NS / 2 {
-            self.days_ns += DAY_NS;
-            self.midnights += 1;
-            ns += DAY_NS;
         }
-        self.last_ns = ns;
-        // In i128: dated stamps centuries apart would overflow i64's difference.
-        Ok((i128::from(ns) - i128::from(self.origin_ns)) as f64 * 1e-9)
+        if let Some(v) = super::flag_word(text).filter(|_| super::FLAGS.contains(&name)) {
+            // LabVIEW's booleans, a bench's switch states.
+            if !self.flag_words.iter().any(|f| f == name) {
+                self.flag_words.push(name.to_string());
+            }
+            return Ok(v);
+        }
+        match (text.is_empty(), is_time) {
+            (true, true) => Err("empty cell, a time is needed".into()),
+            (true, false) => {
+                // A sparse export's slower channel: filled once every row is read.
+                self.blanks = true;
+                Ok(f64::from_bits(BLANK_BITS))
+            }
+            (false, _) => Err(format!("`{}` is not a number", truncate(text, 40))),
+        }
     }
 }
 
@@ -780,9 +754,7 @@ pub fn read_csv_sized(
     let mut comma_decimals = false;
     let mut first_data = true;
     let mut sizing_bytes = 0usize;
-    let mut clock: Option<ClockColumn> = None;
-    let mut blanks = false;
-    let mut flag_words: Vec<String> = Vec::new();
+    let mut kinds = CellKinds::default();
     while let Some((n, l)) = lines.next_line()? {
         if l.trim().is_empty() {
             continue;
@@ -849,49 +821,15 @@ pub fn read_csv_sized(
             let text = c.text(l).trim();
             let name = &sel.order[*slot];
             let is_time = Some(i) == t_index;
-            let v = if c.escaped {
-                None
-            } else if let (Some(clock), true) = (clock.as_mut(), is_time) {
-                Some(
-                    clock
-                        .seconds(text, dialect.decimal_comma)
-                        .map_err(|m| err(n, Some(name), m))?,
-                )
-            } else {
-                number(text, dialect.decimal_comma)
-                    .or_else(|| {
-                        // The first row's time a clock time stamp: the column is read so from here on.
-                        let (ns, dated) = clock_ns(text, dialect.decimal_comma).filter(|_| is_time && n_rows == 0)?;
-                        clock = Some(ClockColumn::new(ns, dated, n, text));
-                        Some(0.0)
-                    })
-                    .or_else(|| {
-                        // A flag written as a word (LabVIEW's booleans, a bench's switch states).
-                        let v = super::flag_word(text).filter(|_| super::FLAGS.contains(&name.as_str()))?;
-                        if !flag_words.contains(name) {
-                            flag_words.push(name.clone());
-                        }
-                        Some(v)
-                    })
-            };
-            if v.is_none() && text.is_empty() && !is_time {
-                // A sparse export's slower channel: filled once every row is read.
-                blanks = true;
-                columns[*slot].push(f64::from_bits(BLANK_BITS));
-                continue;
-            }
-            let Some(v) = v else {
-                let what = if text.is_empty() {
-                    "empty cell, a time is needed".to_string()
-                } else {
-                    format!("`{}` is not a number", truncate(text, 40))
-                };
-                return Err(err(n, Some(name), what));
-            };
+            let v = kinds
+                .read(text, c.escaped, (is_time, n_rows == 0, n), name, dialect.decimal_comma)
+                .map_err(|m| err(n, Some(name), m))?;
             comma_decimals |= dialect.decimal_comma && text.contains(',');
+            // A blank stays the placeholder; a clock's stamps are read in seconds, whatever unit
+            // the column's name states.
+            let as_read = is_blank(v) || (is_time && kinds.clock.is_some());
             columns[*slot].push(match units.conversions[*slot] {
-                // A clock's stamps are read in seconds, whatever unit the column's name states.
-                Some(c) if !(is_time && clock.is_some()) => c.apply(v),
+                Some(c) if !as_read => c.apply(v),
                 _ => v,
             });
         }
@@ -915,7 +853,7 @@ pub fn read_csv_sized(
     if lines.crlf {
         normalised.push("CRLF line ends".to_string());
     }
-    if let Some(c) = &clock {
+    if let Some(c) = &kinds.clock {
         normalised.push(format!(
             "time column in clock time stamps read as the time since line {}'s `{}` (t_s = 0){}",
             c.line,
@@ -949,10 +887,11 @@ pub fn read_csv_sized(
     if trailing_sep {
         normalised.push("a separator after the last column".to_string());
     }
-    if !flag_words.is_empty() {
+    if !kinds.flag_words.is_empty() {
         normalised.push(format!(
             "flags written as words (`TRUE`/`FALSE`, `on`/`off`, `high`/`low`) read as 1/0 in {}",
-            flag_words
+            kinds
+                .flag_words
                 .iter()
                 .map(|f| format!("`{f}`"))
                 .collect::<Vec<_>>()
@@ -979,7 +918,7 @@ pub fn read_csv_sized(
     if quoted_seen {
         normalised.push("quoted cells unquoted".to_string());
     }
-    if blanks {
+    if kinds.blanks {
         notices.extend(fill_blanks(
             source,
             plant,
@@ -1011,123 +950,8 @@ pub fn read_csv_sized(
     finish(source, plant, meta, columns, &rows, all_notices)
 }
 
-/// A blank cell of a sparse export, held as this NaN until [`fill_blanks`] fills it: a NaN
-/// written in the file parses to another (the log's check refuses that one by its line).
-const BLANK_BITS: u64 = 0x7FF8_0000_0000_0B1A;
-
-fn is_blank(v: f64) -> bool {
-    v.to_bits() == BLANK_BITS
-}
-
-/// Fills the blank cells of a sparse export (CANape's and INCA's multi-rate CSV: a channel
-/// slower than the rows has an empty cell between its samples), as the MF4 reader resamples a
-/// logger's slower channel group: the rows without the primary output are left out (its
-/// samples are the log's time base), and every other column with blanks is resampled at the
-/// rows' times from the rows that hold it (linearly, flags by zero-order hold; rows before
-/// its first or after its last sample take that value). The notices say what was done.
-fn fill_blanks(
-    source: &str,
-    plant: Plant,
-    order: &[String],
-    columns: &mut [Vec<f64>],
-    rows: &mut RowLines,
-    header_line: usize,
-) -> Result<Vec<String>, LogError> {
-    let err = |line: Option<usize>, column: &str, message: String| LogError {
-        file: source.to_string(),
-        line,
-        column: Some(column.to_string()),
-        message,
-    };
-    let at = |name: &str| order.iter().position(|o| o == name);
-    let (Some(p), Some(t)) = (at(plant.primary_output()), at("t_s")) else {
-        return Ok(Vec::new());
-    };
-    let mut notices = Vec::new();
-    let primary = &order[p];
-    let n = columns[p].len();
-    let recorded = columns[p].iter().filter(|v| !is_blank(**v)).count();
-    if recorded == 0 {
-        return Err(err(Some(header_line), primary, "no value in any row".into()));
-    }
-    if recorded < n {
-        let keep: Vec<bool> = columns[p].iter().map(|v| !is_blank(*v)).collect();
-        for c in columns.iter_mut() {
-            let mut k = 0;
-            c.retain(|_| {
-                k += 1;
-                keep[k - 1]
-            });
-        }
-        let mut kept = RowLines::default();
-        for (new, old) in (0..n).filter(|&i| keep[i]).enumerate() {
-            if let Some(line) = rows.line_of(old) {
-                kept.push(new, line);
-            }
-        }
-        *rows = kept;
-        notices.push(format!(
-            "{} of {n} rows without `{primary}` (the primary output) left out: its samples are the log's time base",
-            n - recorded
-        ));
-    }
-    let time = std::mem::take(&mut columns[t]);
-    if let Some(k) = time.windows(2).position(|w| !(w[1] > w[0])) {
-        return Err(err(
-            rows.line_of(k + 1),
-            "t_s",
-            format!(
-                "time does not increase ({} then {}), so the blank cells between a column's samples cannot be placed",
-                time[k],
-                time[k + 1]
-            ),
-        ));
-    }
-    let mut filled = Vec::new();
-    let mut outside_total = 0;
-    for (name, c) in order.iter().zip(columns.iter_mut()) {
-        let samples = c.iter().filter(|v| !is_blank(**v)).count();
-        if samples == c.len() || c.is_empty() {
-            continue;
-        }
-        if samples == 0 {
-            return Err(err(Some(header_line), name, "no value in any row".into()));
-        }
-        let (t_from, values): (Vec<f64>, Vec<f64>) = time
-            .iter()
-            .zip(c.iter())
-            .filter(|(_, v)| !is_blank(**v))
-            .map(|(t, v)| (*t, *v))
-            .unzip();
-        let flag = super::FLAGS.contains(&name.as_str());
-        let (out, outside) =
-            crate::signal::resample(&t_from, &values, &time, flag).map_err(|m| err(Some(header_line), name, m))?;
-        *c = out;
-        outside_total += outside;
-        filled.push(format!(
-            "`{name}` ({samples} of {} rows, {})",
-            time.len(),
-            if flag { "held" } else { "interpolated" }
-        ));
-    }
-    columns[t] = time;
-    if !filled.is_empty() {
-        let mut note = format!(
-            "sparse export: blank cells between a slower channel's samples filled at each row's time: {}",
-            filled.join(", ")
-        );
-        if outside_total > 0 {
-            note.push_str(&format!(
-                "; {outside_total} cell(s) before a column's first or after its last sample take that value"
-            ));
-        }
-        notices.push(note);
-    }
-    Ok(notices)
-}
-
 /// At most `max` characters of `s` (on a character boundary), with `…` when cut.
-fn truncate(s: &str, max: usize) -> String {
+pub(super) fn truncate(s: &str, max: usize) -> String {
     match s.char_indices().nth(max) {
         Some((i, _)) => format!("{}…", &s[..i]),
         None => s.to_string(),
