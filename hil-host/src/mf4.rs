@@ -477,6 +477,31 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
             }
             other => other.to_f64(),
         };
+        let flag = FLAGS.contains(column);
+        // Samples the logger marked invalid (invalidation bits: a sensor's dropout, a bus
+        // timeout) hold no measurement: filled from the channel's valid ones at their times.
+        if let Some(valid) = signal.validity().filter(|v| v.iter().any(|ok| !ok)) {
+            let same_group = (ch.data_group_index, ch.channel_group_index) == group;
+            let t_ch = if same_group {
+                t_s.clone()
+            } else {
+                timestamps(&mdf, ch, map, &mut UnitNotes::default()).map_err(|m| {
+                    err(
+                        Some((*column).into()),
+                        format!("{}: time base {m}", describe(column, ch)),
+                    )
+                })?
+            };
+            let invalid = valid.iter().filter(|ok| !**ok).count();
+            values = fill_invalid(&t_ch, &values, &valid, flag)
+                .map_err(|m| err(Some((*column).into()), format!("{}: {m}", describe(column, ch))))?;
+            text_notes.push(format!(
+                "`{column}` ({}): {invalid} of {} samples marked invalid by the logger, filled from its valid samples ({})",
+                describe(column, ch),
+                valid.len(),
+                if flag { "held" } else { "interpolated" }
+            ));
+        }
         // A logger's channel is in the unit it recorded; one named as the column (before a
         // measuring device's suffix) states the column's unit already.
         let renamed = ch.name.split('\\').next() != Some(*column);
@@ -503,7 +528,6 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
             }
             Reading::Assumed => unit_notes.assumed(column, unit),
         }
-        let flag = FLAGS.contains(column);
         let values = if (ch.data_group_index, ch.channel_group_index) == group {
             if values.len() != t_s.len() {
                 return Err(err(
@@ -608,6 +632,36 @@ fn missing(file: &str, mdf: &Mf4File, map: &ChannelMap, column: &str, plant: Pla
             have.join(", ")
         ),
     }
+}
+
+/// `values` at `t` with the samples not `valid` replaced by the valid ones resampled at their
+/// times (linear; held for a flag, `hold`); an error where no sample is valid.
+fn fill_invalid(t: &[f64], values: &[f64], valid: &[bool], hold: bool) -> Result<Vec<f64>, String> {
+    if valid.len() != values.len() || t.len() != values.len() {
+        return Err(format!(
+            "{} samples, {} validity flags, {} time stamps",
+            values.len(),
+            valid.len(),
+            t.len()
+        ));
+    }
+    let (t_ok, v_ok): (Vec<f64>, Vec<f64>) = t
+        .iter()
+        .zip(values)
+        .zip(valid)
+        .filter(|(_, ok)| **ok)
+        .map(|((t, v), _)| (*t, *v))
+        .unzip();
+    if t_ok.is_empty() {
+        return Err("every sample is marked invalid by the logger".into());
+    }
+    let (filled, _) = resample(&t_ok, &v_ok, t, hold)?;
+    Ok(values
+        .iter()
+        .zip(valid)
+        .zip(filled)
+        .map(|((v, ok), f)| if *ok { *v } else { f })
+        .collect())
 }
 
 /// A flag channel recorded with a value-to-text conversion, as loggers record a digital

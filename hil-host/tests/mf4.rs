@@ -373,6 +373,82 @@ fn device_suffixed_channel_names_are_read_by_their_signal_name() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// A logger marks samples invalid (its invalidation bits: a sensor's dropout, a bus timeout);
+/// they hold no measurement and are filled from the channel's valid samples at their times
+/// (linear; flags held), with a notice; a channel with no valid sample is refused by name.
+/// The file is written with falcon_mdf's own writer, which sets the bits (asammdf 8 does not
+/// write them from a `Signal`); it has no header comment, so the plant is given.
+#[test]
+fn samples_a_logger_marked_invalid_are_filled_from_the_valid_ones() {
+    use falcon_mdf::Mf4Writer;
+    let case = generate::generate(Plant::Ehvva, "none", 3).unwrap();
+    let dir = scratch("invalid");
+    let csv_path = dir.join("estimation.csv");
+    std::fs::write(&csv_path, &case.estimation_csv).unwrap();
+    let csv = read_log(&csv_path, None).unwrap();
+    let write = |path: &Path, invalid_in: &str, gap: std::ops::Range<usize>| {
+        let mut w = Mf4Writer::with_start_time_ns(0);
+        let g = w.add_group(csv.col("t_s").unwrap()).unwrap();
+        for (name, values) in csv.columns.iter().filter(|(n, _)| n.as_str() != "t_s") {
+            let mut values = values.clone();
+            let valid: Vec<bool> = (0..values.len())
+                .map(|i| !(name == invalid_in && gap.contains(&i)))
+                .collect();
+            for (v, ok) in values.iter_mut().zip(&valid) {
+                if !ok {
+                    *v = 0.0; // what a logger stores for a sample it has no value for
+                }
+            }
+            g.add_channel_with_validity(name, "", &values, Some(&valid)).unwrap();
+        }
+        w.write_to_file(path).unwrap();
+    };
+    let (supply, lift_high) = (csv.col("p_supply_MPa").unwrap(), csv.col("lift_high").unwrap());
+    let path = dir.join("supply-dropout.mf4");
+    write(&path, "p_supply_MPa", 100..140);
+    let log = read_log(&path, Some(Plant::Ehvva)).unwrap();
+    for (name, values) in &csv.columns {
+        let read = log.col(name).unwrap();
+        if name == "p_supply_MPa" {
+            // Between the valid neighbours, within the set-point's sensor noise.
+            let (lo, hi) = (supply[99].min(supply[140]), supply[99].max(supply[140]));
+            for i in 100..140 {
+                assert!(read[i] >= lo && read[i] <= hi, "sample {i}: {}", read[i]);
+                assert!(
+                    (read[i] - supply[i]).abs() < 0.05,
+                    "sample {i}: {} vs {}",
+                    read[i],
+                    supply[i]
+                );
+            }
+            assert_eq!(&read[..100], &values[..100]);
+            assert_eq!(&read[140..], &values[140..]);
+        } else {
+            assert_eq!(read, &values[..], "{name}");
+        }
+    }
+    assert!(
+        log.notices
+            .iter()
+            .any(|n| n.contains("`p_supply_MPa` (channel `p_supply_MPa`): 40 of") && n.contains("interpolated")),
+        "{:?}",
+        log.notices
+    );
+    // A flag's invalid samples (stored as 0) are held from the last valid one, a 1.
+    let from = 1 + lift_high.iter().position(|v| *v == 1.0).expect("a high-lift event");
+    let path = dir.join("flag-dropout.mf4");
+    write(&path, "lift_high", from..from + 45);
+    let log = read_log(&path, Some(Plant::Ehvva)).unwrap();
+    assert!(log.col("lift_high").unwrap()[from..from + 45].iter().all(|v| *v == 1.0));
+    // No valid sample at all.
+    let path = dir.join("dead.mf4");
+    write(&path, "temp_C", 0..csv.len());
+    let e = read_log(&path, Some(Plant::Ehvva)).unwrap_err();
+    assert_eq!(e.column.as_deref(), Some("temp_C"), "{e}");
+    assert!(e.message.contains("every sample is marked invalid"), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// A logger records a digital state with a value-to-text conversion (`OFF`/`ON`): a flag's
 /// texts that are flag words read as 1/0, other texts by the raw values they name; both give
 /// the CSV's columns, each said in a notice. A text channel under a signal's column is refused
