@@ -245,6 +245,15 @@ fn a_time_column_in_clock_time_stamps_reads_as_the_seconds_since_the_first() {
         }
         assert!((log.dt_s - 0.002).abs() < 1e-12, "{name}: {}", log.dt_s);
     }
+    // A bench's own time column with the stamps' format in its units row, renamed by a map.
+    let text = with_clock(";", true, |i| format!("29.11.2026 10:15:30,{:03}", 2 * i))
+        .replacen("t_s;", "Zeit;", 1)
+        .replacen("u_pilot_extra\n", "u_pilot_extra\nhh:mm:ss,ms;%;V;kPa;kPa;%;-\n", 1);
+    let log = read_mapped("zeit.csv", &text, "[channels]\n\"Zeit\" = \"t_s\"\n").unwrap_or_else(|e| panic!("{e}"));
+    for (p, q) in base.col("t_s").unwrap().iter().zip(log.col("t_s").unwrap()) {
+        assert!((p - q).abs() < 1e-12, "zeit.csv: t_s {p} vs {q}");
+    }
+    assert!(normalised(&log).contains("units row on line 4"), "{:?}", log.notices);
     // A number among the stamps, and a time of day among dated stamps: line and column.
     let text = with_clock(",", false, |i| {
         if i == 3 {

@@ -95,6 +95,11 @@ pub enum Reading {
 /// unknown spelling is taken to mean what the name says. A unit of another quantity, or an
 /// unknown one on a renamed column (whose scale nothing states), is an error.
 pub fn reading(column: &str, unit: &str, renamed: bool) -> Result<Reading, String> {
+    // A clock format (`hh:mm:ss.ms`, `dd.mm.yyyy hh:mm:ss`) under the time column: its cells
+    // are clock time stamps, which the CSV reader reads as the seconds since the first.
+    if column == "t_s" && is_clock_format(unit) {
+        return Ok(Reading::Own);
+    }
     match fit(column, unit) {
         UnitFit::Same => Ok(Reading::Own),
         UnitFit::Convert(c) if renamed => Ok(Reading::Convert(c)),
@@ -112,6 +117,13 @@ pub fn reading(column: &str, unit: &str, renamed: bool) -> Result<Reading, Strin
             accepted(column)
         )),
     }
+}
+
+/// Whether `unit` spells a clock time's format: `hh:mm:ss`, `HH:MM:SS.mmm`, `yyyy-mm-dd
+/// hh:mm:ss`, `dd.mm.yyyy` (any case).
+fn is_clock_format(unit: &str) -> bool {
+    let u = unit.to_ascii_lowercase();
+    u.contains("hh:mm") || u.contains("yyyy")
 }
 
 /// The units a column with this unit suffix is read in: the spellings of its own unit, and
@@ -463,6 +475,22 @@ mod tests {
         assert_eq!(fit("whatever", "furlong"), UnitFit::Same);
         let a = accepted("p_supply_MPa");
         assert!(a.starts_with("`MPa`, or converted from `bar`"), "{a}");
+    }
+
+    #[test]
+    fn a_clock_format_under_the_time_column_is_read_as_its_stamps() {
+        for (unit, renamed) in [
+            ("hh:mm:ss.ms", true),
+            ("DD.MM.YYYY hh:mm:ss,sss", false),
+            ("[HH:MM:SS]", true),
+        ] {
+            assert!(
+                matches!(reading("t_s", bare(unit), renamed), Ok(Reading::Own)),
+                "{unit}"
+            );
+        }
+        assert!(reading("p_supply_MPa", "hh:mm:ss", true).is_err());
+        assert!(reading("t_s", "hh", true).is_err());
     }
 
     #[test]
