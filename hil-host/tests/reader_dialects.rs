@@ -372,6 +372,11 @@ fn a_sparse_exports_blank_cells_are_filled_from_the_slower_channels_samples() {
         log.notices
     );
 
+    // A column with values only in rows without the primary output.
+    let text_vacuum = "# plant: vacuum\nt_s,duty_pct,u_batt_V,p_amb_kPa,p_tank_kPa,x_pct\n0,1,13,101,35,\n0.001,1,,101,35,0\n0.002,1,,101,35,1\n";
+    let e = error("only-between.csv", text_vacuum);
+    assert_eq!((e.line, e.column.as_deref()), (Some(2), Some("u_batt_V")), "{e}");
+    assert!(e.message.contains("no value in any row that holds `x_pct`"), "{e}");
     // A column with no value in any row.
     let text = text.replace(",22,", ",,");
     let e = error("empty.csv", &text);

@@ -85,7 +85,12 @@ pub(super) fn fill_blanks(
             continue;
         }
         if samples == 0 {
-            return Err(err(Some(header_line), name, "no value in any row".into()));
+            let which = if recorded < n {
+                format!("no value in any row that holds `{primary}`")
+            } else {
+                "no value in any row".to_string()
+            };
+            return Err(err(Some(header_line), name, which));
         }
         let (t_from, values): (Vec<f64>, Vec<f64>) = time
             .iter()
