@@ -18,6 +18,8 @@
 //!   Columns recorded in other channel groups (other rates) are resampled onto it: linearly for
 //!   continuous signals, by zero-order hold (the last value at or before each instant) for 0/1
 //!   flags; a notice says which columns, from which rate, and how.
+//! - Samples the logger marked invalid (invalidation bits) are filled from the channel's valid
+//!   ones; a flag recorded with a value-to-text conversion (`OFF`/`ON`) reads as 0/1.
 //! - The columns then go through the CSV reader's checks (`crate::log::log_from_columns`:
 //!   typed metadata, ranges, flags, uniform and increasing time, required columns), so an MF4
 //!   log and a CSV log of the same samples give the same [`Log`], bit for bit. Errors name the
@@ -30,7 +32,7 @@ use falcon_mdf::{Channel, Mf4File, SignalValues};
 
 use crate::log::units::{self, reading, Reading, UnitNotes};
 use crate::log::{log_from_columns, Log, LogError, Plant, FLAGS};
-use crate::signal::resample;
+use crate::signal::{fill_gaps, resample};
 
 /// True when `path` names an MF4 file: the `.mf4`/`.mdf` extension, or the MDF identification
 /// block's signature at the start of the file (a logger's file renamed to `.dat`).
@@ -424,7 +426,7 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
     let base: &[f64] = uniform.as_ref().map_or(&t_s, |(grid, _)| grid);
     let mut columns: Vec<(String, Vec<f64>)> = vec![("t_s".into(), base.to_vec())];
     let mut resampled: Vec<String> = Vec::new();
-    let mut text_notes: Vec<String> = Vec::new();
+    let mut channel_notes: Vec<String> = Vec::new();
     for (column, _) in plant.columns() {
         let Some(found) = by_column.get(column) else {
             continue; // A missing required column is the CSV check's error below.
@@ -472,7 +474,7 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
             SignalValues::Str(texts) => {
                 let (v, note) = text_flag(column, &texts, || signal.raw_values().map(|r| r.to_f64()))
                     .map_err(|m| err(Some((*column).into()), format!("{}: {m}", describe(column, ch))))?;
-                text_notes.push(format!("`{column}` ({}) {note}", describe(column, ch)));
+                channel_notes.push(format!("`{column}` ({}) {note}", describe(column, ch)));
                 v
             }
             other => other.to_f64(),
@@ -493,9 +495,26 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
                 })?
             };
             let invalid = valid.iter().filter(|ok| !**ok).count();
-            values = fill_invalid(&t_ch, &values, &valid, flag)
+            if invalid == valid.len() {
+                return Err(err(
+                    Some((*column).into()),
+                    format!("{}: every sample is marked invalid by the logger", describe(column, ch)),
+                ));
+            }
+            if valid.len() != values.len() {
+                return Err(err(
+                    Some((*column).into()),
+                    format!(
+                        "{}: {} validity flags for {} samples",
+                        describe(column, ch),
+                        valid.len(),
+                        values.len()
+                    ),
+                ));
+            }
+            (values, _) = fill_gaps(&t_ch, &values, |i| valid[i], flag)
                 .map_err(|m| err(Some((*column).into()), format!("{}: {m}", describe(column, ch))))?;
-            text_notes.push(format!(
+            channel_notes.push(format!(
                 "`{column}` ({}): {invalid} of {} samples marked invalid by the logger, filled from its valid samples ({})",
                 describe(column, ch),
                 valid.len(),
@@ -579,7 +598,7 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
         };
         columns.push(((*column).to_string(), values));
     }
-    notices.extend(text_notes);
+    notices.extend(channel_notes);
     notices.extend(resampled);
     notices.extend(unit_notes.into_notices());
 
@@ -632,36 +651,6 @@ fn missing(file: &str, mdf: &Mf4File, map: &ChannelMap, column: &str, plant: Pla
             have.join(", ")
         ),
     }
-}
-
-/// `values` at `t` with the samples not `valid` replaced by the valid ones resampled at their
-/// times (linear; held for a flag, `hold`); an error where no sample is valid.
-fn fill_invalid(t: &[f64], values: &[f64], valid: &[bool], hold: bool) -> Result<Vec<f64>, String> {
-    if valid.len() != values.len() || t.len() != values.len() {
-        return Err(format!(
-            "{} samples, {} validity flags, {} time stamps",
-            values.len(),
-            valid.len(),
-            t.len()
-        ));
-    }
-    let (t_ok, v_ok): (Vec<f64>, Vec<f64>) = t
-        .iter()
-        .zip(values)
-        .zip(valid)
-        .filter(|(_, ok)| **ok)
-        .map(|((t, v), _)| (*t, *v))
-        .unzip();
-    if t_ok.is_empty() {
-        return Err("every sample is marked invalid by the logger".into());
-    }
-    let (filled, _) = resample(&t_ok, &v_ok, t, hold)?;
-    Ok(values
-        .iter()
-        .zip(valid)
-        .zip(filled)
-        .map(|((v, ok), f)| if *ok { *v } else { f })
-        .collect())
 }
 
 /// A flag channel recorded with a value-to-text conversion, as loggers record a digital

@@ -49,6 +49,33 @@ pub fn resample(t_from: &[f64], values: &[f64], t_to: &[f64], hold: bool) -> Res
     Ok((out, outside))
 }
 
+/// `values` at the instants `t` with the samples that are not `valid(i)` replaced by the
+/// valid ones resampled at their instants ([`resample`]: linear, or held for flags): a
+/// logger's invalid samples, a sparse export's blank cells. With the count of replaced samples
+/// outside the valid ones' span (they take the first or last valid value). An error where no
+/// sample is valid or the instants do not increase.
+pub fn fill_gaps(
+    t: &[f64],
+    values: &[f64],
+    valid: impl Fn(usize) -> bool,
+    hold: bool,
+) -> Result<(Vec<f64>, usize), String> {
+    if t.len() != values.len() {
+        return Err(format!("{} samples against {} time stamps", values.len(), t.len()));
+    }
+    let (t_ok, v_ok): (Vec<f64>, Vec<f64>) = (0..t.len()).filter(|&i| valid(i)).map(|i| (t[i], values[i])).unzip();
+    if t_ok.is_empty() {
+        return Err("no valid sample".into());
+    }
+    let (filled, outside) = resample(&t_ok, &v_ok, t, hold)?;
+    let out = filled
+        .into_iter()
+        .enumerate()
+        .map(|(i, f)| if valid(i) { values[i] } else { f })
+        .collect();
+    Ok((out, outside))
+}
+
 /// Σ aᵢbᵢ over the common length, summed in eight interleaved lanes so that the compiler can
 /// vectorise it (one running sum may not be reordered); the order is fixed, so the bits are
 /// the same on every run and machine.
@@ -198,6 +225,20 @@ pub fn downsample(x: &[f64], factor: usize) -> Vec<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn gaps_are_filled_from_the_valid_samples_at_their_instants() {
+        let t = [0.0, 1.0, 2.0, 4.0, 5.0, 6.0];
+        let v = [0.0, 99.0, 99.0, 4.0, 5.0, 99.0];
+        let valid = |i: usize| v[i] != 99.0;
+        // Linear in time (not in index) between 0 at t = 0 and 4 at t = 4; the last sample
+        // beyond the valid span takes the last valid value, and is counted.
+        let (f, outside) = fill_gaps(&t, &v, valid, false).unwrap();
+        assert_eq!((f, outside), (vec![0.0, 1.0, 2.0, 4.0, 5.0, 5.0], 1));
+        let (f, _) = fill_gaps(&t, &v, valid, true).unwrap();
+        assert_eq!(f, vec![0.0, 0.0, 0.0, 4.0, 5.0, 5.0]);
+        assert!(fill_gaps(&t, &v, |_| false, false).is_err());
+    }
 
     fn sine(f: f64, fs: f64, n: usize) -> Vec<f64> {
         (0..n).map(|k| (2.0 * PI * f * k as f64 / fs).sin()).collect()

@@ -92,15 +92,9 @@ pub(super) fn fill_blanks(
             };
             return Err(err(Some(header_line), name, which));
         }
-        let (t_from, values): (Vec<f64>, Vec<f64>) = time
-            .iter()
-            .zip(c.iter())
-            .filter(|(_, v)| !is_blank(**v))
-            .map(|(t, v)| (*t, *v))
-            .unzip();
         let flag = super::FLAGS.contains(&name.as_str());
-        let (out, outside) =
-            crate::signal::resample(&t_from, &values, &time, flag).map_err(|m| err(Some(header_line), name, m))?;
+        let (out, outside) = crate::signal::fill_gaps(&time, c, |i| !is_blank(c[i]), flag)
+            .map_err(|m| err(Some(header_line), name, m))?;
         *c = out;
         outside_total += outside;
         filled.push(format!(
