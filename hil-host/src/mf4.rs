@@ -461,19 +461,16 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
                 }
             },
         };
-        let unreadable = |e: falcon_mdf::Mf4Error| {
-            err(
-                Some((*column).into()),
-                format!("{}: unreadable: {e}", describe(column, ch)),
-            )
-        };
+        // An error of this channel: the column, the channel (and its mapping), what is wrong.
+        let channel_err = |m: String| err(Some((*column).into()), format!("{}: {m}", describe(column, ch)));
+        let unreadable = |e: falcon_mdf::Mf4Error| channel_err(format!("unreadable: {e}"));
         let signal = mdf.signal(ch).map_err(unreadable)?;
         let mut values = match signal.values().map_err(unreadable)? {
             SignalValues::F64(v) => v,
             // A value-to-text conversion (a logger's `ON`/`OFF` states).
             SignalValues::Str(texts) => {
-                let (v, note) = text_flag(column, &texts, || signal.raw_values().map(|r| r.to_f64()))
-                    .map_err(|m| err(Some((*column).into()), format!("{}: {m}", describe(column, ch))))?;
+                let (v, note) =
+                    text_flag(column, &texts, || signal.raw_values().map(|r| r.to_f64())).map_err(channel_err)?;
                 channel_notes.push(format!("`{column}` ({}) {note}", describe(column, ch)));
                 v
             }
@@ -487,33 +484,21 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
             let t_ch = if same_group {
                 t_s.clone()
             } else {
-                timestamps(&mdf, ch, map, &mut UnitNotes::default()).map_err(|m| {
-                    err(
-                        Some((*column).into()),
-                        format!("{}: time base {m}", describe(column, ch)),
-                    )
-                })?
+                timestamps(&mdf, ch, map, &mut UnitNotes::default())
+                    .map_err(|m| channel_err(format!("time base {m}")))?
             };
             let invalid = valid.iter().filter(|ok| !**ok).count();
             if invalid == valid.len() {
-                return Err(err(
-                    Some((*column).into()),
-                    format!("{}: every sample is marked invalid by the logger", describe(column, ch)),
-                ));
+                return Err(channel_err("every sample is marked invalid by the logger".into()));
             }
             if valid.len() != values.len() {
-                return Err(err(
-                    Some((*column).into()),
-                    format!(
-                        "{}: {} validity flags for {} samples",
-                        describe(column, ch),
-                        valid.len(),
-                        values.len()
-                    ),
-                ));
+                return Err(channel_err(format!(
+                    "{} validity flags for {} samples",
+                    valid.len(),
+                    values.len()
+                )));
             }
-            (values, _) = fill_gaps(&t_ch, &values, |i| valid[i], flag)
-                .map_err(|m| err(Some((*column).into()), format!("{}: {m}", describe(column, ch))))?;
+            (values, _) = fill_gaps(&t_ch, &values, |i| valid[i], flag).map_err(channel_err)?;
             channel_notes.push(format!(
                 "`{column}` ({}): {invalid} of {} samples marked invalid by the logger, filled from its valid samples ({})",
                 describe(column, ch),
@@ -537,9 +522,7 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
             }
             None => (units::bare(&ch.unit), renamed),
         };
-        match reading(column, unit, renamed)
-            .map_err(|m| err(Some((*column).into()), format!("{}: {m}", describe(column, ch))))?
-        {
+        match reading(column, unit, renamed).map_err(channel_err)? {
             Reading::Own => {}
             Reading::Convert(c) => {
                 values.iter_mut().for_each(|v| *v = c.apply(*v));
@@ -560,22 +543,13 @@ pub fn read_mf4(path: &Path, plant: Option<Plant>, map: Option<&ChannelMap>) -> 
                 ));
             }
             match &uniform {
-                Some((grid, _)) => {
-                    resample(&t_s, &values, grid, flag)
-                        .map_err(|m| err(Some((*column).into()), format!("{}: {m}", describe(column, ch))))?
-                        .0
-                }
+                Some((grid, _)) => resample(&t_s, &values, grid, flag).map_err(channel_err)?.0,
                 None => values,
             }
         } else {
-            let t_ch = timestamps(&mdf, ch, map, &mut UnitNotes::default()).map_err(|m| {
-                err(
-                    Some((*column).into()),
-                    format!("{}: time base {m}", describe(column, ch)),
-                )
-            })?;
-            let (out, outside) = resample(&t_ch, &values, base, flag)
-                .map_err(|m| err(Some((*column).into()), format!("{}: {m}", describe(column, ch))))?;
+            let t_ch = timestamps(&mdf, ch, map, &mut UnitNotes::default())
+                .map_err(|m| channel_err(format!("time base {m}")))?;
+            let (out, outside) = resample(&t_ch, &values, base, flag).map_err(channel_err)?;
             let rate = rate_hz(&t_ch);
             let mut note = format!(
                 "`{column}` ({}) is in another channel group at {} Hz: resampled onto `{primary}`'s {} Hz time base by {}",
