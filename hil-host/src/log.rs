@@ -8,7 +8,9 @@
 
 pub mod check;
 mod clock;
+mod column_units;
 pub mod csv;
+mod lines;
 mod sparse;
 pub mod units;
 

@@ -6,12 +6,14 @@
 //! [`MAX_LINE_BYTES`] per line, [`MAX_META_LINES`] lines before the header,
 //! [`super::check::MAX_COLUMNS`] columns, [`MAX_ROWS`] data rows.
 
-use std::io::{BufRead, Read};
+use std::io::BufRead;
 
 use super::check::{check_meta, finish, select_columns, MetaEntry, RowLines};
 use super::clock::{clock_ns, ClockColumn};
+use super::column_units::{units_off_names, ColumnUnits};
+use super::lines::Lines;
 use super::sparse::{fill_blanks, is_blank, BLANK_BITS};
-use super::units::{self, reading, Conversion, Reading, UnitNotes};
+use super::units;
 use super::{Log, LogError, Plant};
 
 /// Longest accepted line (bytes, without its line end).
@@ -20,129 +22,6 @@ pub const MAX_LINE_BYTES: usize = 1 << 20;
 pub const MAX_META_LINES: usize = 10_000;
 /// Most data rows (a 20 kHz log of 40 min; an EHVVA log of this length takes 3.2 GB).
 pub const MAX_ROWS: usize = 50_000_000;
-
-/// Reads the file's lines: bounded length, line ends (`\n`, `\r\n`) and a leading UTF-8
-/// byte-order mark removed, UTF-8 checked, blank lines counted. A file whose first line outside
-/// ASCII is not UTF-8 is read as Windows-1252, the code page bench tools and spreadsheets
-/// export in on Windows (`°C` is one byte there, 0xB0, which UTF-8 does not allow alone).
-struct Lines<R: BufRead> {
-    input: R,
-    buf: Vec<u8>,
-    /// The 1-based number of the line in `buf`.
-    number: usize,
-    source: String,
-    crlf: bool,
-    bom: bool,
-    /// A line with bytes outside ASCII that are valid UTF-8 was read (or a byte-order mark):
-    /// the file is UTF-8, and a later invalid byte is an error, not another encoding.
-    utf8_seen: bool,
-    /// The file is read as Windows-1252: the line and byte that UTF-8 does not allow.
-    windows_1252: Option<(usize, u8)>,
-    /// A Windows-1252 line decoded.
-    decoded: String,
-    /// Set once the header is known, so that a bad byte is named by its column.
-    sep: Option<u8>,
-    names: Vec<String>,
-}
-
-impl<R: BufRead> Lines<R> {
-    fn error(&self, column: Option<String>, message: String) -> LogError {
-        LogError {
-            file: self.source.clone(),
-            line: Some(self.number),
-            column,
-            message,
-        }
-    }
-
-    /// The next line, `None` at the end of the input.
-    fn next_line(&mut self) -> Result<Option<(usize, &str)>, LogError> {
-        self.buf.clear();
-        let limit = MAX_LINE_BYTES as u64 + 1;
-        let got = (&mut self.input).take(limit).read_until(b'\n', &mut self.buf);
-        self.number += 1;
-        match got {
-            Err(e) => return Err(self.error(None, format!("cannot read: {e}"))),
-            Ok(0) => return Ok(None),
-            Ok(_) => {}
-        }
-        if self.buf.last() == Some(&b'\n') {
-            self.buf.pop();
-        } else if self.buf.len() > MAX_LINE_BYTES {
-            return Err(self.error(
-                None,
-                format!("line longer than {MAX_LINE_BYTES} bytes (not a log, or a line end is missing)"),
-            ));
-        }
-        if self.buf.last() == Some(&b'\r') {
-            self.buf.pop();
-            self.crlf = true;
-        }
-        let mut start = 0;
-        if self.number == 1 {
-            if self.buf.starts_with(&[0xEF, 0xBB, 0xBF]) {
-                start = 3;
-                self.bom = true;
-            } else if self.buf.starts_with(&[0xFF, 0xFE]) || self.buf.starts_with(&[0xFE, 0xFF]) {
-                return Err(self.error(
-                    None,
-                    "UTF-16 text (byte-order mark at the start); save the log as UTF-8".into(),
-                ));
-            }
-        }
-        if self.bom {
-            self.utf8_seen = true;
-        }
-        if !self.buf[start..].is_ascii() {
-            match (std::str::from_utf8(&self.buf[start..]), self.windows_1252) {
-                (Ok(_), None) => self.utf8_seen = true,
-                (Err(e), None) if !self.utf8_seen => {
-                    self.windows_1252 = Some((self.number, self.buf[start + e.valid_up_to()]));
-                }
-                _ => {}
-            }
-            if self.windows_1252.is_some() {
-                // Control bytes and the five bytes Windows-1252 leaves undefined are binary
-                // data, not a bench's text in either encoding.
-                let binary =
-                    |b: u8| matches!(b, 0..=8 | 0x0B | 0x0C | 0x0E..=0x1F | 0x7F | 0x81 | 0x8D | 0x8F | 0x90 | 0x9D);
-                if let Some(at) = self.buf[start..].iter().position(|&b| binary(b)) {
-                    return Err(self.error(
-                        None,
-                        format!(
-                            "not text: byte 0x{:02X} at byte {} of the line is neither UTF-8 nor Windows-1252 text",
-                            self.buf[start + at],
-                            start + at + 1
-                        ),
-                    ));
-                }
-                let (text, _) = encoding_rs::WINDOWS_1252.decode_without_bom_handling(&self.buf[start..]);
-                self.decoded.clear();
-                self.decoded.push_str(&text);
-                return Ok(Some((self.number, &self.decoded)));
-            }
-        }
-        match std::str::from_utf8(&self.buf[start..]) {
-            Ok(s) => Ok(Some((self.number, s))),
-            Err(e) => {
-                let at = start + e.valid_up_to();
-                let column = self.sep.and_then(|sep| {
-                    let cell = self.buf[start..at].iter().filter(|&&b| b == sep).count();
-                    self.names.get(cell).cloned()
-                });
-                Err(self.error(
-                    column,
-                    format!(
-                        "not valid UTF-8 (byte 0x{:02X} at byte {} of the line) in a file that is UTF-8 (its \
-                         byte-order mark or an earlier line): it mixes encodings",
-                        self.buf[at],
-                        at + 1
-                    ),
-                ))
-            }
-        }
-    }
-}
 
 /// A cell of a split line: a byte range of the line (inside the quotes for a quoted cell).
 #[derive(Clone, Copy, Debug)]
@@ -362,154 +241,6 @@ fn number(cell: &str, decimal_comma: bool) -> Option<f64> {
     s.parse().ok()
 }
 
-/// The unit a bench writes into its own column name, `Zeit [ms]` or `p_Rail (bar)`: the
-/// text of a trailing bracket pair, if any.
-fn unit_in_name(name: &str) -> Option<&str> {
-    split_unit(name).map(|(_, unit)| unit)
-}
-
-/// A name with a unit in a trailing bracket pair split into (the name before it, the unit).
-fn split_unit(name: &str) -> Option<(&str, &str)> {
-    let s = name.trim_end();
-    let (open, close) = match s.chars().last()? {
-        ']' => ('[', ']'),
-        ')' => ('(', ')'),
-        _ => return None,
-    };
-    let at = s.rfind(open)?;
-    let inner = s[at + open.len_utf8()..s.len() - close.len_utf8()].trim();
-    Some((s[..at].trim_end(), inner)).filter(|(_, u)| !u.is_empty())
-}
-
-/// Columns whose names carry their unit, `t_s [s]`, `lift_mm (mm)`: the DATA-FORMAT name with
-/// the unit taken off (where the header has not that name already), and the units, per header
-/// column.
-fn units_off_names(plant: Plant, mut names: Vec<String>) -> (Vec<String>, Vec<Option<String>>) {
-    let known: Vec<&str> = plant.column_names().collect();
-    let mut unit_named: Vec<Option<String>> = vec![None; names.len()];
-    for i in 0..names.len() {
-        let Some((bare, unit)) =
-            split_unit(&names[i]).filter(|(b, _)| !known.contains(&names[i].as_str()) && known.contains(b))
-        else {
-            continue;
-        };
-        if names.iter().any(|n| n == bare) {
-            continue;
-        }
-        let (bare, unit) = (bare.to_string(), unit.to_string());
-        unit_named[i] = Some(unit);
-        names[i] = bare;
-    }
-    (names, unit_named)
-}
-
-/// How each kept column's recorded values become the column's, per slot of the selection:
-/// from a unit in the column's name, the channel map's `[units]` (which win) and the units
-/// row, whichever the file and the map give.
-struct ColumnUnits {
-    conversions: Vec<Option<Conversion>>,
-    /// The unit the header or the map states for the slot: a units row is checked against it.
-    recorded: Vec<Option<String>>,
-    /// Whether the map states it (a units row that says otherwise is overruled, with a notice).
-    stated: Vec<bool>,
-    notes: UnitNotes,
-}
-
-impl ColumnUnits {
-    /// From the header: `original` and `renamed` per header column (the file's names, and
-    /// whether the channel map renamed them), `unit_named` from [`units_off_names`], `map_units`
-    /// the map's `[units]`. `err` names a column's error.
-    fn from_header(
-        sel: &super::check::Selection,
-        original: &[String],
-        renamed: &[bool],
-        unit_named: &[Option<String>],
-        map_units: &[(String, String)],
-        err: impl Fn(&str, String) -> LogError,
-    ) -> Result<Self, LogError> {
-        let n = sel.order.len();
-        let mut u = ColumnUnits {
-            conversions: vec![None; n],
-            recorded: vec![None; n],
-            stated: vec![false; n],
-            notes: UnitNotes::default(),
-        };
-        for (i, slot) in sel.keep.iter().enumerate() {
-            let Some(slot) = *slot else { continue };
-            let column = &sel.order[slot];
-            let (unit, renamed) = match (&unit_named[i], renamed[i]) {
-                // The DATA-FORMAT name with its unit: the name states the unit, as without it.
-                (Some(unit), _) => (unit.as_str(), false),
-                // Renamed by the map from the bench's own name, which may carry the unit.
-                (None, true) => match unit_in_name(&original[i]) {
-                    Some(unit) => (unit, true),
-                    None => continue,
-                },
-                (None, false) => continue,
-            };
-            match reading(column, unit, renamed).map_err(|m| err(column, format!("column `{}`: {m}", original[i])))? {
-                Reading::Own => {}
-                Reading::Convert(c) => {
-                    u.conversions[slot] = Some(c);
-                    u.notes.converted(&format!("`{column}`"), unit, &c, "");
-                }
-                Reading::Assumed => u.notes.assumed(column, unit),
-            }
-            u.recorded[slot] = Some(unit.to_string());
-        }
-        for (column, unit) in map_units {
-            let Some(slot) = sel.order.iter().position(|c| c == column) else {
-                continue;
-            };
-            u.notes.forget(column);
-            // Checked when the map was read.
-            u.conversions[slot] = match reading(column, unit, true) {
-                Ok(Reading::Convert(c)) => {
-                    u.notes
-                        .converted(&format!("`{column}`"), unit, &c, ", as the channel map states");
-                    Some(c)
-                }
-                _ => None,
-            };
-            u.recorded[slot] = Some(unit.clone());
-            u.stated[slot] = true;
-        }
-        Ok(u)
-    }
-
-    /// A units row's (on `line`) `unit` under the column `name` (slot `slot`, the header's
-    /// `original` name, renamed by the map or not): checked against what the header or the map
-    /// state, else read. A notice where the map overrules it.
-    fn units_row_cell(
-        &mut self,
-        (slot, name, original): (usize, &str, &str),
-        unit: &str,
-        renamed: bool,
-        line: usize,
-    ) -> Result<Option<String>, String> {
-        if let Some(recorded) = &self.recorded[slot] {
-            return match (self.stated[slot], recorded == unit) {
-                (_, true) => Ok(None),
-                (true, false) => Ok(Some(format!(
-                    "`{name}` read in {recorded} as the channel map states; the units row (line {line}) says {unit}"
-                ))),
-                (false, false) => Err(format!(
-                    "unit `{unit}` in the units row, but the column's name `{original}` says `{recorded}`"
-                )),
-            };
-        }
-        match reading(name, unit, renamed).map_err(|m| format!("units row: {m}"))? {
-            Reading::Own => {}
-            Reading::Convert(c) => {
-                self.conversions[slot] = Some(c);
-                self.notes.converted(&format!("`{name}`"), unit, &c, "");
-            }
-            Reading::Assumed => self.notes.assumed(name, unit),
-        }
-        Ok(None)
-    }
-}
-
 /// Reads a CSV log from `input`, checking it whole; `source` names it in errors.
 /// `plant_override` (from `--plant`) wins over `# plant:`.
 pub fn read_csv(source: &str, input: impl BufRead, plant_override: Option<Plant>) -> Result<Log, LogError> {
@@ -623,19 +354,7 @@ pub fn read_csv_sized(
     size_hint: Option<u64>,
     renames: Option<Renames<'_>>,
 ) -> Result<Log, LogError> {
-    let mut lines = Lines {
-        input,
-        buf: Vec::new(),
-        number: 0,
-        source: source.to_string(),
-        crlf: false,
-        bom: false,
-        utf8_seen: false,
-        windows_1252: None,
-        decoded: String::new(),
-        sep: None,
-        names: Vec::new(),
-    };
+    let mut lines = Lines::new(source, input);
     let err = |line: usize, column: Option<&str>, message: String| LogError {
         file: source.to_string(),
         line: Some(line),
