@@ -101,8 +101,9 @@ pub fn outside_effects(plant: Plant) -> &'static [&'static str] {
         Plant::Evvt => &["command-delay"],
         // The lift stop moves with temperature (thermal growth of the stroke, 0.1-0.2 %/°C).
         Plant::Ehvva => &["thermal-stroke"],
-        // A position-dependent force (a return spring or a cable, 300-900 N/m).
-        Plant::Positioner => &["position-spring"],
+        // A position-dependent force (a return spring or a cable, 300-900 N/m), and a force
+        // ripple periodic in position (a screw's or a motor's cogging, 8-20 N every 5-20 mm).
+        Plant::Positioner => &["position-spring", "force-ripple"],
     }
 }
 

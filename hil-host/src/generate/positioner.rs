@@ -135,14 +135,36 @@ fn validation_reference(rng: &mut Rng, duration_s: f64) -> Vec<f64> {
     r
 }
 
-/// Runs the closed loop; returns (force logged, position logged). `spring` = (N/m, m): a
-/// position-dependent force −k (q − q0) on the load (the outside effect `position-spring`;
-/// k = 0 without it).
+/// Position-dependent forces on the load that the model does not have (outside the catalogue):
+/// a return spring −k (q − q0) (`position-spring`) and a force ripple periodic in position,
+/// A sin(2π q / λ + φ) (`force-ripple`: a screw's or a motor's cogging). Zero without them.
+#[derive(Clone, Copy, Default)]
+struct OutsideForce {
+    spring_n_per_m: f64,
+    spring_rest_m: f64,
+    ripple_n: f64,
+    ripple_pitch_m: f64,
+    ripple_phase_rad: f64,
+}
+
+impl OutsideForce {
+    fn at(&self, pos_m: f64) -> f64 {
+        let ripple = if self.ripple_n == 0.0 {
+            0.0
+        } else {
+            self.ripple_n * (std::f64::consts::TAU * pos_m / self.ripple_pitch_m + self.ripple_phase_rad).sin()
+        };
+        -self.spring_n_per_m * (pos_m - self.spring_rest_m) + ripple
+    }
+}
+
+/// Runs the closed loop; returns (force logged, position logged). `outside` acts on the load
+/// beside the motor force.
 fn run_loop(
     p: &PositionerParams,
     reference: &[f64],
     pulses: &[f64],
-    spring: (f64, f64),
+    outside: OutsideForce,
     rng: &mut Rng,
 ) -> Result<(Vec<f64>, Vec<f64>), String> {
     let ctrl_p = EmpsControllerParams::emps();
@@ -159,7 +181,7 @@ fn run_loop(
         force_log.push(force + FORCE_NOISE_N * rng.normal());
         pos_log.push(pos_meas);
         for _ in 0..SUBSTEPS {
-            plant.step(force - spring.0 * (plant.pos_m() - spring.1), DT_S / SUBSTEPS as f64);
+            plant.step(force + outside.at(plant.pos_m()), DT_S / SUBSTEPS as f64);
         }
     }
     Ok((force_log, pos_log))
@@ -216,16 +238,26 @@ fn generate_parts(parts: &[&str], seed: u64, estimation_s: f64, validation_s: f6
     };
     let mut rng = Rng::new(seed);
     let (params, mut truth) = draw_params(parts, &mut rng);
-    // Outside the catalogue: a return spring about the middle of the travel.
-    let spring = if parts.contains(&"position-spring") {
-        let k = rng.uniform(300.0, 900.0);
-        truth.push(("spring_N_per_m".into(), k));
-        (k, 0.12)
-    } else {
-        (0.0, 0.0)
-    };
+    // Outside the catalogue: a return spring about the middle of the travel, a force ripple
+    // (each drawn only where hidden, so the other draws stay those of its seed).
+    let mut outside = OutsideForce::default();
+    if parts.contains(&"position-spring") {
+        outside.spring_n_per_m = rng.uniform(300.0, 900.0);
+        outside.spring_rest_m = 0.12;
+        truth.push(("spring_N_per_m".into(), outside.spring_n_per_m));
+    }
+    if parts.contains(&"force-ripple") {
+        // A ball screw's lead is 5-20 mm; the ripple a few percent of the motor's force range,
+        // comparable to the Coulomb friction.
+        outside.ripple_n = rng.uniform(8.0, 20.0);
+        outside.ripple_pitch_m = rng.uniform(0.005, 0.02);
+        outside.ripple_phase_rad = rng.uniform(0.0, std::f64::consts::TAU);
+        truth.push(("ripple_N".into(), outside.ripple_n));
+        truth.push(("ripple_pitch_m".into(), outside.ripple_pitch_m));
+        truth.push(("ripple_phase_rad".into(), outside.ripple_phase_rad));
+    }
     let est_ref = estimation_reference(&mut rng, estimation_s);
-    let (ef, ep) = run_loop(&params, &est_ref, &[], spring, &mut rng)?;
+    let (ef, ep) = run_loop(&params, &est_ref, &[], outside, &mut rng)?;
     let val_ref = validation_reference(&mut rng, validation_s);
     // Force pulses on the controller output: 50 ms, ±40..120 N, every 1-2 s.
     let mut pulses = vec![0.0; val_ref.len()];
@@ -237,7 +269,7 @@ fn generate_parts(parts: &[&str], seed: u64, estimation_s: f64, validation_s: f6
         }
         k += (rng.uniform(1.0, 2.0) / DT_S) as usize;
     }
-    let (vf, vp) = run_loop(&params, &val_ref, &pulses, spring, &mut rng)?;
+    let (vf, vp) = run_loop(&params, &val_ref, &pulses, outside, &mut rng)?;
     Ok(Case {
         plant: Plant::Positioner,
         seed,
