@@ -53,16 +53,33 @@ pub const EFFECTS: [&str; 4] = EvvtEffect::NAMES;
 /// Physics outside the catalogue the EVVT diagnosis tests for: a transport delay of the motor
 /// command (driver or bus latency). A second-order model absorbs a delay of tens of ms into
 /// lower α and β at a remainder close to the floor, so the remainder alone does not show it.
-pub const PROBES: [Probe; 1] = [Probe {
-    name: "command-delay",
-    what: "a transport delay of the motor command (driver or bus latency between the ECU's command and the phaser)",
-    // A delay of one log sample (the control period) or more is physics; the quantized
-    // phase (1 deg) dominates the remainder, so a 30-40 ms delay gains only 2-4 % RMSE.
-    min_samples: Some(1.0),
-}];
+///
+/// And a clearance between the phaser's drive and the camshaft (gear backlash: Section IV-C
+/// puts the bench's 1-degree spikes down to it): after each reversal the cam stands still
+/// until the drive has crossed the clearance. Under the 1-degree phase resolution a model
+/// without it leaves a remainder that follows the command's direction, often within twice
+/// the quantization floor.
+pub const PROBES: [Probe; 2] = [
+    Probe {
+        name: "command-delay",
+        what: "a transport delay of the motor command (driver or bus latency between the ECU's command and the phaser)",
+        // A delay of one log sample (the control period) or more is physics; the quantized
+        // phase (1 deg) dominates the remainder, so a 30-40 ms delay gains only 2-4 % RMSE.
+        min_samples: Some(1.0),
+    },
+    Probe {
+        name: "gear-backlash",
+        what: "a clearance between the phaser's drive and the camshaft (gear or belt backlash: after each reversal the cam phase stands still until the drive has crossed it)",
+        min_samples: None,
+    },
+];
 
 /// The longest command delay the probe fits, s.
 const PROBE_MAX_DELAY_S: f64 = 0.5;
+
+/// The widest drive-to-cam clearance the backlash probe fits, crank deg (a tenth of the
+/// phaser's 40-degree range).
+const PROBE_MAX_BACKLASH_DEG: f64 = 4.0;
 
 /// Settings of the family.
 #[derive(Debug)]
@@ -540,13 +557,27 @@ impl Family for EvvtFamily {
         &PROBES
     }
 
-    /// The command-delay probe: the final model with a transport delay of the motor command
-    /// (linear between samples, 0-0.5 s), every parameter refitted from the final model's
-    /// optimum; the delay starts at the best of a coarse grid with those parameters.
+    /// The probes: the final model with a transport delay of the motor command (linear
+    /// between samples, 0-0.5 s) or with a drive-to-cam clearance (0-4 crank deg), every
+    /// parameter refitted from the final model's optimum; the probe's value starts at the best
+    /// of a coarse grid with those parameters.
     fn fit_probe(&self, probe: &str, effects: &[&str], parent: &Fit, est: &Log, val: &Log) -> Result<Fit, String> {
-        if probe != PROBES[0].name {
+        let (grid, max, name): (&[f64], f64, &str) = if probe == PROBES[0].name {
+            (
+                &[0.0, 0.01, 0.02, 0.04, 0.08, 0.16, 0.32],
+                PROBE_MAX_DELAY_S,
+                "command_delay_s",
+            )
+        } else if probe == PROBES[1].name {
+            (
+                &[0.0, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0],
+                PROBE_MAX_BACKLASH_DEG,
+                "backlash_deg",
+            )
+        } else {
             return Err(format!("no probe `{probe}` for the EVVT"));
-        }
+        };
+        let is_delay = probe == PROBES[0].name;
         let (effects, de, dv, ctx) = self.prepare(effects, est, val)?;
         let mut x0: Vec<f64> = parent.internal.iter().map(|(_, v)| *v).collect();
         if x0.len() < 2 {
@@ -561,27 +592,35 @@ impl Family for EvvtFamily {
         }
         x0.truncate(lo.len());
         let with_delay = |x: &[f64]| {
-            let (delay, rest) = x.split_last().unwrap_or((&0.0, x));
-            Model {
-                cmd_delay_s: *delay,
-                ..model_from(&effects, rest, &ctx)
+            let (value, rest) = x.split_last().unwrap_or((&0.0, x));
+            let m = model_from(&effects, rest, &ctx);
+            if is_delay {
+                Model {
+                    cmd_delay_s: *value,
+                    ..m
+                }
+            } else {
+                Model {
+                    backlash_deg: *value,
+                    ..m
+                }
             }
         };
         let mut out = vec![0.0; de.y.len()];
         let mut start = (f64::INFINITY, 0.0);
-        for delay_s in [0.0, 0.01, 0.02, 0.04, 0.08, 0.16, 0.32] {
+        for &value in grid {
             let mut x = x0.clone();
-            x.push(delay_s);
+            x.push(value);
             if sim_error(&with_delay(&x), &de, &mut out).is_ok() {
                 let cost = out.iter().map(|e| e * e).sum::<f64>();
                 if cost < start.0 {
-                    start = (cost, delay_s);
+                    start = (cost, value);
                 }
             }
         }
         x0.push(start.1);
         lo.push(0.0);
-        hi.push(PROBE_MAX_DELAY_S);
+        hi.push(max);
         let r = self.solve_built(
             &with_delay,
             &de,
@@ -593,7 +632,7 @@ impl Family for EvvtFamily {
         )?;
         let predicted = self.predict(&with_delay(&r.x), &dv)?;
         let mut names = Self::report_names(&effects, &ctx);
-        names.push("command_delay_s".into());
+        names.push(name.into());
         let params: Vec<(String, f64)> = names.iter().cloned().zip(r.x.iter().copied()).collect();
         let measured = Fit::shared_measured(Some(parent), dv.y);
         let mut fit = Fit::with_shared(

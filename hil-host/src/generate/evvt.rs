@@ -321,16 +321,29 @@ struct Run {
     phase: Vec<f64>,
 }
 
+/// Physics outside the catalogue between the controller and the cam (none by default).
+#[derive(Clone, Copy, Debug, Default)]
+struct Outside {
+    /// The plant moves with the command of this many periods earlier (the outside effect
+    /// `command-delay`; the log shows the command as sent).
+    delay: usize,
+    /// Clearance between the phaser's drive and the camshaft, crank deg (the outside effect
+    /// `gear-backlash`): the cam follows the drive only once the clearance is taken up, so
+    /// after each reversal of the drive the measured phase stands still.
+    backlash_deg: f64,
+}
+
 /// Runs the bench: each sample the controller reads the quantized phase and commands the
-/// motor; the plant moves for one period with the command of `delay` periods earlier (0: that
-/// command; the outside effect `command-delay`; the log shows the command as sent).
-fn run_loop_delayed(
+/// motor; the plant moves for one period with the command, as `outside` has it.
+fn run_bench(
     p: &EvvtParams,
     points: &[Point],
     point_samples: usize,
     reference: &[f64],
-    delay: usize,
+    outside: Outside,
 ) -> Result<Run, String> {
+    let delay = outside.delay;
+    let half_clearance = 0.5 * outside.backlash_deg;
     let n = reference.len();
     let initial = reference
         .first()
@@ -352,13 +365,21 @@ fn run_loop_delayed(
         reference: reference.to_vec(),
         phase: Vec::with_capacity(n),
     };
+    let mut cam = plant.phase_deg();
     for (k, &r) in reference.iter().enumerate() {
         let pt = points
             .get(k / point_samples.max(1))
             .or(points.last())
             .copied()
             .ok_or("no operating points")?;
-        let measured = plant.measured_phase_deg();
+        let measured = if half_clearance > 0.0 {
+            // The cam sits anywhere within the clearance; the drive pushes it at either flank.
+            let drive = plant.phase_deg();
+            cam = cam.clamp(drive - half_clearance, drive + half_clearance);
+            quantize_phase_deg(cam, PHASE_RESOLUTION_DEG)
+        } else {
+            plant.measured_phase_deg()
+        };
         let out = ctrl.update(
             &EvvtPhaseInputs {
                 setpoint_deg: r,
@@ -441,16 +462,21 @@ fn generate_parts(parts: &[&str], seed: u64, sizes: &Sizes) -> Result<Case, Stri
     let val_points = validation_points(&mut rng, sizes.validation_points.max(1));
     let val_per_point = (sizes.validation_point_s / DT_S).round().max(1.0) as usize;
     let val_ref = step_ramp_reference(&mut rng, val_per_point * val_points.len());
-    // Outside the catalogue: a command delay, drawn last.
-    let delay = if parts.contains(&"command-delay") {
-        let d = (rng.uniform(0.03, 0.06) / DT_S).round() as usize;
-        truth.push(("command_delay_s".into(), d as f64 * DT_S));
-        d
-    } else {
-        0
-    };
-    let est = run_loop_delayed(&est_params, &est_points, est_per_point, &est_ref, delay)?;
-    let val = run_loop_delayed(&val_params, &val_points, val_per_point, &val_ref, delay)?;
+    // Outside the catalogue, drawn last (each only where hidden, so the other draws stay
+    // those of its seed): a command delay, a clearance in the phaser's gears.
+    let mut outside = Outside::default();
+    if parts.contains(&"command-delay") {
+        outside.delay = (rng.uniform(0.03, 0.06) / DT_S).round() as usize;
+        truth.push(("command_delay_s".into(), outside.delay as f64 * DT_S));
+    }
+    if parts.contains(&"gear-backlash") {
+        // Section IV-C blames the 1-degree spikes of the bench's responses on backlash
+        // between the gears and the belt: a clearance of 1.5-3 crank degrees.
+        outside.backlash_deg = rng.uniform(1.5, 3.0);
+        truth.push(("backlash_deg".into(), outside.backlash_deg));
+    }
+    let est = run_bench(&est_params, &est_points, est_per_point, &est_ref, outside)?;
+    let val = run_bench(&val_params, &val_points, val_per_point, &val_ref, outside)?;
     Ok(Case {
         plant: Plant::Evvt,
         seed,

@@ -97,8 +97,9 @@ pub fn outside_effects(plant: Plant) -> &'static [&'static str] {
     match plant {
         // The valve acts on the commanded duty 60-150 ms late (a long pneumatic line).
         Plant::Vacuum => &["duty-delay"],
-        // The motor follows its command 30-60 ms late (driver and CAN latency).
-        Plant::Evvt => &["command-delay"],
+        // The motor follows its command 30-60 ms late (driver and CAN latency); a clearance of
+        // 1.5-3 crank degrees between the phaser's drive and the camshaft.
+        Plant::Evvt => &["command-delay", "gear-backlash"],
         // The lift stop moves with temperature (thermal growth of the stroke, 0.1-0.2 %/°C).
         Plant::Ehvva => &["thermal-stroke"],
         // A position-dependent force (a return spring or a cable, 300-900 N/m), and a force

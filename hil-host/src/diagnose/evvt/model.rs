@@ -32,6 +32,10 @@ pub(super) struct Model {
     /// Transport delay between the controller's command and the phaser, s (the
     /// command-delay probe only; 0 in every catalogue model).
     pub(super) cmd_delay_s: f64,
+    /// Clearance between the phaser's drive and the camshaft, crank deg (the gear-backlash
+    /// probe only; 0 in every catalogue model): the measured cam phase follows the model's
+    /// phase only once the clearance is taken up.
+    pub(super) backlash_deg: f64,
 }
 
 impl Model {
@@ -52,6 +56,7 @@ impl Model {
             belt_cos: 0.0,
             belt_sin: 0.0,
             cmd_delay_s: 0.0,
+            backlash_deg: 0.0,
         }
     }
 
@@ -91,6 +96,9 @@ pub(super) fn simulate(m: &Model, d: &Data, out: &mut [f64]) -> Result<(), Strin
     };
     let b0 = if belt_on { m.belt_deg(0.0) } else { 0.0 };
     let mut x1 = (d.y[0] - b0).clamp(d.stop_lo, d.stop_hi);
+    // The cam within the clearance (the play's half width each side of the drive's phase).
+    let half_play = 0.5 * m.backlash_deg.max(0.0);
+    let mut cam = x1 + b0;
     let mut x2 = 0.0;
     let mut u_held = 0.0;
     let mut key = (f64::NAN, f64::NAN);
@@ -108,9 +116,15 @@ pub(super) fn simulate(m: &Model, d: &Data, out: &mut [f64]) -> Result<(), Strin
         if let Drive::OpenLoop { window } = d.drive {
             if k % window == 0 {
                 x1 = (d.y[k] - b).clamp(d.stop_lo, d.stop_hi);
+                cam = x1 + b;
             }
         }
-        let phase = x1 + b;
+        let phase = if half_play > 0.0 {
+            cam = cam.clamp(x1 + b - half_play, x1 + b + half_play);
+            cam
+        } else {
+            x1 + b
+        };
         *slot = phase;
         let u = match d.drive {
             Drive::ClosedLoop { kp, cmd_max, hold } => {
