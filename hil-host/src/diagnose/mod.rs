@@ -82,6 +82,14 @@ pub trait Family {
     fn fit_probe(&self, probe: &str, _effects: &[&str], _parent: &Fit, _est: &Log, _val: &Log) -> Result<Fit, String> {
         Err(format!("no probe `{probe}` in this family"))
     }
+    /// Whether, with a probe found, the catalogue effects not selected are tried again with the
+    /// probe's physics in every model ([`probes::causes_beside`]): outside physics that
+    /// dominates the remainder can hide a catalogue effect's gain. Only for a family whose
+    /// [`Self::fit_probe`] fits any set of effects with the probe (its result independent of
+    /// the parent given).
+    fn selects_beside_probes(&self) -> bool {
+        false
+    }
     /// Whether a model may also be started from another model it nests than its parent (the
     /// same effects but one of the parent's, an effect that competed with the parent's in an
     /// earlier round), passed to [`Self::fit`] as `parent` with the effects reordered so that

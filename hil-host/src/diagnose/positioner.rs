@@ -31,11 +31,21 @@ const NESTED: [(&str, &str); 1] = [(
 /// load's position (a screw's lead, a motor's cogging). Its ripple passes the moving load at a
 /// rate that rises with speed, so the residual's second differences count much of it as sensor
 /// noise and the floor rises with it: the remainder alone can stay within twice that floor.
-pub const PROBES: [Probe; 1] = [Probe {
-    name: "force-ripple",
-    what: "a force periodic in the load's position (a screw's lead or a motor's cogging: the remainder repeats along the travel)",
-    min_samples: None,
-}];
+///
+/// And a force proportional to the position (a return spring, a cable chain, a bellows):
+/// the IDIM-LS model has no position term, so its remainder follows the position.
+pub const PROBES: [Probe; 2] = [
+    Probe {
+        name: "force-ripple",
+        what: "a force periodic in the load's position (a screw's lead or a motor's cogging: the remainder repeats along the travel)",
+        min_samples: None,
+    },
+    Probe {
+        name: "position-spring",
+        what: "a force proportional to the load's position (a return spring, a cable chain or bellows pulling the load towards one point of the travel)",
+        min_samples: None,
+    },
+];
 
 /// The shortest ripple pitch the probe looks for, m (finer than a screw's lead or a motor's
 /// pole pitch; below it the encoder's and the filters' own errors repeat too).
@@ -311,13 +321,19 @@ impl Family for PositionerFamily {
         &PROBES
     }
 
-    /// The final model's regression plus a sinusoid in the filtered position, A sin(2π q/λ + φ)
+    /// Every probe fit is one linear regression of any effects with the probe's columns.
+    fn selects_beside_probes(&self) -> bool {
+        true
+    }
+
+    /// `position-spring`: the final model's regression plus the filtered position.
+    /// `force-ripple`: the final model's regression plus a sinusoid in the filtered position, A sin(2π q/λ + φ)
     /// as its sine and cosine columns (linear in them), at the pitch λ where the final model's
     /// estimation residual is most periodic in position: a periodogram over the decimated
     /// positions (pitches from 1 mm to half the travel, so that a force rising along the
     /// travel, a spring, is not taken for a ripple), refined by golden section.
     fn fit_probe(&self, probe: &str, effects: &[&str], _parent: &Fit, est: &Log, val: &Log) -> Result<Fit, String> {
-        if probe != PROBES[0].name {
+        if !PROBES.iter().any(|p| p.name == probe) {
             return Err(format!("no probe `{probe}` for the positioner"));
         }
         let effect = model_of(effects)?;
@@ -325,6 +341,20 @@ impl Family for PositionerFamily {
         let (fe, fv) = (1.0 / est.dt_s, 1.0 / val.dt_s);
         let (mut cols, mut names, y) = self.columns(&me, effect, fe)?;
         let (mut vcols, _, vy) = self.columns(&mv, effect, fv)?;
+        if probe == PROBES[1].name {
+            // k (q − q0): the position column, and the offset column for k q0 where the model
+            // has none (asymmetric friction's Coulomb levels hold the offset only while the
+            // load moves, and a spring pulls a load at rest too).
+            cols.push(self.decimate(&me.pos, fe)?);
+            vcols.push(self.decimate(&mv.pos, fv)?);
+            names.push("spring_N_per_m".into());
+            if !names.iter().any(|n| n == "offset_N") {
+                cols.push(self.decimate(&vec![1.0; me.pos.len()], fe)?);
+                vcols.push(self.decimate(&vec![1.0; mv.pos.len()], fv)?);
+                names.push("spring_rest_force_N".into());
+            }
+            return regress(&format!("probe: {probe}"), (cols, names, y), (vcols, vy));
+        }
         let theta = linear_lsq(&cols, &y).ok_or("the regressors are linearly dependent")?;
         let resid: Vec<f64> = (0..y.len())
             .map(|i| y[i] - cols.iter().zip(&theta).map(|(c, t)| c[i] * t).sum::<f64>())
@@ -495,6 +525,39 @@ mod tests {
         }
         // A travel too short for two of the shortest pitches has no periodogram.
         assert_eq!(ripple_pitch(&[1.0, 2.0, 3.0], &[0.0, 0.001, 0.0015]), None);
+    }
+
+    /// A return spring hides the friction: without it in the model, Coulomb friction gains a
+    /// few per cent of the spring's remainder and was not named (seed 2024: no cause). The
+    /// spring probe measures the spring, and beside it the friction is named, asymmetric
+    /// friction too (`probes::causes_beside`); the verdict stays `unexplained`.
+    #[test]
+    fn friction_beside_a_spring_is_named_and_the_spring_measured() {
+        let family = PositionerFamily::default();
+        for (effect, seed, named) in [
+            ("coulomb-friction+position-spring", 2024, "coulomb-friction"),
+            ("asymmetric-friction+position-spring", 11, "asymmetric-friction"),
+        ] {
+            let case = generate::generate(Plant::Positioner, effect, seed).unwrap();
+            let (est, val) = case.logs().unwrap();
+            let d = diagnose::diagnose(&family, &est, &val, false, &Rules::default(), &mut |_| {}).unwrap();
+            assert_eq!(d.causes, [named], "{effect}: {:?}", d.evidence);
+            assert_eq!(d.verdict, "unexplained");
+            assert!(d
+                .evidence
+                .iter()
+                .any(|e| e.starts_with("beside the probe `position-spring`") && e.ends_with(": named")));
+            let text = d
+                .evidence
+                .iter()
+                .find(|e| e.starts_with("a force proportional to the load's position"))
+                .unwrap();
+            let at = text.find("spring_N_per_m = ").unwrap() + 17;
+            let k: f64 = text[at..].split([',', ')']).next().unwrap().parse().unwrap();
+            let truth = case.truth.iter().find(|(n, _)| n == "spring_N_per_m").unwrap().1;
+            // Measured on top of the catalogue model without the friction: within 15 %.
+            assert!((k / truth - 1.0).abs() < 0.15, "{text}: truth {truth}");
+        }
     }
 
     /// On a generated unit with a force ripple the probe recovers its amplitude and pitch and

@@ -3,6 +3,7 @@
 //! the selection's rules.
 use super::{improvement_z_of, Family, Fit, FitProbe, Rules};
 use crate::log::Log;
+use std::cmp::Ordering;
 
 /// A test for physics outside the catalogue: after the selection, the final model with this
 /// physics added is fitted; if it beats the final model by the selection's rules, the verdict
@@ -124,4 +125,129 @@ pub(super) fn cause_not_needed(
             found.probe.name, without.rmse
         )
     })
+}
+
+/// Causes beside outside physics ([`Family::selects_beside_probes`]): with `found`, the
+/// forward selection is run again with the probe's physics in every model, from the probe
+/// fitted on the `baseline`: each catalogue effect not yet selected is fitted with the probe
+/// and the selected effects and added by the selection's rules over the probe's model so far
+/// (gain ≥ `min_gain_pct`, z ≥ `min_z`; of two nested effects the simpler unless the richer
+/// adds `nested_margin_pct` points of the probe-on-baseline RMSE; the richer replaces a
+/// selected simpler one only by that margin), until none is eligible. Its causes replace the
+/// first selection's: outside physics that dominates the remainder hides a catalogue effect's
+/// gain (a spring of a few hundred N/m over a 0.2 m travel leaves a Coulomb friction's 10-20 N
+/// a few per cent of the remainder), and a catalogue effect can take part of the outside
+/// physics (friction takes a duty delay's lag into a dead band). Returns the causes, or `None`
+/// where the probe cannot be fitted on the baseline (the first selection stands).
+#[allow(clippy::too_many_arguments)]
+pub(super) fn causes_beside(
+    family: &dyn Family,
+    rules: &Rules,
+    baseline: &Fit,
+    found: &Found,
+    fit_probe: &FitProbe,
+    (index, total): (&mut usize, &mut usize),
+    evidence: &mut Vec<String>,
+) -> Option<Vec<&'static str>> {
+    *total += 1;
+    *index += 1;
+    let mut base = match fit_probe(found.probe.name, &[], baseline, *index, *total) {
+        Ok(f) => f,
+        Err(err) => {
+            evidence.push(format!(
+                "the probe `{}` could not be fitted on the baseline: {err}",
+                found.probe.name
+            ));
+            return None;
+        }
+    };
+    let reference = base.rmse.max(f64::MIN_POSITIVE);
+    let mut selected: Vec<&'static str> = Vec::new();
+    for _ in 0..family.effects().len() {
+        let nested_in_selected = |e: &str| {
+            family
+                .nested()
+                .iter()
+                .any(|(simple, rich)| selected.contains(rich) && e == *simple)
+        };
+        let remaining: Vec<&'static str> = family
+            .effects()
+            .iter()
+            .copied()
+            .filter(|e| !selected.contains(e) && !nested_in_selected(e))
+            .collect();
+        *total += remaining.len();
+        let mut candidates: Vec<(&'static str, Fit, f64, f64)> = Vec::new();
+        for e in remaining {
+            *index += 1;
+            // A richer effect replaces its selected simpler one (the model holds one of them).
+            let mut effects: Vec<&str> = selected
+                .iter()
+                .copied()
+                .filter(|s| !family.nested().iter().any(|(simple, rich)| *rich == e && s == simple))
+                .collect();
+            effects.push(e);
+            match fit_probe(found.probe.name, &effects, &base, *index, *total) {
+                Ok(f) => {
+                    let gain_pct = 100.0 * (base.rmse - f.rmse) / base.rmse.max(f64::MIN_POSITIVE);
+                    let z = improvement_z_of(&base, &f);
+                    candidates.push((e, f, gain_pct, z));
+                }
+                Err(err) => evidence.push(format!(
+                    "`{e}` beside the probe `{}` could not be fitted: {err}",
+                    found.probe.name
+                )),
+            }
+        }
+        let eligible = |c: &&(&str, Fit, f64, f64)| c.2 >= rules.min_gain_pct && c.3 >= rules.min_z;
+        for (e, f, gain_pct, z) in candidates.iter().filter(|c| !eligible(c)) {
+            evidence.push(format!(
+                "`{e}` beside the probe `{}`: {gain_pct:.1} % (z = {z:.1}, validation RMSE {:.4}): not named",
+                found.probe.name, f.rmse
+            ));
+        }
+        let Some(mut best) = candidates
+            .iter()
+            .filter(eligible)
+            .min_by(|a, b| a.1.rmse.partial_cmp(&b.1.rmse).unwrap_or(Ordering::Equal))
+        else {
+            break;
+        };
+        for (simple, rich) in family.nested() {
+            if best.0 != *rich {
+                continue;
+            }
+            let margin_over = |rmse: f64| 100.0 * (rmse - best.1.rmse) / reference;
+            if let Some(s) = candidates.iter().filter(eligible).find(|c| c.0 == *simple) {
+                if margin_over(s.1.rmse) < rules.nested_margin_pct {
+                    evidence.push(format!(
+                        "beside the probe `{}`, `{rich}` nests `{simple}` and adds {:.1} points (validation RMSE {:.4} against {:.4}), under the {} point margin: the simpler `{simple}`",
+                        found.probe.name,
+                        margin_over(s.1.rmse),
+                        best.1.rmse,
+                        s.1.rmse,
+                        rules.nested_margin_pct
+                    ));
+                    best = s;
+                }
+            } else if selected.contains(simple) && margin_over(base.rmse) < rules.nested_margin_pct {
+                evidence.push(format!(
+                    "beside the probe `{}`, `{rich}` adds {:.1} points over the selected `{simple}`, under the {} point margin: `{simple}` kept",
+                    found.probe.name,
+                    margin_over(base.rmse),
+                    rules.nested_margin_pct
+                ));
+                return Some(selected);
+            }
+        }
+        let (e, fit, gain_pct, z) = best;
+        evidence.push(format!(
+            "beside the probe `{}`, `{e}` lowers the validation RMSE from {:.4} to {:.4} ({gain_pct:.1} %, z = {z:.1}): named",
+            found.probe.name, base.rmse, fit.rmse
+        ));
+        selected.retain(|s| !family.nested().iter().any(|(simple, rich)| rich == e && s == simple));
+        selected.push(e);
+        base = fit.clone();
+    }
+    Some(selected)
 }

@@ -600,9 +600,46 @@ pub(super) fn diagnose_fits(
         &mut evidence,
     );
 
-    // A single cause next to outside physics: kept only if it still gains with the probe's
-    // physics fitted on the baseline too.
-    if let ([cause], Some(found)) = (selected.as_slice(), probes_found.first()) {
+    // Next to outside physics, the causes are selected again with the probe's physics in every
+    // model (families whose probe fits take any effects); else a single cause is kept only if
+    // it still gains with the probe's physics fitted on the baseline too.
+    let beside = probes_found
+        .first()
+        .filter(|_| family.selects_beside_probes())
+        .and_then(|found| {
+            probes::causes_beside(
+                family,
+                rules,
+                &baseline,
+                found,
+                fit_probe,
+                (&mut index, &mut total),
+                &mut evidence,
+            )
+        });
+    if let Some(causes) = beside {
+        if causes != selected {
+            let said = |c: &[&str]| {
+                if c.is_empty() {
+                    "none".to_string()
+                } else {
+                    c.join(" + ")
+                }
+            };
+            evidence.push(format!(
+                "beside the probe's physics the causes are {} (the selection without it: {})",
+                said(&causes),
+                said(&selected)
+            ));
+            current = baseline.clone();
+            for k in 1..=causes.len() {
+                total += 1;
+                index += 1;
+                current = fit(&causes[..k], Some(&current), index, total)?;
+            }
+            selected = causes;
+        }
+    } else if let ([cause], Some(found)) = (selected.as_slice(), probes_found.first()) {
         if let Some(sentence) =
             probes::cause_not_needed(rules, cause, found, &baseline, fit_probe, (&mut index, &mut total))
         {

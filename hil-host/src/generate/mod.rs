@@ -124,6 +124,19 @@ pub fn effect_pairs(plant: Plant) -> Vec<String> {
     out
 }
 
+/// Cases of a catalogue effect next to physics outside the catalogue (`a+o`): every catalogue
+/// effect with every outside effect of the plant. The catalogue effect is to be named, and the
+/// verdict to be `unexplained`.
+pub fn effects_beside_outside(plant: Plant) -> Vec<String> {
+    let mut out = Vec::new();
+    for a in catalogue::names(plant) {
+        for o in outside_effects(plant) {
+            out.push(format!("{a}+{o}"));
+        }
+    }
+    out
+}
+
 /// The parts of an effect specification: `none`, one effect, or effects joined by `+`, each
 /// in the plant's catalogue or among its outside effects. Unknown names are refused by name.
 pub fn parse_effects(plant: Plant, spec: &str) -> Result<Vec<&'static str>, String> {

@@ -704,6 +704,12 @@ impl Family for VacuumFamily {
         &PROBES
     }
 
+    /// The duty-delay probe fits any set of effects (its start: the parent's values by name,
+    /// a new effect at its neutral value).
+    fn selects_beside_probes(&self) -> bool {
+        true
+    }
+
     /// The duty-delay probe: the final model with a transport delay of the duty (linear
     /// between samples, 0-0.5 s), every parameter refitted from the final model's optimum; the
     /// delay starts at the best of a coarse grid with those parameters and is fitted with the
