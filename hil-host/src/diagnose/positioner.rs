@@ -330,8 +330,8 @@ impl Family for PositionerFamily {
     /// `force-ripple`: the final model's regression plus a sinusoid in the filtered position, A sin(2π q/λ + φ)
     /// as its sine and cosine columns (linear in them), at the pitch λ where the final model's
     /// estimation residual is most periodic in position: a periodogram over the decimated
-    /// positions (pitches from 1 mm to half the travel, so that a force rising along the
-    /// travel, a spring, is not taken for a ripple), refined by golden section.
+    /// positions (pitches from 1 mm to a quarter of the travel, so that a force rising along
+    /// the travel, a spring, is not taken for a ripple), refined by golden section.
     fn fit_probe(&self, probe: &str, effects: &[&str], _parent: &Fit, est: &Log, val: &Log) -> Result<Fit, String> {
         if !PROBES.iter().any(|p| p.name == probe) {
             return Err(format!("no probe `{probe}` for the positioner"));
@@ -439,16 +439,17 @@ impl Family for PositionerFamily {
 }
 
 /// The pitch, m, at which `resid` is most periodic in the positions `pos` (the same samples):
-/// the power of the residual's projection on e^{2πi q/λ} over wavenumbers from two periods in
-/// the travel to [`RIPPLE_MIN_PITCH_M`], on a grid of a quarter of the travel's resolution
-/// (1/travel), the best refined by golden section. `None` for a travel shorter than two of the
+/// the power of the residual's projection on e^{2πi q/λ} over wavenumbers from four periods in
+/// the travel (fewer would take a spring's or a slope's curve for a ripple) to
+/// [`RIPPLE_MIN_PITCH_M`], on a grid of a quarter of the travel's resolution
+/// (1/travel), the best refined by golden section. `None` for a travel shorter than four of the
 /// shortest pitches.
 fn ripple_pitch(resid: &[f64], pos: &[f64]) -> Option<f64> {
     let (lo, hi) = pos
         .iter()
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &q| (a.min(q), b.max(q)));
     let travel = hi - lo;
-    if !(travel > 2.0 * RIPPLE_MIN_PITCH_M) {
+    if !(travel > 4.0 * RIPPLE_MIN_PITCH_M) {
         return None;
     }
     let mean = resid.iter().sum::<f64>() / resid.len().max(1) as f64;
@@ -461,7 +462,7 @@ fn ripple_pitch(resid: &[f64], pos: &[f64]) -> Option<f64> {
         }
         c * c + s * s
     };
-    let (k_lo, k_hi) = (2.0 / travel, 1.0 / RIPPLE_MIN_PITCH_M);
+    let (k_lo, k_hi) = (4.0 / travel, 1.0 / RIPPLE_MIN_PITCH_M);
     let dk = 0.25 / travel;
     let steps = ((k_hi - k_lo) / dk).ceil() as usize;
     let (mut best_k, mut best_p) = (k_lo, f64::NEG_INFINITY);

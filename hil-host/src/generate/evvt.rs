@@ -365,7 +365,7 @@ fn run_bench(
         reference: reference.to_vec(),
         phase: Vec::with_capacity(n),
     };
-    let mut cam = plant.phase_deg();
+    let mut cam = plant.phase_deg() - plant.belt_disturbance_deg();
     for (k, &r) in reference.iter().enumerate() {
         let pt = points
             .get(k / point_samples.max(1))
@@ -374,9 +374,12 @@ fn run_bench(
             .ok_or("no operating points")?;
         let measured = if half_clearance > 0.0 {
             // The cam sits anywhere within the clearance; the drive pushes it at either flank.
-            let drive = plant.phase_deg();
+            // The belt's vibration reaches the cam as before (it is the ring's, measured at the
+            // cam; the clearance is in the phaser's drive).
+            let belt = plant.belt_disturbance_deg();
+            let drive = plant.phase_deg() - belt;
             cam = cam.clamp(drive - half_clearance, drive + half_clearance);
-            quantize_phase_deg(cam, PHASE_RESOLUTION_DEG)
+            quantize_phase_deg(cam + belt, PHASE_RESOLUTION_DEG)
         } else {
             plant.measured_phase_deg()
         };

@@ -96,9 +96,10 @@ pub(super) fn simulate(m: &Model, d: &Data, out: &mut [f64]) -> Result<(), Strin
     };
     let b0 = if belt_on { m.belt_deg(0.0) } else { 0.0 };
     let mut x1 = (d.y[0] - b0).clamp(d.stop_lo, d.stop_hi);
-    // The cam within the clearance (the play's half width each side of the drive's phase).
+    // The cam within the clearance (the play's half width each side of the drive's phase,
+    // the belt's vibration left out).
     let half_play = 0.5 * m.backlash_deg.max(0.0);
-    let mut cam = x1 + b0;
+    let mut cam = x1;
     let mut x2 = 0.0;
     let mut u_held = 0.0;
     let mut key = (f64::NAN, f64::NAN);
@@ -116,12 +117,13 @@ pub(super) fn simulate(m: &Model, d: &Data, out: &mut [f64]) -> Result<(), Strin
         if let Drive::OpenLoop { window } = d.drive {
             if k % window == 0 {
                 x1 = (d.y[k] - b).clamp(d.stop_lo, d.stop_hi);
-                cam = x1 + b;
+                cam = x1;
             }
         }
+        // The belt's vibration reaches the cam past the drive's clearance.
         let phase = if half_play > 0.0 {
-            cam = cam.clamp(x1 + b - half_play, x1 + b + half_play);
-            cam
+            cam = cam.clamp(x1 - half_play, x1 + half_play);
+            cam + b
         } else {
             x1 + b
         };
