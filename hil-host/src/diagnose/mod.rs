@@ -82,11 +82,10 @@ pub trait Family {
     fn fit_probe(&self, probe: &str, _effects: &[&str], _parent: &Fit, _est: &Log, _val: &Log) -> Result<Fit, String> {
         Err(format!("no probe `{probe}` in this family"))
     }
-    /// Whether, with a probe found, the catalogue effects not selected are tried again with the
-    /// probe's physics in every model ([`probes::causes_beside`]): outside physics that
-    /// dominates the remainder can hide a catalogue effect's gain. Only for a family whose
-    /// [`Self::fit_probe`] fits any set of effects with the probe (its result independent of
-    /// the parent given).
+    /// Whether, with a probe found, the causes are selected again with the probe's physics in
+    /// every model ([`probes::causes_beside`]): outside physics that dominates the remainder
+    /// can hide a catalogue effect's gain. Only for a family whose [`Self::fit_probe`] fits any
+    /// set of effects with the probe, an effect the parent lacks from its neutral value.
     fn selects_beside_probes(&self) -> bool {
         false
     }
@@ -493,4 +492,4 @@ pub fn family_for(plant: Plant) -> Result<Box<dyn Family>, String> {
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

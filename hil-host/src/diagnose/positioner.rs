@@ -496,6 +496,7 @@ fn ripple_pitch(resid: &[f64], pos: &[f64]) -> Option<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::diagnose::tests::probe_value;
     use crate::diagnose::{self, Rules};
     use crate::generate;
 
@@ -548,16 +549,10 @@ mod tests {
                 .evidence
                 .iter()
                 .any(|e| e.starts_with("beside the probe `position-spring`") && e.ends_with(": named")));
-            let text = d
-                .evidence
-                .iter()
-                .find(|e| e.starts_with("a force proportional to the load's position"))
-                .unwrap();
-            let at = text.find("spring_N_per_m = ").unwrap() + 17;
-            let k: f64 = text[at..].split([',', ')']).next().unwrap().parse().unwrap();
+            let k = probe_value(&d, PROBES[1].what, "spring_N_per_m");
             let truth = case.truth.iter().find(|(n, _)| n == "spring_N_per_m").unwrap().1;
             // Measured on top of the catalogue model without the friction: within 15 %.
-            assert!((k / truth - 1.0).abs() < 0.15, "{text}: truth {truth}");
+            assert!((k / truth - 1.0).abs() < 0.15, "{k} N/m: truth {truth}");
         }
     }
 
@@ -584,10 +579,7 @@ mod tests {
             assert_eq!(d.verdict, "unexplained");
             let truth = |k: &str| case.truth.iter().find(|(n, _)| n == k).unwrap().1;
             let text = found.expect("the probe's sentence");
-            let value = |k: &str| -> f64 {
-                let at = text.find(&format!("{k} = ")).unwrap() + k.len() + 3;
-                text[at..].split([',', ')']).next().unwrap().parse().unwrap()
-            };
+            let value = |k: &str| probe_value(&d, PROBES[0].what, k);
             assert!((value("ripple_N") / truth("ripple_N") - 1.0).abs() < 0.05, "{text}");
             assert!(
                 (value("ripple_pitch_mm") / (1e3 * truth("ripple_pitch_m")) - 1.0).abs() < 0.02,

@@ -3,7 +3,6 @@
 //! the selection's rules.
 use super::{improvement_z_of, Family, Fit, FitProbe, Rules};
 use crate::log::Log;
-use std::cmp::Ordering;
 
 /// A test for physics outside the catalogue: after the selection, the final model with this
 /// physics added is fitted; if it beats the final model by the selection's rules, the verdict
@@ -219,7 +218,7 @@ pub(super) fn causes_beside(
         let Some(mut best) = candidates
             .iter()
             .filter(eligible)
-            .min_by(|a, b| a.1.rmse.partial_cmp(&b.1.rmse).unwrap_or(Ordering::Equal))
+            .min_by(|a, b| a.1.rmse.total_cmp(&b.1.rmse))
         else {
             break;
         };

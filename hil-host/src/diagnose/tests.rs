@@ -1,5 +1,22 @@
 use super::*;
 
+/// The value `key = v` that a found probe's sentence (the remainder's evidence line starting
+/// with `what`) reports, for the families' probe tests.
+pub(crate) fn probe_value(d: &Diagnosis, what: &str, key: &str) -> f64 {
+    let sentence = d
+        .remainder
+        .evidence
+        .iter()
+        .find(|e| e.starts_with(what))
+        .unwrap_or_else(|| panic!("no `{what}` in {:?}", d.remainder.evidence));
+    sentence
+        .split(&format!("{key} = "))
+        .nth(1)
+        .and_then(|r| r.split([',', ')']).next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("no {key} in {sentence}"))
+}
+
 /// What every written-out test family below shares: a positioner-shaped log, no regressors
 /// for the residual tests.
 macro_rules! written_family_basics {

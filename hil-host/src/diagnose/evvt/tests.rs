@@ -2,6 +2,7 @@
 //! selection on pairs it used to miss, the command-delay and gear-backlash probes, open-loop
 //! windows.
 use super::*;
+use crate::diagnose::tests::probe_value;
 use crate::generate::evvt as gen;
 use model_core::evvt::quantize_phase_deg;
 
@@ -128,18 +129,7 @@ fn the_command_delay_probe_finds_a_delay_and_only_a_delay() {
         assert!(d.causes.is_empty(), "{:?}", d.causes);
         assert_eq!(d.verdict, "unexplained", "seed {seed}");
         let delay_truth = truth(&t, "command_delay_s");
-        let probe = d
-            .remainder
-            .evidence
-            .iter()
-            .find(|e| e.starts_with("a transport delay of the motor command"))
-            .unwrap_or_else(|| panic!("{:?}", d.remainder.evidence));
-        let delay: f64 = probe
-            .split("command_delay_s = ")
-            .nth(1)
-            .and_then(|r| r.split(')').next())
-            .and_then(|v| v.parse().ok())
-            .unwrap();
+        let delay = probe_value(&d, "a transport delay of the motor command", "command_delay_s");
         assert!((delay / delay_truth - 1.0).abs() < 0.15, "{delay} vs {delay_truth}");
     }
     let (est, val, _) = logs("none", 1000);
@@ -167,18 +157,11 @@ fn the_gear_backlash_probe_measures_a_clearance_and_only_a_clearance() {
         let d = crate::diagnose::diagnose(&f, &est, &val, false, &rules, &mut |_| {}).unwrap();
         assert!(d.causes.is_empty(), "{:?}", d.causes);
         assert_eq!(d.verdict, "unexplained", "seed {seed}");
-        let probe = d
-            .remainder
-            .evidence
-            .iter()
-            .find(|e| e.starts_with("a clearance between the phaser's drive and the camshaft"))
-            .unwrap_or_else(|| panic!("{:?}", d.remainder.evidence));
-        let clearance: f64 = probe
-            .split("backlash_deg = ")
-            .nth(1)
-            .and_then(|r| r.split(')').next())
-            .and_then(|v| v.parse().ok())
-            .unwrap();
+        let clearance = probe_value(
+            &d,
+            "a clearance between the phaser's drive and the camshaft",
+            "backlash_deg",
+        );
         let want = truth(&t, "backlash_deg");
         assert!((clearance / want - 1.0).abs() < 0.15, "{clearance} vs {want}");
     }
