@@ -562,22 +562,25 @@ impl Family for EvvtFamily {
     /// parameter refitted from the final model's optimum; the probe's value starts at the best
     /// of a coarse grid with those parameters.
     fn fit_probe(&self, probe: &str, effects: &[&str], parent: &Fit, est: &Log, val: &Log) -> Result<Fit, String> {
-        let (grid, max, name): (&[f64], f64, &str) = if probe == PROBES[0].name {
+        // The probe's value: its start grid, upper bound, name, and where it enters the model.
+        type Enter = fn(Model, f64) -> Model;
+        let (grid, max, name, enter): (&[f64], f64, &str, Enter) = if probe == PROBES[0].name {
             (
                 &[0.0, 0.01, 0.02, 0.04, 0.08, 0.16, 0.32],
                 PROBE_MAX_DELAY_S,
                 "command_delay_s",
+                |m, v| Model { cmd_delay_s: v, ..m },
             )
         } else if probe == PROBES[1].name {
             (
                 &[0.0, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0],
                 PROBE_MAX_BACKLASH_DEG,
                 "backlash_deg",
+                |m, v| Model { backlash_deg: v, ..m },
             )
         } else {
             return Err(format!("no probe `{probe}` for the EVVT"));
         };
-        let is_delay = probe == PROBES[0].name;
         let (effects, de, dv, ctx) = self.prepare(effects, est, val)?;
         let mut x0: Vec<f64> = parent.internal.iter().map(|(_, v)| *v).collect();
         if x0.len() < 2 {
@@ -591,27 +594,16 @@ impl Family for EvvtFamily {
             hi.extend(s.hi);
         }
         x0.truncate(lo.len());
-        let with_delay = |x: &[f64]| {
+        let with_probe = |x: &[f64]| {
             let (value, rest) = x.split_last().unwrap_or((&0.0, x));
-            let m = model_from(&effects, rest, &ctx);
-            if is_delay {
-                Model {
-                    cmd_delay_s: *value,
-                    ..m
-                }
-            } else {
-                Model {
-                    backlash_deg: *value,
-                    ..m
-                }
-            }
+            enter(model_from(&effects, rest, &ctx), *value)
         };
         let mut out = vec![0.0; de.y.len()];
         let mut start = (f64::INFINITY, 0.0);
         for &value in grid {
             let mut x = x0.clone();
             x.push(value);
-            if sim_error(&with_delay(&x), &de, &mut out).is_ok() {
+            if sim_error(&with_probe(&x), &de, &mut out).is_ok() {
                 let cost = out.iter().map(|e| e * e).sum::<f64>();
                 if cost < start.0 {
                     start = (cost, value);
@@ -622,7 +614,7 @@ impl Family for EvvtFamily {
         lo.push(0.0);
         hi.push(max);
         let r = self.solve_built(
-            &with_delay,
+            &with_probe,
             &de,
             &Spec {
                 x0,
@@ -630,7 +622,7 @@ impl Family for EvvtFamily {
                 hi: hi.clone(),
             },
         )?;
-        let predicted = self.predict(&with_delay(&r.x), &dv)?;
+        let predicted = self.predict(&with_probe(&r.x), &dv)?;
         let mut names = Self::report_names(&effects, &ctx);
         names.push(name.into());
         let params: Vec<(String, f64)> = names.iter().cloned().zip(r.x.iter().copied()).collect();

@@ -221,10 +221,7 @@ impl PositionerFamily {
         };
         let (cols, names, y) = self.columns(&m, effect, 1.0 / val.dt_s)?;
         let theta: Vec<f64> = names.iter().map(|n| get(n).unwrap_or(0.0)).collect();
-        let e: Vec<f64> = (0..y.len())
-            .map(|i| y[i] - cols.iter().zip(&theta).map(|(c, t)| c[i] * t).sum::<f64>())
-            .collect();
-        Ok(crate::residuals::rmse(&e))
+        Ok(crate::residuals::rmse(&residual(&cols, &theta, &y)))
     }
 }
 
@@ -247,6 +244,21 @@ fn model_of(effects: &[&str]) -> Result<Option<&'static str>, String> {
     })
 }
 
+/// Σ θ_j column_j at each of the first `n` rows: a regression's force.
+fn combination(cols: &[Vec<f64>], theta: &[f64], n: usize) -> Vec<f64> {
+    (0..n)
+        .map(|i| cols.iter().zip(theta).map(|(c, t)| c[i] * t).sum())
+        .collect()
+}
+
+/// y − Σ θ_j column_j: what a regression leaves of the measured force.
+fn residual(cols: &[Vec<f64>], theta: &[f64], y: &[f64]) -> Vec<f64> {
+    y.iter()
+        .zip(combination(cols, theta, y.len()))
+        .map(|(y, f)| y - f)
+        .collect()
+}
+
 /// Solves one IDIM-LS regression on the estimation columns and predicts the validation force:
 /// the fit labelled `label`, with confidence intervals, estimation cost and the parameters no
 /// physical positioner has.
@@ -256,9 +268,7 @@ fn regress(label: &str, (cols, names, y): Regression, (vcols, vy): (Vec<Vec<f64>
     // Confidence intervals: s² (ΦᵀΦ)⁻¹ on the decimated estimation data.
     let p = cols.len();
     let n = y.len();
-    let resid: Vec<f64> = (0..n)
-        .map(|i| y[i] - (0..p).map(|j| cols[j][i] * theta[j]).sum::<f64>())
-        .collect();
+    let resid = residual(&cols, &theta, &y);
     let s2 = resid.iter().map(|r| r * r).sum::<f64>() / (n.saturating_sub(p).max(1)) as f64;
     let mut ata = vec![0.0; p * p];
     for a in 0..p {
@@ -270,9 +280,7 @@ fn regress(label: &str, (cols, names, y): Regression, (vcols, vy): (Vec<Vec<f64>
     let ci95 = (0..p)
         .map(|j| inv.as_ref().map(|m| 1.96 * (s2 * m[j * p + j]).sqrt()))
         .collect();
-    let pred: Vec<f64> = (0..vy.len())
-        .map(|i| (0..p).map(|j| vcols[j][i] * theta[j]).sum())
-        .collect();
+    let pred = combination(&vcols, &theta, vy.len());
     let mut fit = Fit::new(label, names.into_iter().zip(theta).collect(), ci95, vy, pred, 0);
     fit.est_cost = 0.5 * resid.iter().map(|r| r * r).sum::<f64>();
     // A mass, a viscous or a Coulomb coefficient below zero is no physical positioner.
@@ -356,9 +364,7 @@ impl Family for PositionerFamily {
             return regress(&format!("probe: {probe}"), (cols, names, y), (vcols, vy));
         }
         let theta = linear_lsq(&cols, &y).ok_or("the regressors are linearly dependent")?;
-        let resid: Vec<f64> = (0..y.len())
-            .map(|i| y[i] - cols.iter().zip(&theta).map(|(c, t)| c[i] * t).sum::<f64>())
-            .collect();
+        let resid = residual(&cols, &theta, &y);
         let pos = self.decimate(&me.pos, fe)?;
         let pitch_m = ripple_pitch(&resid, &pos).ok_or("the travel is too short for a periodic force")?;
         let wave = |pos: &[f64], f: fn(f64) -> f64| -> Vec<f64> {
