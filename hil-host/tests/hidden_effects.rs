@@ -210,7 +210,8 @@ fn positioner_sweep_success_rate_per_effect() {
     sweep(Plant::Positioner);
 }
 
-/// 25 seeds per class (`SWEEP_SEEDS=n` for fewer, e.g. a quick look).
+/// 25 seeds per class (`SWEEP_SEEDS=n` for fewer, e.g. a quick look; `SWEEP_CLASSES=a,b` for
+/// the classes whose name contains `a` or `b`, e.g. `+duty-delay`).
 fn sweep(plant: Plant) {
     let n: u64 = std::env::var("SWEEP_SEEDS")
         .ok()
@@ -221,6 +222,9 @@ fn sweep(plant: Plant) {
     classes.extend(effect_pairs(plant));
     classes.extend(outside_effects(plant).iter().map(|s| s.to_string()));
     classes.extend(effects_beside_outside(plant));
+    if let Ok(only) = std::env::var("SWEEP_CLASSES") {
+        classes.retain(|c| only.split(',').any(|part| c.contains(part.trim())));
+    }
     for effect in &classes {
         let t0 = std::time::Instant::now();
         let mut ok = 0;

@@ -67,12 +67,29 @@ pub(super) fn run(
                 };
                 // As the selection's confirmed gain (step 2): a large gain whose z a remainder
                 // full of other structure holds under `min_z` (a spring beside unmodelled
-                // friction: 43 % at z 3.4) counts where the estimation data confirm it.
-                let confirmed = probe.min_samples.is_none()
+                // friction: 43 % at z 3.4; a duty delay beside a clearance: 50 % at z 3.0)
+                // counts where the estimation data confirm it, a time only at its size.
+                let confirmed = (probe.min_samples.is_none() || large)
                     && gain_pct >= rules.resolve_gain_pct
                     && z >= rules.resolve_z
                     && p.est_cost <= rules.confirm_est_cost_ratio * current.est_cost;
-                if (z >= rules.min_z && counts) || confirmed {
+                // A time the estimation data pin down counts where the validation data agree
+                // (a gain at z > 0): its 95 % interval clears a sample period and the
+                // estimation cost falls by `min_gain_pct`. A coarse quantization that
+                // dominates the validation remainder hides a real delay's gain there (the
+                // EVVT's 1 deg phase steps: 30-50 ms command delays fitted within 20 %, ±1.5 ms,
+                // the estimation cost 10-16 % lower, 0.7-4.3 % on validation at z 0.5-3.9);
+                // healthy units fit no delay (0-2 ms, at the bound).
+                let pinned = match (probe.min_samples, p.params.last(), p.ci95.last()) {
+                    (Some(samples), Some((_, v)), Some(Some(ci))) if large => {
+                        v - ci >= samples * val.dt_s
+                            && p.est_cost <= (1.0 - rules.min_gain_pct / 100.0) * current.est_cost
+                            && gain_pct > 0.0
+                            && z > 0.0
+                    }
+                    _ => false,
+                };
+                if (z >= rules.min_z && counts) || confirmed || pinned {
                     found.push(Found {
                         probe: *probe,
                         sentence: format!(
@@ -142,7 +159,8 @@ pub(super) fn cause_not_needed(
 /// and the selected effects and added by the selection's rules over the probe's model so far
 /// (gain ≥ `min_gain_pct`, z ≥ `min_z`; of two nested effects the simpler unless the richer
 /// adds `nested_margin_pct` points of the probe-on-baseline RMSE; the richer replaces a
-/// selected simpler one only by that margin), until none is eligible. Its causes replace the
+/// selected simpler one only by that margin), until none is eligible or the model is at the
+/// noise floor `floor_rmse` (`stop_ratio`, as step 2's stop). Its causes replace the
 /// first selection's: outside physics that dominates the remainder hides a catalogue effect's
 /// gain (a spring of a few hundred N/m over a 0.2 m travel leaves a Coulomb friction's 10-20 N
 /// a few per cent of the remainder), and a catalogue effect can take part of the outside
@@ -155,6 +173,7 @@ pub(super) fn causes_beside(
     baseline: &Fit,
     found: &Found,
     fit_probe: &FitProbe,
+    floor_rmse: f64,
     (index, total): (&mut usize, &mut usize),
     evidence: &mut Vec<String>,
 ) -> Option<Vec<&'static str>> {
@@ -172,7 +191,23 @@ pub(super) fn causes_beside(
     };
     let reference = base.rmse.max(f64::MIN_POSITIVE);
     let mut selected: Vec<&'static str> = Vec::new();
+    // As the selection's floor stop (step 2): once the model is at the floor, only the effects
+    // that held evidence in the round that reached it are tried (a duty delay's probe beside a
+    // clearance at 1.1x the floor, friction eligible next to it: friction then gained nothing
+    // and the pressure direction, without evidence before, took 10 % of the noise).
+    let mut evidence_left: Vec<&'static str> = Vec::new();
     for _ in 0..family.effects().len() {
+        let at_floor = !selected.is_empty() && base.rmse <= rules.stop_ratio * floor_rmse;
+        if at_floor && evidence_left.is_empty() {
+            evidence.push(format!(
+                "beside the probe `{}`, the model with {} is at the noise floor (validation RMSE {:.4}, floor {:.4}): the selection stops",
+                found.probe.name,
+                selected.join(" + "),
+                base.rmse,
+                floor_rmse
+            ));
+            break;
+        }
         let nested_in_selected = |e: &str| {
             family
                 .nested()
@@ -184,6 +219,7 @@ pub(super) fn causes_beside(
             .iter()
             .copied()
             .filter(|e| !selected.contains(e) && !nested_in_selected(e))
+            .filter(|e| !at_floor || evidence_left.contains(e))
             .collect();
         *total += remaining.len();
         let mut candidates: Vec<(&'static str, Fit, f64, f64)> = Vec::new();
@@ -208,7 +244,30 @@ pub(super) fn causes_beside(
                 )),
             }
         }
-        let eligible = |c: &&(&str, Fit, f64, f64)| c.2 >= rules.min_gain_pct && c.3 >= rules.min_z;
+        // As in the selection: an effect that ends switched off gains only by refitting the rest
+        // of the model, and every other effect must beat the best such refit by the same rules.
+        let mut refuted: Vec<&'static str> = Vec::new();
+        let refit = candidates
+            .iter()
+            .filter(|c| family.is_off(c.0, &c.1) && c.1.rmse.is_finite() && c.1.rmse < base.rmse)
+            .min_by(|a, b| a.1.rmse.total_cmp(&b.1.rmse));
+        for (e, f, _, _) in &candidates {
+            if family.is_off(e, f) {
+                refuted.push(e);
+            } else if let Some((_, r, _, _)) = refit {
+                let gain_ref = 100.0 * (r.rmse - f.rmse) / r.rmse.max(f64::MIN_POSITIVE);
+                let z_ref = improvement_z_of(r, f);
+                if gain_ref < rules.min_gain_pct || z_ref < rules.min_z {
+                    evidence.push(format!(
+                        "`{e}` beside the probe `{}` gains {gain_ref:.1} % (z = {z_ref:.1}) over the same model refitted without it (validation RMSE {:.4}): not named",
+                        found.probe.name, r.rmse
+                    ));
+                    refuted.push(e);
+                }
+            }
+        }
+        let eligible =
+            |c: &&(&str, Fit, f64, f64)| c.2 >= rules.min_gain_pct && c.3 >= rules.min_z && !refuted.contains(&c.0);
         for (e, f, gain_pct, z) in candidates.iter().filter(|c| !eligible(c)) {
             evidence.push(format!(
                 "`{e}` beside the probe `{}`: {gain_pct:.1} % (z = {z:.1}, validation RMSE {:.4}): not named",
@@ -250,6 +309,11 @@ pub(super) fn causes_beside(
             }
         }
         let (e, fit, gain_pct, z) = best;
+        evidence_left = candidates
+            .iter()
+            .filter(|c| c.0 != *e && (eligible(c) || (c.2 >= rules.min_gain_pct && c.3 >= rules.resolve_z)))
+            .map(|c| c.0)
+            .collect();
         evidence.push(format!(
             "beside the probe `{}`, `{e}` lowers the validation RMSE from {:.4} to {:.4} ({gain_pct:.1} %, z = {z:.1}): named",
             found.probe.name, base.rmse, fit.rmse

@@ -613,6 +613,7 @@ pub(super) fn diagnose_fits(
                 &baseline,
                 found,
                 fit_probe,
+                floor.rmse,
                 (&mut index, &mut total),
                 &mut evidence,
             )
