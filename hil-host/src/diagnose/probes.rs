@@ -251,8 +251,17 @@ pub(super) fn causes_beside(
             .iter()
             .filter(|c| family.is_off(c.0, &c.1) && c.1.rmse.is_finite() && c.1.rmse < base.rmse)
             .min_by(|a, b| a.1.rmse.total_cmp(&b.1.rmse));
-        for (e, f, _, _) in &candidates {
+        // The effects whose evidence line says why (the others get the common one below).
+        let mut said: Vec<&'static str> = Vec::new();
+        for (e, f, gain_pct, _) in &candidates {
             if family.is_off(e, f) {
+                if *gain_pct >= rules.min_gain_pct {
+                    evidence.push(format!(
+                        "`{e}` beside the probe `{}` ends at its neutral value (switched off); its {gain_pct:.1} % come from refitting the rest of the model: not named",
+                        found.probe.name
+                    ));
+                    said.push(e);
+                }
                 refuted.push(e);
             } else if let Some((_, r, _, _)) = refit {
                 let gain_ref = 100.0 * (r.rmse - f.rmse) / r.rmse.max(f64::MIN_POSITIVE);
@@ -262,13 +271,14 @@ pub(super) fn causes_beside(
                         "`{e}` beside the probe `{}` gains {gain_ref:.1} % (z = {z_ref:.1}) over the same model refitted without it (validation RMSE {:.4}): not named",
                         found.probe.name, r.rmse
                     ));
+                    said.push(e);
                     refuted.push(e);
                 }
             }
         }
         let eligible =
             |c: &&(&str, Fit, f64, f64)| c.2 >= rules.min_gain_pct && c.3 >= rules.min_z && !refuted.contains(&c.0);
-        for (e, f, gain_pct, z) in candidates.iter().filter(|c| !eligible(c)) {
+        for (e, f, gain_pct, z) in candidates.iter().filter(|c| !eligible(c) && !said.contains(&c.0)) {
             evidence.push(format!(
                 "`{e}` beside the probe `{}`: {gain_pct:.1} % (z = {z:.1}, validation RMSE {:.4}): not named",
                 found.probe.name, f.rmse
@@ -311,7 +321,8 @@ pub(super) fn causes_beside(
         let (e, fit, gain_pct, z) = best;
         evidence_left = candidates
             .iter()
-            .filter(|c| c.0 != *e && (eligible(c) || (c.2 >= rules.min_gain_pct && c.3 >= rules.resolve_z)))
+            .filter(|c| c.0 != *e && !refuted.contains(&c.0))
+            .filter(|c| eligible(c) || (c.2 >= rules.min_gain_pct && c.3 >= rules.resolve_z))
             .map(|c| c.0)
             .collect();
         evidence.push(format!(
