@@ -246,15 +246,18 @@ pub(super) fn causes_beside(
         }
         // As in the selection: an effect that ends switched off gains only by refitting the rest
         // of the model, and every other effect must beat the best such refit by the same rules.
+        let offs: Vec<bool> = candidates.iter().map(|c| family.is_off(c.0, &c.1)).collect();
         let mut refuted: Vec<&'static str> = Vec::new();
         let refit = candidates
             .iter()
-            .filter(|c| family.is_off(c.0, &c.1) && c.1.rmse.is_finite() && c.1.rmse < base.rmse)
+            .zip(&offs)
+            .filter(|(c, off)| **off && c.1.rmse.is_finite() && c.1.rmse < base.rmse)
+            .map(|(c, _)| c)
             .min_by(|a, b| a.1.rmse.total_cmp(&b.1.rmse));
         // The effects whose evidence line says why (the others get the common one below).
         let mut said: Vec<&'static str> = Vec::new();
-        for (e, f, gain_pct, _) in &candidates {
-            if family.is_off(e, f) {
+        for ((e, f, gain_pct, _), off) in candidates.iter().zip(&offs) {
+            if *off {
                 if *gain_pct >= rules.min_gain_pct {
                     evidence.push(format!(
                         "`{e}` beside the probe `{}` ends at its neutral value (switched off); its {gain_pct:.1} % come from refitting the rest of the model: not named",

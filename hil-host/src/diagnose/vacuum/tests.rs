@@ -1,5 +1,6 @@
 //! Tests of the vacuum family: the moving average, parameter round trips, map shapes, extended fits and residual grouping on generated units.
 use super::*;
+use crate::diagnose::tests::probe_value;
 use model_core::vacuum::VacuumEffects;
 use model_core::vacuum::{VacuumInputs, VacuumValveActuator};
 
@@ -516,7 +517,7 @@ fn a_clearance_beside_a_duty_delay_is_named_alone() {
         let (case, d) = diagnosed("backlash+duty-delay", seed);
         assert_eq!(d.causes, ["backlash"], "seed {seed}");
         assert_eq!(d.verdict, "unexplained", "seed {seed}");
-        let fitted = crate::diagnose::tests::probe_value(&d, "a transport delay of the duty", "duty_delay_s");
+        let fitted = probe_value(&d, "a transport delay of the duty", "duty_delay_s");
         let delay = truth(&case, "duty_delay_s");
         assert!(
             (fitted / delay - 1.0).abs() < 0.1,
