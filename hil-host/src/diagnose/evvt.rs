@@ -66,11 +66,13 @@ pub const PROBES: [Probe; 2] = [
         // A delay of one log sample (the control period) or more is physics; the quantized
         // phase (1 deg) dominates the remainder, so a 30-40 ms delay gains only 2-4 % RMSE.
         min_samples: Some(1.0),
+        only_above_floor: false,
     },
     Probe {
         name: "gear-backlash",
         what: "a clearance between the phaser's drive and the camshaft (gear or belt backlash: after each reversal the cam phase stands still until the drive has crossed it)",
         min_samples: None,
+        only_above_floor: false,
     },
 ];
 

@@ -39,11 +39,13 @@ pub const PROBES: [Probe; 2] = [
         name: "force-ripple",
         what: "a force periodic in the load's position (a screw's lead or a motor's cogging: the remainder repeats along the travel)",
         min_samples: None,
+        only_above_floor: false,
     },
     Probe {
         name: "position-spring",
         what: "a force proportional to the load's position (a return spring, a cable chain or bellows pulling the load towards one point of the travel)",
         min_samples: None,
+        only_above_floor: false,
     },
 ];
 

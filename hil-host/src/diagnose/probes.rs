@@ -22,11 +22,18 @@ pub struct Probe {
     /// model's own hold, and a gain with a shorter one comes from the refit's other
     /// parameters). `None`: the gain rule only.
     pub min_samples: Option<f64>,
+    /// Fitted only where the final model's validation RMSE is above
+    /// [`Rules::explained_ratio`] times the verdict's floor (the sensor's and the logged
+    /// inputs' own error, [`Family::input_floor`]): a probe that refits the whole model
+    /// (the EHVVA's every valve event, a second or so on a long bench pair) runs where the
+    /// remainder's size already says something is missing, not on every unit.
+    pub only_above_floor: bool,
 }
 
 /// Fits every probe of `family` on top of `current` (the baseline plus `selected`), as fits
 /// `index` of `total` (both advanced). Returns the probes found, each as (what is missing, the
-/// sentence for the evidence and the remainder); the probes not needed or not fitted are
+/// sentence for the evidence and the remainder), and those the estimation data confirm and
+/// the validation does not ([`Probed::pending`]); the probes not needed or not fitted are
 /// reported in `evidence`, the found ones too.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn run(
@@ -34,14 +41,29 @@ pub(super) fn run(
     rules: &Rules,
     selected: &[&str],
     current: &Fit,
-    val: &Log,
+    (val, floor_rmse): (&Log, f64),
     fit_probe: &FitProbe,
     (index, total): (&mut usize, &mut usize),
     evidence: &mut Vec<String>,
-) -> Vec<Found> {
-    let mut found = Vec::new();
-    *total += family.probes().len();
-    for probe in family.probes() {
+) -> Probed {
+    let (mut found, mut pending) = (Vec::new(), Vec::new());
+    let above_floor = current.rmse > rules.explained_ratio * floor_rmse;
+    let probes: Vec<&Probe> = family
+        .probes()
+        .iter()
+        .filter(|p| {
+            let run = above_floor || !p.only_above_floor;
+            if !run {
+                evidence.push(format!(
+                    "probe `{}` not fitted: the remainder (RMSE {:.4}) is within {} times the noise floor {:.4}",
+                    p.name, current.rmse, rules.explained_ratio, floor_rmse
+                ));
+            }
+            run
+        })
+        .collect();
+    *total += probes.len();
+    for probe in probes {
         *index += 1;
         match fit_probe(probe.name, selected, current, *index, *total) {
             Ok(p) => {
@@ -100,6 +122,20 @@ pub(super) fn run(
                             p.rmse
                         ),
                         fit: p,
+                        fit_on_baseline: selected.is_empty(),
+                    });
+                } else if probe.min_samples.is_none() && p.est_cost <= rules.confirm_est_cost_ratio * current.est_cost {
+                    evidence.push(format!(
+                        "probe `{}` ({}) takes the estimation cost to {:.2}x the model's, but gains {gain_pct:.1} % (z = {z:.1}) on validation: tried with the causes selected beside it",
+                        probe.name,
+                        values.join(", "),
+                        p.est_cost / current.est_cost
+                    ));
+                    pending.push(Found {
+                        probe: *probe,
+                        sentence: String::new(),
+                        fit: p,
+                        fit_on_baseline: selected.is_empty(),
                     });
                 } else {
                     evidence.push(format!(
@@ -116,7 +152,79 @@ pub(super) fn run(
     // of one family can describe the same remainder (a long ripple and a spring).
     found.sort_by(|a, b| a.fit.rmse.total_cmp(&b.fit.rmse));
     evidence.extend(found.iter().map(|f| f.sentence.clone()));
-    found
+    pending.sort_by(|a, b| a.fit.est_cost.total_cmp(&b.fit.est_cost));
+    Probed { found, pending }
+}
+
+/// What [`run`] found.
+pub(super) struct Probed {
+    /// The probes that found their physics, the one that explains most first.
+    pub found: Vec<Found>,
+    /// Probes that take the estimation cost to at most [`Rules::confirm_est_cost_ratio`] of
+    /// the final model's and do not gain on validation (non-time probes only; the lowest
+    /// estimation cost first): outside physics whose model extrapolates badly while a catalogue
+    /// effect it hid is missing (a lift growing with temperature hid a direction-dependent
+    /// delay: the estimation cost fell 13x, the validation RMSE rose 20 %). Where the family
+    /// selects beside probes, the causes are selected beside such a probe and the two models
+    /// compared ([`judge_beside`]).
+    pub pending: Vec<Found>,
+}
+
+/// A probe of [`Probed::pending`] with the causes selected beside it (`with_probe`: the probe
+/// fitted with them), against `reference`, the best catalogue model (the selection's, or the
+/// same causes without the probe): found where it gains by the selection's rules (gain
+/// `min_gain_pct` at z `min_z`, or `resolve_gain_pct` at z `resolve_z` where its estimation
+/// cost is at most `confirm_est_cost_ratio` of the reference's). Returns it as found, with
+/// the evidence's sentence, or the sentence why not.
+pub(super) fn judge_beside(
+    family: &dyn Family,
+    rules: &Rules,
+    pending: &Found,
+    causes: &[&str],
+    with_probe: Fit,
+    reference: &Fit,
+) -> Result<Found, String> {
+    let gain_pct = 100.0 * (reference.rmse - with_probe.rmse) / reference.rmse.max(f64::MIN_POSITIVE);
+    let z = improvement_z_of(reference, &with_probe);
+    let values: Vec<String> = with_probe
+        .params
+        .iter()
+        .filter(|(n, _)| !reference.params.iter().any(|(r, _)| r == n))
+        .filter(|(n, _)| {
+            !causes
+                .iter()
+                .any(|c| super::catalogue::params(family.plant(), c).iter().any(|(p, _)| p == n))
+        })
+        .map(|(n, v)| format!("{n} = {}", crate::numbers::sig(*v, 3)))
+        .collect();
+    let beside = if causes.is_empty() {
+        String::new()
+    } else {
+        format!(" with {} beside it", causes.join(" + "))
+    };
+    let significant = (gain_pct >= rules.min_gain_pct && z >= rules.min_z)
+        || (gain_pct >= rules.resolve_gain_pct
+            && z >= rules.resolve_z
+            && with_probe.est_cost <= rules.confirm_est_cost_ratio * reference.est_cost);
+    if significant {
+        Ok(Found {
+            probe: pending.probe,
+            sentence: format!(
+                "{} ({}){beside} lowers the validation RMSE from {:.4} (the catalogue's best) to {:.4} ({gain_pct:.1} %, z = {z:.1}): physics outside the catalogue",
+                pending.probe.what,
+                values.join(", "),
+                reference.rmse,
+                with_probe.rmse
+            ),
+            fit: with_probe,
+            fit_on_baseline: causes.is_empty(),
+        })
+    } else {
+        Err(format!(
+            "probe `{}`{beside}: {gain_pct:.1} % (z = {z:.1}) over the catalogue's best (validation RMSE {:.4}): not needed",
+            pending.probe.name, reference.rmse
+        ))
+    }
 }
 
 /// A probe that found its physics: the probe, the evidence's sentence and its fit on top of
@@ -125,6 +233,9 @@ pub(super) struct Found {
     pub probe: Probe,
     pub sentence: String,
     pub fit: Fit,
+    /// `fit` is the probe on the baseline (no cause was selected): [`causes_beside`] starts
+    /// from it rather than fitting it again.
+    pub fit_on_baseline: bool,
 }
 
 /// With a probe found, is the one cause the selection named still needed? The probe is
@@ -164,8 +275,9 @@ pub(super) fn cause_not_needed(
 /// first selection's: outside physics that dominates the remainder hides a catalogue effect's
 /// gain (a spring of a few hundred N/m over a 0.2 m travel leaves a Coulomb friction's 10-20 N
 /// a few per cent of the remainder), and a catalogue effect can take part of the outside
-/// physics (friction takes a duty delay's lag into a dead band). Returns the causes, or `None`
-/// where the probe cannot be fitted on the baseline (the first selection stands).
+/// physics (friction takes a duty delay's lag into a dead band). Returns the causes and the
+/// probe's fit with them, or `None` where the probe cannot be fitted on the baseline (the
+/// first selection stands).
 #[allow(clippy::too_many_arguments)]
 pub(super) fn causes_beside(
     family: &dyn Family,
@@ -176,10 +288,15 @@ pub(super) fn causes_beside(
     floor_rmse: f64,
     (index, total): (&mut usize, &mut usize),
     evidence: &mut Vec<String>,
-) -> Option<Vec<&'static str>> {
-    *total += 1;
-    *index += 1;
-    let mut base = match fit_probe(found.probe.name, &[], baseline, *index, *total) {
+) -> Option<(Vec<&'static str>, Fit)> {
+    let on_baseline = if found.fit_on_baseline {
+        Ok(found.fit.clone())
+    } else {
+        *total += 1;
+        *index += 1;
+        fit_probe(found.probe.name, &[], baseline, *index, *total)
+    };
+    let mut base = match on_baseline {
         Ok(f) => f,
         Err(err) => {
             evidence.push(format!(
@@ -318,7 +435,7 @@ pub(super) fn causes_beside(
                     margin_over(base.rmse),
                     rules.nested_margin_pct
                 ));
-                return Some(selected);
+                return Some((selected, base));
             }
         }
         let (e, fit, gain_pct, z) = best;
@@ -336,5 +453,5 @@ pub(super) fn causes_beside(
         selected.push(e);
         base = fit.clone();
     }
-    Some(selected)
+    Some((selected, base))
 }

@@ -589,12 +589,27 @@ pub(super) fn diagnose_fits(
 
     // Physics outside the catalogue (`probes::run`): a probe found makes the verdict
     // `unexplained`, whatever the remainder's size.
-    let probes_found = probes::run(
+    // A probe run only above the floor (`Probe::only_above_floor`) is judged against the floor
+    // the verdict will use, the logged inputs' own error included (computed only where the
+    // sensor floor alone would let it run): a valve near its force balance misses by more than
+    // the sensor's noise and is explained by that, not by outside physics.
+    let probe_floor =
+        if family.probes().iter().any(|p| p.only_above_floor) && current.rmse > rules.explained_ratio * floor.rmse {
+            family
+                .input_floor(val, &current)
+                .map_or(floor.rmse, |(input_rmse, _)| floor.rmse.hypot(input_rmse))
+        } else {
+            floor.rmse
+        };
+    let probes::Probed {
+        found: mut probes_found,
+        pending,
+    } = probes::run(
         family,
         rules,
         &selected,
         &current,
-        val,
+        (val, probe_floor),
         fit_probe,
         (&mut index, &mut total),
         &mut evidence,
@@ -603,7 +618,7 @@ pub(super) fn diagnose_fits(
     // Next to outside physics, the causes are selected again with the probe's physics in every
     // model (families whose probe fits take any effects); else a single cause is kept only if
     // it still gains with the probe's physics fitted on the baseline too.
-    let beside = probes_found
+    let mut beside = probes_found
         .first()
         .filter(|_| family.selects_beside_probes())
         .and_then(|found| {
@@ -617,7 +632,53 @@ pub(super) fn diagnose_fits(
                 (&mut index, &mut total),
                 &mut evidence,
             )
-        });
+        })
+        .map(|(causes, _)| causes);
+    // The catalogue model of `beside`'s causes, where it was fitted to judge a pending probe.
+    let mut catalogue_of_beside: Option<Fit> = None;
+    // A probe the estimation data confirm and the validation does not: its model may lack a
+    // catalogue effect it hid; judged with the causes selected beside it against the best
+    // catalogue model (`probes::judge_beside`).
+    if let Some(pending) = pending
+        .first()
+        .filter(|_| probes_found.is_empty() && family.selects_beside_probes())
+    {
+        if let Some((causes, with_probe)) = probes::causes_beside(
+            family,
+            rules,
+            &baseline,
+            pending,
+            fit_probe,
+            floor.rmse,
+            (&mut index, &mut total),
+            &mut evidence,
+        ) {
+            let mut catalogue = baseline.clone();
+            if causes != selected {
+                for k in 1..=causes.len() {
+                    total += 1;
+                    index += 1;
+                    catalogue = fit(&causes[..k], Some(&catalogue), index, total)?;
+                }
+            }
+            let reference = if causes == selected || current.rmse <= catalogue.rmse {
+                &current
+            } else {
+                &catalogue
+            };
+            match probes::judge_beside(family, rules, pending, &causes, with_probe, reference) {
+                Ok(found) => {
+                    evidence.push(found.sentence.clone());
+                    probes_found.push(found);
+                    if causes != selected {
+                        catalogue_of_beside = Some(catalogue);
+                    }
+                    beside = Some(causes);
+                }
+                Err(sentence) => evidence.push(sentence),
+            }
+        }
+    }
     if let Some(causes) = beside {
         if causes != selected {
             let said = |c: &[&str]| {
@@ -632,12 +693,18 @@ pub(super) fn diagnose_fits(
                 said(&causes),
                 said(&selected)
             ));
-            current = baseline.clone();
-            for k in 1..=causes.len() {
-                total += 1;
-                index += 1;
-                current = fit(&causes[..k], Some(&current), index, total)?;
-            }
+            current = match catalogue_of_beside {
+                Some(c) => c,
+                None => {
+                    let mut c = baseline.clone();
+                    for k in 1..=causes.len() {
+                        total += 1;
+                        index += 1;
+                        c = fit(&causes[..k], Some(&c), index, total)?;
+                    }
+                    c
+                }
+            };
             selected = causes;
         }
     } else if let ([cause], Some(found)) = (selected.as_slice(), probes_found.first()) {

@@ -641,6 +641,7 @@ pub const PROBES: [Probe; 1] = [Probe {
         "a transport delay of the duty command (driver, bus or PWM-stage latency, or a long pneumatic line, between the logged duty and the actuator)",
     // A delay of one log sample or more is physics; shorter is within the sampled model's hold.
     min_samples: Some(1.0),
+    only_above_floor: false,
 }];
 
 fn is_pressure_param(name: &str) -> bool {
