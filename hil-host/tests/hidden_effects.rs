@@ -159,12 +159,12 @@ fn physics_outside_the_catalogue_is_unexplained() {
 }
 
 /// A catalogue effect next to outside physics: one combination per plant and seed in CI
-/// (rotating with the seed), all of them in the sweep. Not the EHVVA: its outside effect (a
-/// stroke growing with temperature) leaves a remainder 40-80 times the floor that hides its
-/// smaller catalogue effects, and it has no probe to select beside (docs/diagnosis.md).
+/// (rotating with the seed), all of them in the sweep. The EHVVA's (a stroke growing with
+/// temperature beside an effect it hides) since its lift-scale probe (docs/diagnosis.md,
+/// steps 8 and 9).
 #[test]
 fn a_catalogue_effect_beside_outside_physics_is_named() {
-    for plant in [Plant::Positioner, Plant::Evvt, Plant::Vacuum] {
+    for plant in Plant::ALL {
         let combos = effects_beside_outside(plant);
         for (i, seed) in CI_SEEDS.iter().take(2).enumerate() {
             if let Some(c) = combos.get((i + *seed as usize) % combos.len().max(1)) {

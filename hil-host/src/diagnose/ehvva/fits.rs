@@ -4,7 +4,10 @@
 
 use model_core::ehvva::EhvvaParams;
 
-use super::{apply_knobs, reference_values, simulate_all_on, Events, Knob, BASELINE_KNOBS};
+use super::{
+    apply_knobs, lift_scale_per_c, reference_values, scale_lift_with_temperature, simulate_all_on, Events, Knob,
+    BASELINE_KNOBS,
+};
 use crate::lsq::{solve, LsqOptions, LsqResult, StopReason};
 
 /// Fits `knobs` (starting at `x0`) on the lift simulation error of `set` by the trust-region
@@ -261,6 +264,7 @@ pub fn calibrate_with(
         let mut p = apply_knobs(base, knobs, x);
         derive(&mut p)?;
         simulate_all_on(&p, set, out, opts.threads)?;
+        scale_lift_with_temperature(set, out, lift_scale_per_c(knobs, x));
         for (o, y) in out.iter_mut().zip(&measured) {
             *o -= y;
         }

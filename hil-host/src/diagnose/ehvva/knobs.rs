@@ -225,6 +225,61 @@ pub fn effect_knob(effect: &str) -> Result<Knob, String> {
     })
 }
 
+/// The temperature about which [`LIFT_SCALE_KNOB`] scales the lift: the paper's reference
+/// (Cd, td and τp are given at 22 °C).
+pub const LIFT_SCALE_REFERENCE_C: f64 = 22.0;
+
+/// The probe's knob for a lift that scales with the fluid temperature (outside the catalogue:
+/// a stroke that grows with the actuator's temperature, or the lift sensor's gain drifting
+/// with it): the simulated lift of each event is multiplied by 1 + k (T − 22 °C), k per °C.
+/// It is no parameter of the valve ([`EhvvaParams`] does not change): the simulation's
+/// callers apply it to the simulated lift ([`scale_lift_with_temperature`]). ±1 %/°C is ±60 %
+/// over the paper's −20..100 °C.
+pub const LIFT_SCALE_KNOB: Knob = Knob {
+    name: "lift_scale_per_C",
+    lo: -0.01,
+    hi: 0.01,
+    apply: |_, _| {},
+};
+
+/// The value of [`LIFT_SCALE_KNOB`] among `knobs` set to `x` (0, the lift as simulated, where
+/// it is not among them).
+pub fn lift_scale_per_c(knobs: &[Knob], x: &[f64]) -> f64 {
+    knobs
+        .iter()
+        .zip(x)
+        .find(|(k, _)| k.name == LIFT_SCALE_KNOB.name)
+        .map_or(0.0, |(_, v)| *v)
+}
+
+/// Multiplies each event's simulated lift in `out` (the log's samples, as
+/// [`super::simulate_all_on`] writes them) by 1 + `per_c` (T − 22 °C) at the event's mean
+/// temperature ([`LIFT_SCALE_KNOB`]).
+pub fn scale_lift_with_temperature(set: &super::Events, out: &mut [f64], per_c: f64) {
+    if per_c == 0.0 {
+        return;
+    }
+    for ev in &set.events {
+        let scale = 1.0 + per_c * (ev.inputs.temp_c - LIFT_SCALE_REFERENCE_C);
+        for y in &mut out[ev.start..ev.start + ev.lift_mm.len()] {
+            *y *= scale;
+        }
+    }
+}
+
+/// `set` with each event's measured lift divided by 1 + `per_c` (T − 22 °C): the lift the
+/// valve would show without [`LIFT_SCALE_KNOB`]'s scale.
+pub fn with_lift_unscaled(set: &super::Events, per_c: f64) -> super::Events {
+    let mut out = set.clone();
+    for ev in &mut out.events {
+        let scale = 1.0 + per_c * (ev.inputs.temp_c - LIFT_SCALE_REFERENCE_C);
+        for y in &mut ev.lift_mm {
+            *y /= scale;
+        }
+    }
+    out
+}
+
 /// `base` with the knobs set to `x`.
 pub fn apply_knobs(base: &EhvvaParams, knobs: &[Knob], x: &[f64]) -> EhvvaParams {
     let mut p = *base;
@@ -236,7 +291,8 @@ pub fn apply_knobs(base: &EhvvaParams, knobs: &[Knob], x: &[f64]) -> EhvvaParams
 
 /// The valve a fit describes, from its parameter vector ([`super::Fit::internal`]: knob names
 /// and values in the order the fit applied them) on [`EhvvaParams::baseline`] (catalogue
-/// effects the fit did not add stay off). An unknown name is refused.
+/// effects the fit did not add stay off; a probe's [`LIFT_SCALE_KNOB`] is no parameter of the
+/// valve and changes nothing). An unknown name is refused.
 pub fn params_from_fit(internal: &[(String, f64)]) -> Result<EhvvaParams, String> {
     let mut p = EhvvaParams::baseline();
     for (name, v) in internal {
@@ -245,6 +301,7 @@ pub fn params_from_fit(internal: &[(String, f64)]) -> Result<EhvvaParams, String
             .chain(&UNIT_KNOBS)
             .copied()
             .chain(EhvvaEffect::NAMES.iter().filter_map(|e| effect_knob(e).ok()))
+            .chain([LIFT_SCALE_KNOB])
             .find(|k| k.name == name.as_str())
             .ok_or_else(|| format!("EHVVA fit: no parameter named `{name}`"))?;
         (knob.apply)(&mut p, *v);

@@ -34,7 +34,7 @@ use std::sync::Mutex;
 use model_core::ehvva::EhvvaParams;
 
 use super::catalogue::{Effect, EhvvaEffect};
-use super::{Family, Fit};
+use super::{Family, Fit, Probe};
 use crate::log::{Log, Plant};
 use crate::lsq::{LsqOptions, LsqResult};
 
@@ -49,6 +49,15 @@ pub use knobs::*;
 
 /// The catalogue effects of this family (DATA-FORMAT.md), from the typed catalogue.
 pub const EFFECTS: [&str; 4] = EhvvaEffect::NAMES;
+
+/// Physics outside the catalogue that the EHVVA family tests for (step 8 of docs/diagnosis.md).
+pub const PROBES: [Probe; 1] = [Probe {
+    name: "lift-temperature-scale",
+    what: "a lift that scales with the fluid temperature (a stroke that grows with the actuator's temperature, or the lift sensor's gain drifting with it)",
+    min_samples: None,
+    // A refit of every valve event: run where the remainder calls for it.
+    only_above_floor: true,
+}];
 
 /// A calibrated baseline: its knobs, solution and solver run.
 #[derive(Clone, Debug)]
@@ -138,6 +147,15 @@ impl EhvvaFamily {
                 return Ok(b);
             }
         }
+        let b = self.baseline_of(set)?;
+        if let Ok(mut g) = self.baseline.lock() {
+            *g = Some((key, b.clone()));
+        }
+        Ok(b)
+    }
+
+    /// [`Self::fit_baseline`] without its cache.
+    fn baseline_of(&self, set: &Events) -> Result<Baseline, String> {
         let x0 = self.baseline_start(set)?;
         let r4 = calibrate(&EhvvaParams::baseline(), &BASELINE_KNOBS, &x0, set, &self.lsq)?;
         let four = Baseline {
@@ -172,9 +190,6 @@ impl EhvvaFamily {
                 };
             }
         }
-        if let Ok(mut g) = self.baseline.lock() {
-            *g = Some((key, b.clone()));
-        }
         Ok(b)
     }
 
@@ -204,6 +219,75 @@ impl EhvvaFamily {
             }
         }
         Ok(b)
+    }
+
+    /// The fit of `knobs` at the solver's end `r`, scored on `val`: the validation events
+    /// simulated (and scaled with temperature where the knobs hold [`LIFT_SCALE_KNOB`]), its
+    /// intervals, bounds and what the data cannot identify. `fitted_on`: of how many
+    /// estimation events the fit used.
+    #[allow(clippy::too_many_arguments)]
+    fn scored(
+        &self,
+        label: &str,
+        knobs: &[Knob],
+        r: &LsqResult,
+        parent: Option<&Fit>,
+        val: &Log,
+        paper_unit: bool,
+        (fitted_on, of): (usize, usize),
+    ) -> Result<Fit, String> {
+        let p = apply_knobs(&EhvvaParams::baseline(), knobs, &r.x);
+        // Cut after the fit, not held through it with the solver's arrays.
+        let dv = Events::from_log(val)?;
+        let mut predicted = vec![0.0; dv.samples];
+        simulate_all_on(&p, &dv, &mut predicted, self.lsq.threads)?;
+        scale_lift_with_temperature(&dv, &mut predicted, lift_scale_per_c(knobs, &r.x));
+        // Samples before the validation log's first event are not predicted (the valve's state
+        // there is unknown): they are scored as measured, the same for every candidate.
+        let mut measured = dv.measured();
+        let lift = val
+            .col("lift_mm")
+            .ok_or_else(|| format!("{}: no `lift_mm` column", val.file))?;
+        let skip = dv.skipped();
+        measured[..skip].copy_from_slice(&lift[..skip]);
+        predicted[..skip].copy_from_slice(&lift[..skip]);
+        drop(dv);
+        let measured = Fit::shared_measured(parent, &measured);
+        let params = knobs.iter().zip(&r.x).map(|(k, v)| (k.name.to_string(), *v)).collect();
+        let names: Vec<String> = knobs.iter().map(|k| k.name.to_string()).collect();
+        let lo: Vec<f64> = knobs.iter().map(|k| k.lo).collect();
+        let hi: Vec<f64> = knobs.iter().map(|k| k.hi).collect();
+        let fit = Fit::with_shared(label, params, r.ci95.clone(), measured, predicted, r.iterations);
+        // An effect gain at 0 is the effect switched off (its neutral value), not a bound the
+        // data pushed against.
+        let mut fit = fit.with_solver(&names, &lo, &hi, r);
+        if fitted_on < of {
+            fit.convergence += &format!(
+                "; fitted on {fitted_on} of the {of} estimation events (every test condition, spread over the record)"
+            );
+        }
+        // The scale the lift cannot see, and unit knobs left at the paper's values: reported.
+        if self.unit_baseline {
+            fit.not_identifiable.push(
+                "area_top_mm2 (the scale of mass, areas, spring, friction and Cd together; held at the paper's value)"
+                    .into(),
+            );
+            if paper_unit {
+                for k in UNIT_KNOBS {
+                    fit.not_identifiable
+                        .push(format!("{} (fixed at the paper's value)", k.name));
+                }
+            } else {
+                fit.not_identifiable.push(format!(
+                    "cd_at_22C (trades exactly with the common scale of the orifice areas; held at the paper's {:.4})",
+                    reference_values().1
+                ));
+            }
+        }
+        let params = fit.params.clone();
+        fit.at_bound
+            .retain(|n| !(n.ends_with("_gain") && params.iter().any(|(k, v)| k == n && *v == 0.0)));
+        Ok(fit)
     }
 }
 
@@ -390,64 +474,109 @@ impl Family for EhvvaFamily {
             }
             with_tau_profile_start(&knobs, r, &de, &lsq)?
         };
-        let p = apply_knobs(&EhvvaParams::baseline(), &knobs, &r.x);
-        // Cut after the fit, not held through it with the solver's arrays.
-        let dv = Events::from_log(val)?;
-        let mut predicted = vec![0.0; dv.samples];
-        simulate_all_on(&p, &dv, &mut predicted, self.lsq.threads)?;
-        // Samples before the validation log's first event are not predicted (the valve's state
-        // there is unknown): they are scored as measured, the same for every candidate.
-        let mut measured = dv.measured();
-        let lift = val
-            .col("lift_mm")
-            .ok_or_else(|| format!("{}: no `lift_mm` column", val.file))?;
-        let skip = dv.skipped();
-        measured[..skip].copy_from_slice(&lift[..skip]);
-        predicted[..skip].copy_from_slice(&lift[..skip]);
-        drop(dv);
-        let measured = Fit::shared_measured(parent, &measured);
-        let params = knobs.iter().zip(&r.x).map(|(k, v)| (k.name.to_string(), *v)).collect();
-        let names: Vec<String> = knobs.iter().map(|k| k.name.to_string()).collect();
-        let lo: Vec<f64> = knobs.iter().map(|k| k.lo).collect();
-        let hi: Vec<f64> = knobs.iter().map(|k| k.hi).collect();
-        let fit = Fit::with_shared(
+        self.scored(
             &Fit::label(effects),
-            params,
-            r.ci95.clone(),
-            measured,
-            predicted,
-            r.iterations,
-        );
-        // An effect gain at 0 is the effect switched off (its neutral value), not a bound the
-        // data pushed against.
-        let mut fit = fit.with_solver(&names, &lo, &hi, &r);
-        if fitted_on < of {
-            fit.convergence += &format!(
-                "; fitted on {fitted_on} of the {of} estimation events (every test condition, spread over the record)"
-            );
+            &knobs,
+            &r,
+            parent,
+            val,
+            base.paper_unit,
+            (fitted_on, of),
+        )
+    }
+
+    fn probes(&self) -> &'static [Probe] {
+        &PROBES
+    }
+
+    /// The lift-scale probe fits any set of effects (its start: the parent's values by name,
+    /// a new effect at the paper's gain and at neutral).
+    fn selects_beside_probes(&self) -> bool {
+        true
+    }
+
+    /// The lift-scale probe ([`PROBES`]): the model of `effects` with the simulated lift
+    /// scaled by 1 + k (T − 22 °C) ([`LIFT_SCALE_KNOB`]), every knob refitted from `parent`'s
+    /// values with k from 0 (from the parent's k where it holds one); an effect the parent
+    /// lacks starts at the paper's gain and, as a second start, at neutral (the parent's own
+    /// optimum, so the fit never ends above it).
+    fn fit_probe(&self, probe: &str, effects: &[&str], parent: &Fit, est: &Log, val: &Log) -> Result<Fit, String> {
+        if probe != PROBES[0].name {
+            return Err(format!("no probe `{probe}` for the EHVVA"));
         }
-        // The scale the lift cannot see, and unit knobs left at the paper's values: reported.
-        if self.unit_baseline {
-            fit.not_identifiable.push(
-                "area_top_mm2 (the scale of mass, areas, spring, friction and Cd together; held at the paper's value)"
-                    .into(),
-            );
-            if base.paper_unit {
-                for k in UNIT_KNOBS {
-                    fit.not_identifiable
-                        .push(format!("{} (fixed at the paper's value)", k.name));
-                }
-            } else {
-                fit.not_identifiable.push(format!(
-                    "cd_at_22C (trades exactly with the common scale of the orifice areas; held at the paper's {:.4})",
-                    reference_values().1
-                ));
+        let all = Events::from_log(est)?;
+        let de = all.for_fitting(MAX_FIT_EVENTS);
+        let (fitted_on, of) = (de.events.len(), all.events.len());
+        drop(all);
+        let base = self.fit_baseline(&de)?;
+        let mut knobs: Vec<Knob> = base.knobs.clone();
+        for e in effects {
+            knobs.push(effect_knob(e)?);
+        }
+        knobs.push(LIFT_SCALE_KNOB);
+        let start = |new_gain: f64| -> Vec<f64> {
+            knobs
+                .iter()
+                .zip(base.x.iter().copied().map(Some).chain(std::iter::repeat(None)))
+                .map(|(k, b)| {
+                    let new = if k.name == LIFT_SCALE_KNOB.name { 0.0 } else { new_gain };
+                    parent.internal_value(k.name).or(b).unwrap_or(new).clamp(k.lo, k.hi)
+                })
+                .collect()
+        };
+        let starts = if knobs
+            .iter()
+            .any(|k| parent.internal_value(k.name).is_none() && k.name != LIFT_SCALE_KNOB.name)
+        {
+            vec![start(1.0), start(0.0)]
+        } else {
+            vec![start(0.0)]
+        };
+        let lsq = if base.paper_unit {
+            self.lsq.clone()
+        } else {
+            self.unit_lsq()
+        };
+        let r = calibrate_best_of(&EhvvaParams::baseline(), &knobs, &starts, &de, &lsq)?;
+        let mut r = with_tau_profile_start(&knobs, r, &de, &lsq)?;
+        // The parent's optimum may hold the scale's trace in wrong unit values (a baseline
+        // that met a lift growing with temperature moved its orifices and spring to their
+        // bounds), where the scale, though fitted right, gains nothing on validation. The
+        // scale is pinned by the events' end lifts, so the fit above finds it; as a second
+        // start, the baseline is calibrated again on the lift divided by that scale, and every
+        // knob is fitted from there.
+        let per_c = lift_scale_per_c(&knobs, &r.x);
+        if per_c != 0.0 {
+            let again = self.baseline_of(&with_lift_unscaled(&de, per_c))?;
+            let x0: Vec<f64> = knobs
+                .iter()
+                .zip(&r.x)
+                .map(|(k, v)| {
+                    let in_again = again.knobs.iter().zip(&again.x).find(|(a, _)| a.name == k.name);
+                    match in_again {
+                        Some((_, a)) => *a,
+                        None if UNIT_KNOBS.iter().any(|u| u.name == k.name) => unit_nominal(k),
+                        // The effects where the first fit left them, the scale as found.
+                        None => *v,
+                    }
+                    .clamp(k.lo, k.hi)
+                })
+                .collect();
+            let r2 = calibrate_restarted(&EhvvaParams::baseline(), &knobs, &x0, &de, &lsq)?;
+            let r2 = with_tau_profile_start(&knobs, r2, &de, &lsq)?;
+            if r2.cost < r.cost {
+                r = r2;
             }
         }
-        let params = fit.params.clone();
-        fit.at_bound
-            .retain(|n| !(n.ends_with("_gain") && params.iter().any(|(k, v)| k == n && *v == 0.0)));
-        Ok(fit)
+        self.scored(
+            &format!("probe: {probe}"),
+            &knobs,
+            &r,
+            Some(parent),
+            val,
+            base.paper_unit,
+            (fitted_on, of),
+        )
     }
 
     /// The set-points' own error: each validation event's supply and back pressure are the
