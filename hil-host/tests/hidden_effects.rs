@@ -211,7 +211,8 @@ fn positioner_sweep_success_rate_per_effect() {
 }
 
 /// 25 seeds per class (`SWEEP_SEEDS=n` for fewer, e.g. a quick look; `SWEEP_CLASSES=a,b` for
-/// the classes whose name contains `a` or `b`, e.g. `+duty-delay`).
+/// the classes whose name contains `a` or `b`, e.g. `+duty-delay`, and `=a` for the class `a`
+/// alone, e.g. `=snubber` without the pairs that hold it).
 fn sweep(plant: Plant) {
     let n: u64 = std::env::var("SWEEP_SEEDS")
         .ok()
@@ -223,7 +224,12 @@ fn sweep(plant: Plant) {
     classes.extend(outside_effects(plant).iter().map(|s| s.to_string()));
     classes.extend(effects_beside_outside(plant));
     if let Ok(only) = std::env::var("SWEEP_CLASSES") {
-        classes.retain(|c| only.split(',').any(|part| c.contains(part.trim())));
+        classes.retain(|c| {
+            only.split(',').map(str::trim).any(|part| match part.strip_prefix('=') {
+                Some(exact) => c == exact,
+                None => c.contains(part),
+            })
+        });
     }
     for effect in &classes {
         let t0 = std::time::Instant::now();
