@@ -124,9 +124,12 @@ pub(super) fn run(
                         fit: p,
                         fit_on_baseline: selected.is_empty(),
                     });
-                } else if probe.min_samples.is_none() && p.est_cost <= rules.confirm_est_cost_ratio * current.est_cost {
+                } else if probe.min_samples.is_none()
+                    && family.selects_beside_probes()
+                    && p.est_cost <= rules.confirm_est_cost_ratio * current.est_cost
+                {
                     evidence.push(format!(
-                        "probe `{}` ({}) takes the estimation cost to {:.2}x the model's, but gains {gain_pct:.1} % (z = {z:.1}) on validation: tried with the causes selected beside it",
+                        "probe `{}` ({}) takes the estimation cost to {:.2}x the model's, but gains {gain_pct:.1} % (z = {z:.1}) on validation: tried with the causes selected beside it where no probe is found",
                         probe.name,
                         values.join(", "),
                         p.est_cost / current.est_cost
@@ -161,7 +164,8 @@ pub(super) struct Probed {
     /// The probes that found their physics, the one that explains most first.
     pub found: Vec<Found>,
     /// Probes that take the estimation cost to at most [`Rules::confirm_est_cost_ratio`] of
-    /// the final model's and do not gain on validation (non-time probes only; the lowest
+    /// the final model's and do not gain on validation (non-time probes of a family that
+    /// selects beside probes, [`Family::selects_beside_probes`], only; the lowest
     /// estimation cost first): outside physics whose model extrapolates badly while a catalogue
     /// effect it hid is missing (a lift growing with temperature hid a direction-dependent
     /// delay: the estimation cost fell 13x, the validation RMSE rose 20 %). Where the family

@@ -16,6 +16,19 @@ fn simulation_rmse(p: &EhvvaParams, set: &Events) -> f64 {
     crate::residuals::rmse(&e)
 }
 
+/// The EHVVA diagnosis of a log pair with the default rules.
+fn diagnosed(est: &Log, val: &Log) -> crate::diagnose::Diagnosis {
+    crate::diagnose::diagnose(
+        &EhvvaFamily::default(),
+        est,
+        val,
+        false,
+        &crate::diagnose::Rules::default(),
+        &mut |_| {},
+    )
+    .unwrap()
+}
+
 fn get(v: &[(String, f64)], key: &str) -> f64 {
     v.iter()
         .find(|(k, _)| k == key)
@@ -118,16 +131,7 @@ fn a_valve_that_floats_off_its_seat_at_rest_is_simulated_from_the_rest_window() 
     let rms = simulation_rmse(&p, &set);
     assert!(rms < 0.008, "rms {rms} mm: more than the lift sensor's noise");
     // The healthy unit is explained, with no cause.
-    let family = EhvvaFamily::default();
-    let d = crate::diagnose::diagnose(
-        &family,
-        &est,
-        &val,
-        false,
-        &crate::diagnose::Rules::default(),
-        &mut |_| {},
-    )
-    .unwrap();
+    let d = diagnosed(&est, &val);
     assert!(d.causes.is_empty(), "{:?}", d.causes);
     assert_eq!(d.verdict, "explained", "{}", crate::diagnose::report::summary(&d));
     // Within the floor, the probe for outside physics is not fitted.
@@ -148,15 +152,7 @@ fn a_valve_that_floats_off_its_seat_at_rest_is_simulated_from_the_rest_window() 
 #[test]
 fn a_lift_growing_with_temperature_is_measured_and_the_delay_it_hid_named() {
     let (est, val, truth) = logs("thermal-stroke+direction-delay", 11);
-    let d = crate::diagnose::diagnose(
-        &EhvvaFamily::default(),
-        &est,
-        &val,
-        false,
-        &crate::diagnose::Rules::default(),
-        &mut |_| {},
-    )
-    .unwrap();
+    let d = diagnosed(&est, &val);
     let summary = crate::diagnose::report::summary(&d);
     assert_eq!(d.causes, ["direction-delay"], "{summary}");
     assert_eq!(d.verdict, "unexplained", "{summary}");
