@@ -11,7 +11,9 @@ pub mod catalogue;
 pub mod ehvva;
 pub mod evvt;
 mod fit;
+mod none_eligible;
 mod order_spectrum;
+mod outside;
 pub mod positioner;
 mod probes;
 pub mod progress;
@@ -19,6 +21,7 @@ pub mod report;
 mod residual_tests;
 mod selection;
 mod significance;
+mod verdict;
 pub use probes::Probe;
 pub mod vacuum;
 

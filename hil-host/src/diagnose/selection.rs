@@ -1,5 +1,6 @@
-//! The diagnosis proper: the baseline, forward selection of the catalogue's effects, the
-//! probes for physics outside it and the verdict.
+//! The diagnosis proper: the baseline and the forward selection of the catalogue's effects;
+//! the probes for physics outside the catalogue follow in `outside.rs`, the verdict in
+//! `verdict.rs`.
 
 use super::*;
 
@@ -24,9 +25,12 @@ const MAX_PARENT_REFITS: usize = 2;
 ///    the floor (`stop_ratio`: unless another effect was itself eligible in the round just
 ///    run, since the floor is an estimate that unmodelled periodic physics inflates, or
 ///    gained `min_gain_pct` at z ≥ `resolve_z`, evidence short of eligibility) or
-///    `max_causes` are in.
-/// 3. The verdict: `explained` when the remainder is within `explained_ratio` of the floor and
-///    carries no material structure; else `unexplained`, with where the remainder lives.
+///    `max_causes` are in ([`forward_selection`]; where no single effect passes the block
+///    test, the rules of `none_eligible.rs`).
+/// 3. The probes for physics outside the catalogue ([`outside::probe_step`]).
+/// 4. The verdict ([`verdict::verdict`]): `explained` when the remainder is within
+///    `explained_ratio` of the floor and carries no material structure; else `unexplained`,
+///    with where the remainder lives.
 ///
 /// A model that a richer one shows stopped short of its optimum is refitted from there
 /// ([`Family::refits_parent_from`]) and its round run again.
@@ -39,21 +43,84 @@ pub(super) fn diagnose_fits(
     (fit, fit_probe): (&FitOne, &FitProbe),
     release_estimation: &dyn Fn(),
 ) -> Result<Diagnosis, String> {
-    let mut total = 1 + family.effects().len();
-    let mut index = 1;
-    let mut baseline = fit(&[], None, index, total)?;
+    let total = 1 + family.effects().len();
+    let baseline = fit(&[], None, 1, total)?;
     // Residual series are made where they are used, not held through the rounds (each is a
     // validation-length copy); the z of one fit over another is computed from their series.
     let n_res = baseline.residual_len();
-    let lags = (n_res / 20).clamp(5, 50);
-    let mut floor = family.noise_floor(val, &baseline);
-    // Seconds per residual sample (an equation-error family may decimate).
-    let dt_res = val.dt_s * val.len() as f64 / n_res.max(1) as f64;
-    let mut evidence = Vec::new();
+    let floor = family.noise_floor(val, &baseline);
+    let mut s = Selection {
+        current: baseline.clone(),
+        baseline,
+        selected: Vec::new(),
+        floor,
+        rounds: Vec::new(),
+        evidence: Vec::new(),
+        index: 1,
+        total,
+        lags: (n_res / 20).clamp(5, 50),
+        // Seconds per residual sample (an equation-error family may decimate).
+        dt_res: val.dt_s * val.len() as f64 / n_res.max(1) as f64,
+    };
+    s = forward_selection(family, val, rules, fit, s)?;
+    drop_switched_off(family, &mut s);
+    let outside = outside::probe_step(family, val, rules, (fit, fit_probe), &mut s)?;
+    // The fits are done: what remains reads the validation log only.
+    release_estimation();
+    Ok(verdict::verdict(
+        family,
+        (est_id, unexcited),
+        val,
+        validation_is_tail,
+        rules,
+        s,
+        outside,
+    ))
+}
 
-    let mut selected: Vec<&'static str> = Vec::new();
-    let mut current = baseline.clone();
-    let mut rounds: Vec<Round> = Vec::new();
+/// The diagnosis so far, passed from one step to the next.
+pub(super) struct Selection {
+    /// The baseline at its optimum (refitted where a richer model showed it had stopped short).
+    pub(super) baseline: Fit,
+    /// The model selected and the effects it adds to the baseline (the causes).
+    pub(super) current: Fit,
+    pub(super) selected: Vec<&'static str>,
+    /// The sensor's noise floor: the lowest read from the residuals of the models selected.
+    pub(super) floor: NoiseFloor,
+    /// The selection's rounds (the first one's candidates are the report's table).
+    pub(super) rounds: Vec<Round>,
+    /// The sentences of the report's evidence, in order.
+    pub(super) evidence: Vec<String>,
+    /// Progress: the number of the fit being run and the fits expected.
+    pub(super) index: usize,
+    pub(super) total: usize,
+    /// Lags of the residual tests (a twentieth of the residual, 5 to 50).
+    pub(super) lags: usize,
+    /// Seconds per residual sample (an equation-error family may decimate).
+    pub(super) dt_res: f64,
+}
+
+/// Step 2, the forward selection: adds to `s` the catalogue's effects that are causes, round by
+/// round, until none is eligible, the remainder is at the floor or `max_causes` are in.
+fn forward_selection(
+    family: &dyn Family,
+    val: &Log,
+    rules: &Rules,
+    fit: &FitOne,
+    s: Selection,
+) -> Result<Selection, String> {
+    let Selection {
+        mut baseline,
+        mut current,
+        mut selected,
+        mut floor,
+        mut rounds,
+        mut evidence,
+        mut index,
+        mut total,
+        lags,
+        dt_res,
+    } = s;
     let score = |c: &Candidate, base: &Fit| {
         c.fit.rmse * (1.0 + rules.penalty_per_param * c.fit.n_params().saturating_sub(base.n_params()) as f64)
     };
@@ -236,7 +303,6 @@ pub(super) fn diagnose_fits(
             }
         }
         // Prefer the simpler of two nested explanations unless the richer is clearly better.
-        let last_of = |c: &Candidate| c.fit.effects.last().cloned().unwrap_or_default();
         if let Some(b) = best {
             for (simple, rich) in family.nested() {
                 if last_of(&candidates[b]) != *rich {
@@ -275,191 +341,38 @@ pub(super) fn diagnose_fits(
                 }
             }
         }
-        // A large gain that resolves the remainder: when nothing passed z >= min_z but the
-        // model so far leaves a remainder that is not noise (over explained_ratio of the floor
-        // or with material structure) and the candidate with the largest gain turns it into
-        // one that is (within explained_ratio, no material structure), that is evidence the
-        // block test alone cannot give when the gain is concentrated in part of the record
-        // (an EVVT engine-speed effect shows only away from the nominal speed, so a 29 %
-        // gain scored z = 3.3 over 40 time blocks). Such a candidate is added if its gain is
-        // at least `resolve_gain_pct` and z at least `resolve_z` (one-sided 99 %, the
-        // residual tests' level).
-        // Only where no candidate was eligible at all (a richer nested effect turned down by
-        // the nested margin stays turned down), and never an effect nesting a selected one.
-        // Gain, z and "the model without it" are taken against the best switched-off refit
-        // where one beat the model so far, as eligibility is: a model that stopped short of
-        // its optimum is no reference (an EHVVA direction-delay fit ended at 0.0144 mm, any
-        // refit without a new effect reached 0.0062, and pressure-delay's 58 % over the
-        // former was 3.6 % over the latter).
+        // A single effect whose gain the block test misses, where no candidate was eligible at
+        // all (`none_eligible::single_beyond_block_test`): a richer nested effect turned down by
+        // the nested margin stays turned down.
         let without = refit.as_ref().unwrap_or(&current);
         if best.is_none() && !candidates.iter().any(|c| c.eligible) {
-            let nests_selected = |c: &Candidate| {
-                let e = last_of(c);
-                family.nested().iter().any(|(simple, rich)| {
-                    (*rich == e && selected.contains(simple)) || (*simple == e && selected.contains(rich))
-                })
-            };
-            let by_gain = (0..candidates.len())
-                .filter(|&i| {
-                    !offs[i]
-                        && candidates[i].fit.rmse.is_finite()
-                        && candidates[i].fit.effects.len() == selected.len() + 1
-                        && !nests_selected(&candidates[i])
-                })
-                .max_by(|&a, &b| candidates[a].gain_pct.total_cmp(&candidates[b].gain_pct));
-            let gain_over = |c: &Candidate| 100.0 * (without.rmse - c.fit.rmse) / without.rmse.max(f64::MIN_POSITIVE);
-            let z_over = |c: &Candidate| improvement_z_of(without, &c.fit);
-            // A gain the estimation data make plain and the validation data confirm: the
-            // effect takes the estimation cost to at most `confirm_est_cost_ratio` of the model
-            // without it, and gains at least `min_gain_pct` on validation at z >= `resolve_z`.
-            // The block test alone can miss it where the gain sits in a few events of a short
-            // validation log: an EHVVA unit's snubber on top of viscosity, pressure-delay or
-            // direction-delay (seed 88109's three pair logs) took the estimation cost from
-            // 0.54, 0.34, 0.33 to 0.15 each and gained 8-15 % at z = 3.0-3.5.
-            let confirmed = |c: &Candidate| {
-                c.fit.est_cost <= rules.confirm_est_cost_ratio * without.est_cost
-                    && gain_over(c) >= rules.min_gain_pct
-                    && z_over(c) >= rules.resolve_z
-            };
-            if let Some(i) = by_gain.filter(|&i| confirmed(&candidates[i])) {
-                evidence.push(format!(
-                    "`{}` takes the estimation cost from {:.3e} to {:.3e} and gains {:.1} % on validation at z = {:.1} (under {}): added",
-                    last_of(&candidates[i]),
-                    without.est_cost,
-                    candidates[i].fit.est_cost,
-                    gain_over(&candidates[i]),
-                    z_over(&candidates[i]),
-                    rules.min_z
-                ));
+            if let Some(i) = none_eligible::single_beyond_block_test(
+                family,
+                (val, lags),
+                rules,
+                &floor,
+                &selected,
+                (&candidates, &offs),
+                without,
+                &mut evidence,
+            ) {
                 candidates[i].eligible = true;
                 best = Some(i);
-            } else if let Some(i) = by_gain.filter(|&i| {
-                gain_over(&candidates[i]) >= rules.resolve_gain_pct && z_over(&candidates[i]) >= rules.resolve_z
-            }) {
-                let regressors = family.regressors(val);
-                let resolves = |f: &Fit, floor_rmse: f64| {
-                    let tests = ResidualTests::run(&f.residual(), &regressors, lags, floor_rmse);
-                    f.rmse <= rules.explained_ratio * floor_rmse && tests.material_failures().is_empty()
-                };
-                let cand_floor = family.noise_floor(val, &candidates[i].fit).rmse.min(floor.rmse);
-                // A remainder already called noise may still hold an effect whose gain was
-                // spread too unevenly over the blocks for z: the candidate must then take at
-                // least three quarters of what lies above the floor (variance beyond it).
-                let excess2 = |f: &Fit| f.rmse * f.rmse - floor.rmse * floor.rmse;
-                let takes_the_excess = excess2(&candidates[i].fit) <= 0.25 * excess2(without);
-                if (!resolves(without, floor.rmse) || takes_the_excess) && resolves(&candidates[i].fit, cand_floor) {
-                    evidence.push(format!(
-                        "`{}` gains {:.1} % at z = {:.1} (under {}) and leaves a remainder of noise where the model without it does not: added",
-                        last_of(&candidates[i]),
-                        gain_over(&candidates[i]),
-                        z_over(&candidates[i]),
-                        rules.min_z
-                    ));
-                    candidates[i].eligible = true;
-                    best = Some(i);
-                }
             }
         }
-        // Two effects can mask each other: each alone gains but not consistently enough, or
-        // one alone fits the estimation data much better and loses on validation (it
-        // stands in for the other where the two vary together, e.g. two effects that both
-        // reschedule the EVVT's α/β). When no single effect is eligible, the two with the
-        // largest gains on either record are fitted together and added together if the
-        // pair is eligible and significantly better than each alone on validation.
+        // Two effects that mask each other (`none_eligible::masked_pairs`), where no single
+        // effect is eligible.
         if best.is_none() && selected.len() + 2 <= rules.max_causes {
-            // Estimation gain in RMSE terms (the cost is a sum of squares), comparable
-            // with the validation gain.
-            let est_gain = |c: &Candidate| {
-                let g = 100.0 * (1.0 - (c.fit.est_cost / current.est_cost).sqrt());
-                if g.is_finite() {
-                    g
-                } else {
-                    f64::NEG_INFINITY
-                }
-            };
-            let pair_gain = |c: &Candidate| c.gain_pct.max(est_gain(c));
-            // The first of the two must gain at least `min_gain_pct` on one record, the
-            // second something (its own gain may be what the first one's stand-in took).
-            let mut gaining: Vec<usize> = (0..candidates.len())
-                .filter(|&i| !offs[i] && pair_gain(&candidates[i]) > 0.0 && candidates[i].fit.rmse.is_finite())
-                .collect();
-            gaining.sort_by(|&a, &b| pair_gain(&candidates[b]).total_cmp(&pair_gain(&candidates[a])));
-            if gaining
-                .first()
-                .is_some_and(|&a| pair_gain(&candidates[a]) < rules.min_gain_pct)
-            {
-                gaining.clear();
-            }
-            // The largest-gaining effect is paired with the next one, and in the first round
-            // (nothing selected yet) with every other gaining one: the second effect of a
-            // masked pair may gain least of all alone (seed 88109's viscosity+pressure-delay
-            // unit: viscosity gains 53 % at z 1.5, pressure-delay alone loses 3 %, snubber,
-            // ranked second, 2 %; viscosity with pressure-delay reaches 1.6x the floor, z 9.9).
-            // The best eligible pair is added.
-            let partners = if selected.is_empty() {
-                gaining.len().saturating_sub(1)
-            } else {
-                gaining.len().min(2).saturating_sub(1)
-            };
-            let mut pairs: Vec<(Candidate, [&'static str; 2])> = Vec::new();
-            if let Some(&a) = gaining.first() {
-                for &b in gaining.iter().skip(1).take(partners) {
-                    let (ea, eb) = (last_of(&candidates[a]), last_of(&candidates[b]));
-                    let nests = family
-                        .nested()
-                        .iter()
-                        .any(|(s, r)| (*s == ea && *r == eb) || (*s == eb && *r == ea));
-                    let find = |name: &str| family.effects().iter().copied().find(|e| *e == name);
-                    let (false, Some(na), Some(nb)) = (nests, find(&ea), find(&eb)) else {
-                        continue;
-                    };
-                    let mut set = selected.clone();
-                    set.extend([na, nb]);
-                    index += 1;
-                    total += 1;
-                    let Ok(pair) = fit(&set, Some(&candidates[a].fit), index, total) else {
-                        continue;
-                    };
-                    let gain_pct = 100.0 * (current.rmse - pair.rmse) / current.rmse;
-                    let z = improvement_z_of(&current, &pair);
-                    let beats = |single: &Candidate| {
-                        100.0 * (single.fit.rmse - pair.rmse) / single.fit.rmse >= rules.min_gain_pct
-                            && improvement_z_of(&single.fit, &pair) >= rules.min_z
-                    };
-                    let eligible = gain_pct >= rules.min_gain_pct
-                        && z >= rules.min_z
-                        && beats(&candidates[a])
-                        && beats(&candidates[b]);
-                    pairs.push((
-                        Candidate {
-                            fit: pair,
-                            gain_pct,
-                            z,
-                            eligible,
-                        },
-                        [na, nb],
-                    ));
-                }
-            }
-            let chosen = (0..pairs.len())
-                .filter(|&i| pairs[i].0.eligible)
-                .min_by(|&i, &j| pairs[i].0.fit.rmse.total_cmp(&pairs[j].0.fit.rmse));
-            for (i, (pair, [na, nb])) in pairs.iter().enumerate() {
-                evidence.push(format!(
-                    "neither effect alone is significant on validation; `{na}` and `{nb}` together lower the validation RMSE from {:.4} to {:.4} ({:.1} %, z = {:.1}){}",
-                    current.rmse,
-                    pair.fit.rmse,
-                    pair.gain_pct,
-                    pair.z,
-                    if Some(i) == chosen {
-                        ", more than either alone: both added"
-                    } else if pair.eligible {
-                        ", more than either alone, but another pair does better"
-                    } else {
-                        ": not added"
-                    }
-                ));
-            }
+            let (pairs, chosen) = none_eligible::masked_pairs(
+                family,
+                rules,
+                fit,
+                &selected,
+                &current,
+                (&candidates, &offs),
+                (&mut index, &mut total),
+                &mut evidence,
+            );
             let first = candidates.len();
             let mut added_pair: Option<[&'static str; 2]> = None;
             for (i, (pair, names)) in pairs.into_iter().enumerate() {
@@ -561,16 +474,33 @@ pub(super) fn diagnose_fits(
             break;
         }
     }
-    // A cause added early whose effect the final model switched off (its parameters back at
-    // neutral within their 95 % intervals, the later causes describing what it took at first:
-    // a clearance taken for friction's dead band, then friction and the pressure's direction
-    // added and the clearance fitted to 0) is not named; the model is the same without it.
+    Ok(Selection {
+        baseline,
+        current,
+        selected,
+        floor,
+        rounds,
+        evidence,
+        index,
+        total,
+        lags,
+        dt_res,
+    })
+}
+
+/// A cause added early whose effect the final model switched off (its parameters back at
+/// neutral within their 95 % intervals, the later causes describing what it took at first: a
+/// clearance taken for friction's dead band, then friction and the pressure's direction added
+/// and the clearance fitted to 0) is not named; the model is the same without it.
+fn drop_switched_off(family: &dyn Family, s: &mut Selection) {
+    let Selection {
+        current,
+        selected,
+        evidence,
+        ..
+    } = s;
     if selected.len() > 1 {
-        let off: Vec<&'static str> = selected
-            .iter()
-            .copied()
-            .filter(|c| family.is_off(c, &current))
-            .collect();
+        let off: Vec<&'static str> = selected.iter().copied().filter(|c| family.is_off(c, current)).collect();
         if !off.is_empty() && off.len() < selected.len() {
             for c in &off {
                 evidence.push(format!(
@@ -579,278 +509,10 @@ pub(super) fn diagnose_fits(
                 ));
             }
             selected.retain(|s| !off.contains(s));
-            current.effect = Fit::label(&selected);
+            current.effect = Fit::label(selected);
             current.effects = selected.iter().map(|s| s.to_string()).collect();
         }
     }
-    let mut rounds = rounds.into_iter();
-    let candidates = rounds.next().map(|r| r.candidates).unwrap_or_default();
-    let rounds: Vec<Round> = rounds.collect();
-
-    // Physics outside the catalogue (`probes::run`): a probe found makes the verdict
-    // `unexplained`, whatever the remainder's size.
-    // A probe run only above the floor (`Probe::only_above_floor`) is judged against the floor
-    // the verdict will use, the logged inputs' own error included (computed only where the
-    // sensor floor alone would let it run): a valve near its force balance misses by more than
-    // the sensor's noise and is explained by that, not by outside physics.
-    // The input floor computed here is kept for the verdict where `current` stays the model
-    // it was computed on (on a 400 000-row EHVVA pair it is five simulations of the
-    // validation events, 0.3 s).
-    let mut input_floor_of_current: Option<Option<(f64, String)>> = None;
-    let probe_floor =
-        if family.probes().iter().any(|p| p.only_above_floor) && current.rmse > rules.explained_ratio * floor.rmse {
-            let input = family.input_floor(val, &current);
-            let rmse = input
-                .as_ref()
-                .map_or(floor.rmse, |(input_rmse, _)| floor.rmse.hypot(*input_rmse));
-            input_floor_of_current = Some(input);
-            rmse
-        } else {
-            floor.rmse
-        };
-    let probes::Probed {
-        found: mut probes_found,
-        pending,
-    } = probes::run(
-        family,
-        rules,
-        &selected,
-        &current,
-        (val, probe_floor),
-        fit_probe,
-        (&mut index, &mut total),
-        &mut evidence,
-    );
-
-    // Next to outside physics, the causes are selected again with the probe's physics in every
-    // model (families whose probe fits take any effects); else a single cause is kept only if
-    // it still gains with the probe's physics fitted on the baseline too.
-    let mut beside = probes_found
-        .first()
-        .filter(|_| family.selects_beside_probes())
-        .and_then(|found| {
-            probes::causes_beside(
-                family,
-                rules,
-                &baseline,
-                found,
-                fit_probe,
-                floor.rmse,
-                (&mut index, &mut total),
-                &mut evidence,
-            )
-        })
-        .map(|(causes, _)| causes);
-    // The catalogue model of `beside`'s causes, where it was fitted to judge a pending probe.
-    let mut catalogue_of_beside: Option<Fit> = None;
-    // A probe the estimation data confirm and the validation does not: its model may lack a
-    // catalogue effect it hid; judged with the causes selected beside it against the best
-    // catalogue model (`probes::judge_beside`).
-    if let Some(pending) = pending
-        .first()
-        .filter(|_| probes_found.is_empty() && family.selects_beside_probes())
-    {
-        if let Some((causes, with_probe)) = probes::causes_beside(
-            family,
-            rules,
-            &baseline,
-            pending,
-            fit_probe,
-            floor.rmse,
-            (&mut index, &mut total),
-            &mut evidence,
-        ) {
-            let mut catalogue = baseline.clone();
-            if causes != selected {
-                for k in 1..=causes.len() {
-                    total += 1;
-                    index += 1;
-                    catalogue = fit(&causes[..k], Some(&catalogue), index, total)?;
-                }
-            }
-            let reference = if causes == selected || current.rmse <= catalogue.rmse {
-                &current
-            } else {
-                &catalogue
-            };
-            match probes::judge_beside(family, rules, pending, &causes, with_probe, reference) {
-                Ok(found) => {
-                    evidence.push(found.sentence.clone());
-                    probes_found.push(found);
-                    if causes != selected {
-                        catalogue_of_beside = Some(catalogue);
-                    }
-                    beside = Some(causes);
-                }
-                Err(sentence) => evidence.push(sentence),
-            }
-        }
-    }
-    if let Some(causes) = beside {
-        if causes != selected {
-            let said = |c: &[&str]| {
-                if c.is_empty() {
-                    "none".to_string()
-                } else {
-                    c.join(" + ")
-                }
-            };
-            evidence.push(format!(
-                "beside the probe's physics the causes are {} (the selection without it: {})",
-                said(&causes),
-                said(&selected)
-            ));
-            input_floor_of_current = None;
-            current = match catalogue_of_beside {
-                Some(c) => c,
-                None => {
-                    let mut c = baseline.clone();
-                    for k in 1..=causes.len() {
-                        total += 1;
-                        index += 1;
-                        c = fit(&causes[..k], Some(&c), index, total)?;
-                    }
-                    c
-                }
-            };
-            selected = causes;
-        }
-    } else if let ([cause], Some(found)) = (selected.as_slice(), probes_found.first()) {
-        if let Some(sentence) =
-            probes::cause_not_needed(rules, cause, found, &baseline, fit_probe, (&mut index, &mut total))
-        {
-            evidence.push(sentence);
-            selected.clear();
-            input_floor_of_current = None;
-            current = baseline.clone();
-        }
-    }
-
-    // The fits are done: what remains reads the validation log only.
-    release_estimation();
-    // What the logged inputs' own error costs a perfect model joins the floor of the verdict
-    // (after the selection, which stops on the sensor floor: the causes do not depend on it).
-    let input_floor = input_floor_of_current.unwrap_or_else(|| family.input_floor(val, &current));
-    if let Some((input_rmse, how)) = input_floor {
-        if input_rmse > 0.0 {
-            floor = NoiseFloor {
-                rmse: floor.rmse.hypot(input_rmse),
-                method: format!("{}; {how}; floor = their root sum of squares", floor.method),
-            };
-        }
-    }
-    // Made after the fits, not held through them (the families' caches they read hold the
-    // baseline from its fit).
-    let regressors = family.regressors(val);
-    let e0 = baseline.residual();
-    let tests = ResidualTests::run(&e0, &regressors, lags, floor.rmse);
-    tests.describe("baseline residual", &mut evidence);
-    let causes: Vec<String> = selected.iter().map(|s| s.to_string()).collect();
-    let extended = current;
-    let gain_pct = if causes.is_empty() {
-        0.0
-    } else {
-        100.0 * (baseline.rmse - extended.rmse) / baseline.rmse
-    };
-    if causes.is_empty() {
-        evidence.push(format!(
-            "no extension lowers the validation RMSE by ≥ {} % with z ≥ {}: cause `none`",
-            rules.min_gain_pct, rules.min_z
-        ));
-    }
-    let e_ext = extended.residual();
-    let rest = ResidualTests::run(&e_ext, &regressors, lags, floor.rmse);
-    let ratio = if floor.rmse > 0.0 {
-        extended.rmse / floor.rmse
-    } else {
-        f64::INFINITY
-    };
-    let ratio_txt = if ratio.is_finite() {
-        format!("{ratio:.2}×")
-    } else {
-        "not comparable with".to_string()
-    };
-    let material = rest.material_failures();
-    let explained = ratio <= rules.explained_ratio && material.is_empty() && probes_found.is_empty();
-    let mut where_ = Vec::new();
-    if !explained {
-        where_ = probes_found.iter().map(|f| f.sentence.clone()).collect();
-        where_.extend(locate(&rest, &e_ext, floor.rmse, dt_res));
-        if where_.is_empty() {
-            where_.push(format!(
-                "the remainder is {ratio_txt} the noise floor with no single input, state or regime it follows; look at the residual plot for what the catalogue does not describe"
-            ));
-        }
-    }
-    let verdict = if explained { "explained" } else { "unexplained" }.to_string();
-    evidence.push(if explained {
-        format!(
-            "verdict explained: the remainder (RMSE {:.4}) is {ratio_txt} the noise floor {:.4}, without material structure",
-            extended.rmse, floor.rmse
-        )
-    } else {
-        format!(
-            "verdict unexplained: the remainder (RMSE {:.4}) is {ratio_txt} the noise floor {:.4}{}{}: physics outside the catalogue{}",
-            extended.rmse,
-            floor.rmse,
-            if material.is_empty() {
-                String::new()
-            } else {
-                format!(", with structure ({})", material.join("; "))
-            },
-            if probes_found.is_empty() {
-                String::new()
-            } else {
-                format!(
-                    "; a probe finds {}",
-                    probes_found.iter().map(|f| f.probe.what).collect::<Vec<_>>().join(", ")
-                )
-            },
-            if causes.is_empty() {
-                String::new()
-            } else {
-                format!(" beyond {}", causes.join(" + "))
-            }
-        )
-    });
-    for (what, f) in
-        std::iter::once(("baseline", &baseline)).chain((!causes.is_empty()).then_some(("extended", &extended)))
-    {
-        for flag in f.flags() {
-            evidence.push(format!("{what} calibration: {flag}"));
-        }
-    }
-    Ok(Diagnosis {
-        plant: family.plant(),
-        output: family.output().to_string(),
-        formulation: family.formulation().to_string(),
-        estimation: est_id.clone(),
-        validation: (val.file.clone(), val.len()),
-        validation_is_tail,
-        baseline,
-        whiteness: tests.white,
-        cross: tests.cross,
-        grouped: tests.grouped,
-        candidates,
-        rounds,
-        cause: causes.first().cloned().unwrap_or_else(|| "none".into()),
-        causes,
-        extended,
-        gain_pct,
-        noise_floor: floor.clone(),
-        remainder: Remainder {
-            rmse: e_ext.iter().map(|v| v * v).sum::<f64>().sqrt() / (e_ext.len().max(1) as f64).sqrt(),
-            ratio_to_floor: ratio,
-            evidence: where_,
-        },
-        verdict,
-        remainder_whiteness: rest.white,
-        remainder_cross: rest.cross,
-        remainder_grouped: rest.grouped,
-        evidence,
-        unexcited,
-        validation_scope: None,
-    })
 }
 
 /// The fits of earlier rounds that `set` nests other than `parent`: the same effects but one
@@ -910,4 +572,9 @@ fn lower_floor(floor: &mut NoiseFloor, family: &dyn Family, val: &Log, current: 
             method: format!("{} (from the model with {})", f.method, selected.join(" + ")),
         };
     }
+}
+
+/// The effect a candidate adds to the model it extends (the last of its effects).
+pub(super) fn last_of(c: &Candidate) -> String {
+    c.fit.effects.last().cloned().unwrap_or_default()
 }
