@@ -100,14 +100,11 @@ pub(super) fn probe_step(
             (&mut s.index, &mut s.total),
             &mut s.evidence,
         ) {
-            let mut catalogue = s.baseline.clone();
-            if causes != s.selected {
-                for k in 1..=causes.len() {
-                    s.total += 1;
-                    s.index += 1;
-                    catalogue = fit(&causes[..k], Some(&catalogue), s.index, s.total)?;
-                }
-            }
+            let catalogue = if causes == s.selected {
+                s.baseline.clone()
+            } else {
+                catalogue_model(fit, &causes, s)?
+            };
             let reference = if causes == s.selected || s.current.rmse <= catalogue.rmse {
                 &s.current
             } else {
@@ -143,15 +140,7 @@ pub(super) fn probe_step(
             input_floor_of_current = None;
             s.current = match catalogue_of_beside {
                 Some(c) => c,
-                None => {
-                    let mut c = s.baseline.clone();
-                    for k in 1..=causes.len() {
-                        s.total += 1;
-                        s.index += 1;
-                        c = fit(&causes[..k], Some(&c), s.index, s.total)?;
-                    }
-                    c
-                }
+                None => catalogue_model(fit, &causes, s)?,
             };
             s.selected = causes;
         }
@@ -174,4 +163,16 @@ pub(super) fn probe_step(
         found: probes_found,
         input_floor_of_current,
     })
+}
+
+/// The catalogue model of `causes` (without the probe's physics): the baseline extended by
+/// one cause at a time, each fit starting from the one before.
+fn catalogue_model(fit: &FitOne, causes: &[&str], s: &mut Selection) -> Result<Fit, String> {
+    let mut model = s.baseline.clone();
+    for k in 1..=causes.len() {
+        s.total += 1;
+        s.index += 1;
+        model = fit(&causes[..k], Some(&model), s.index, s.total)?;
+    }
+    Ok(model)
 }

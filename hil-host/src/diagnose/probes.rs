@@ -461,18 +461,13 @@ pub(super) fn causes_beside(
     // its neutral value is not named, the later causes describing what it took at first (a
     // clearance taken for a Dahl friction's pre-sliding lag beside a duty delay, then friction
     // added and the clearance fitted to 0).
-    if selected.len() > 1 {
-        let off: Vec<&'static str> = selected.iter().copied().filter(|c| family.is_off(c, &base)).collect();
-        if !off.is_empty() && off.len() < selected.len() {
-            for c in &off {
-                evidence.push(format!(
-                    "beside the probe `{}`, `{c}` is not named: it was added in round {} but the final model fitted it back to its neutral value",
-                    found.probe.name,
-                    1 + selected.iter().position(|s| s == c).unwrap_or(0)
-                ));
-            }
-            selected.retain(|s| !off.contains(s));
-        }
+    let off = super::selection::switched_off(family, &selected, &base);
+    for (c, round) in &off {
+        evidence.push(format!(
+            "beside the probe `{}`, `{c}` is not named: it was added in round {round} but the final model fitted it back to its neutral value",
+            found.probe.name
+        ));
     }
+    selected.retain(|c| !off.iter().any(|(o, _)| o == c));
     Some((selected, base))
 }

@@ -493,25 +493,34 @@ fn forward_selection(
 /// clearance taken for friction's dead band, then friction and the pressure's direction added
 /// and the clearance fitted to 0) is not named; the model is the same without it.
 fn drop_switched_off(family: &dyn Family, s: &mut Selection) {
-    let Selection {
-        current,
-        selected,
-        evidence,
-        ..
-    } = s;
-    if selected.len() > 1 {
-        let off: Vec<&'static str> = selected.iter().copied().filter(|c| family.is_off(c, current)).collect();
-        if !off.is_empty() && off.len() < selected.len() {
-            for c in &off {
-                evidence.push(format!(
-                    "`{c}` is not named: it was added in round {} but the final model fitted it back to its neutral value (the causes added after it describe what it took at first)",
-                    1 + selected.iter().position(|s| s == c).unwrap_or(0)
-                ));
-            }
-            selected.retain(|s| !off.contains(s));
-            current.effect = Fit::label(selected);
-            current.effects = selected.iter().map(|s| s.to_string()).collect();
-        }
+    let off = switched_off(family, &s.selected, &s.current);
+    if off.is_empty() {
+        return;
+    }
+    for (c, round) in &off {
+        s.evidence.push(format!(
+            "`{c}` is not named: it was added in round {round} but the final model fitted it back to its neutral value (the causes added after it describe what it took at first)"
+        ));
+    }
+    s.selected.retain(|c| !off.iter().any(|(o, _)| o == c));
+    s.current.effect = Fit::label(&s.selected);
+    s.current.effects = s.selected.iter().map(|c| c.to_string()).collect();
+}
+
+/// The causes of `selected` that `fit`, their final model, fitted back to neutral, each with
+/// the round it was added in (from 1); none unless another cause stays on (a model whose every
+/// cause is off is the parent refitted, judged where it was selected).
+pub(super) fn switched_off(family: &dyn Family, selected: &[&'static str], fit: &Fit) -> Vec<(&'static str, usize)> {
+    let off: Vec<(&'static str, usize)> = selected
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| family.is_off(c, fit))
+        .map(|(k, c)| (*c, k + 1))
+        .collect();
+    if off.len() < selected.len() {
+        off
+    } else {
+        Vec::new()
     }
 }
 
