@@ -95,8 +95,9 @@ pub fn effects(plant: Plant) -> Vec<&'static str> {
 /// the catalogue on purpose.
 pub fn outside_effects(plant: Plant) -> &'static [&'static str] {
     match plant {
-        // The valve acts on the commanded duty 60-150 ms late (a long pneumatic line).
-        Plant::Vacuum => &["duty-delay"],
+        // The valve acts on the commanded duty 60-150 ms late (a long pneumatic line); the
+        // rod's travel ends at 72-88 % of the stroke (a linkage or flap stop).
+        Plant::Vacuum => &["duty-delay", "travel-stop"],
         // The motor follows its command 30-60 ms late (driver and CAN latency); a clearance of
         // 1.5-3 crank degrees between the phaser's drive and the camshaft.
         Plant::Evvt => &["command-delay", "gear-backlash"],

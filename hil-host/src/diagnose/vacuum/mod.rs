@@ -241,6 +241,32 @@ fn fingerprint(log: &Log) -> u64 {
 }
 
 impl VacuumFamily {
+    /// The travel-stop probe: the model `effects` from `parent`'s values with the position
+    /// limited below and above (a stop inside the stroke), refitted in both stages (an effect
+    /// new beside the probe, such as the supply voltage's, has its parameters in the pressure
+    /// stage), the stops with the rod's parameters on the position error. The stops start
+    /// where the estimation log's position ends, or at `parent`'s where it has them (a
+    /// selection beside the probe).
+    fn fit_travel_stop(&self, effects: &[&str], parent: &Fit, est: &Log, val: &Log) -> Result<Fit, String> {
+        let data = self.est_data(est)?;
+        let prepared = self.prepared(est, &data)?.model;
+        let mut start = model_of(&prepared, effects, parent)?;
+        let (low, high) = data.x.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &x| {
+            (lo.min(x), hi.max(x))
+        });
+        let clamp_to = |v: f64, name: &str| v.max(bounds(name).0).min(bounds(name).1);
+        if !start.x_stop_low_pct.is_finite() {
+            start.x_stop_low_pct = clamp_to(low, "x_stop_low_pct");
+        }
+        if !start.x_stop_high_pct.is_finite() {
+            start.x_stop_high_pct = clamp_to(high, "x_stop_high_pct");
+        }
+        let mut names = start.parameter_names(effects)?;
+        names.extend(["x_stop_low_pct", "x_stop_high_pct"]);
+        let c = self.calibrate_from(&data, start, &names, true)?;
+        self.record(&format!("probe: {}", PROBES[1].name), c, Some(parent), val)
+    }
+
     fn est_data<'a>(&self, log: &'a Log) -> Result<EstData<'a>, String> {
         let io = Inputs::from_log(log)?;
         let x = log
@@ -634,15 +660,25 @@ fn model_of(prepared: &VacuumModel, effects: &[&str], parent: &Fit) -> Result<Va
 /// Physics outside the catalogue the vacuum diagnosis tests for: a transport delay of the
 /// duty (a driver or bus latency, a PWM stage that takes a new duty only at its next period).
 /// Friction takes part of such a lag into a dead band, so the nearest catalogue effect gains
-/// on it; the probe says what is missing instead.
-pub const PROBES: [Probe; 1] = [Probe {
-    name: "duty-delay",
-    what:
-        "a transport delay of the duty command (driver, bus or PWM-stage latency, or a long pneumatic line, between the logged duty and the actuator)",
-    // A delay of one log sample or more is physics; shorter is within the sampled model's hold.
-    min_samples: Some(1.0),
-    only_above_floor: false,
-}];
+/// on it; the probe says what is missing instead. And a travel that ends inside the stroke
+/// (a linkage or flap stop, a position sensor at the end of its range): the position stays
+/// flat while the chamber pressure goes on, which a clearance's dead band half mimics.
+pub const PROBES: [Probe; 2] = [
+    Probe {
+        name: "duty-delay",
+        what: "a transport delay of the duty command (driver, bus or PWM-stage latency, or a long pneumatic line, between the logged duty and the actuator)",
+        // A delay of one log sample or more is physics; shorter is within the sampled model's hold.
+        min_samples: Some(1.0),
+        only_above_floor: false,
+    },
+    Probe {
+        name: "travel-stop",
+        what: "a travel that ends inside the stroke: the measured position stops at a level the pressure would carry it past (a linkage, flap or wastegate stop, or a position sensor at the end of its range)",
+        min_samples: None,
+        // A stop changes nothing where the model already reaches the floor.
+        only_above_floor: true,
+    },
+];
 
 fn is_pressure_param(name: &str) -> bool {
     matches!(
@@ -717,6 +753,9 @@ impl Family for VacuumFamily {
     /// pressure model where the chamber pressure is logged (the pressure follows the duty
     /// without the rod's friction in between).
     fn fit_probe(&self, probe: &str, effects: &[&str], parent: &Fit, est: &Log, val: &Log) -> Result<Fit, String> {
+        if probe == PROBES[1].name {
+            return self.fit_travel_stop(effects, parent, est, val);
+        }
         if probe != PROBES[0].name {
             return Err(format!("no probe `{probe}` for the vacuum actuator"));
         }

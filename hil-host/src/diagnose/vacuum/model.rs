@@ -61,6 +61,11 @@ pub struct VacuumModel {
     /// A transport delay of the duty command, s: physics outside the catalogue, fitted only by
     /// the `duty-delay` probe (0 in every catalogue model).
     pub duty_delay_s: f64,
+    /// Where the rod's measured travel ends inside the model's stroke, %: a linkage or valve
+    /// stop, or a position sensor at the end of its range. Physics outside the catalogue,
+    /// fitted only by the `travel-stop` probe (±∞ in every catalogue model: no stop).
+    pub x_stop_low_pct: f64,
+    pub x_stop_high_pct: f64,
     pub u_ref_v: f64,
     pub p_amb_ref_kpa: f64,
     pub effects: VacuumEffects,
@@ -153,6 +158,8 @@ impl VacuumModel {
             dahl_x_pct: 0.3,
             backlash_pct: 0.0,
             duty_delay_s: 0.0,
+            x_stop_low_pct: f64::NEG_INFINITY,
+            x_stop_high_pct: f64::INFINITY,
             u_ref_v: 12.0,
             p_amb_ref_kpa: 100.0,
             effects: VacuumEffects::NONE,
@@ -304,6 +311,8 @@ impl VacuumModel {
             "dahl_x_pct" => &mut self.dahl_x_pct,
             "backlash_pct" => &mut self.backlash_pct,
             "duty_delay_s" => &mut self.duty_delay_s,
+            "x_stop_low_pct" => &mut self.x_stop_low_pct,
+            "x_stop_high_pct" => &mut self.x_stop_high_pct,
             // Names come from `parameter_names`: an unknown one is no field.
             _ => return None,
         })
@@ -383,7 +392,9 @@ impl VacuumModel {
         let mut a = self.actuator(h_max_s)?;
         a.settle(&self.inputs_at(io, k0));
         for (i, k) in range.enumerate() {
-            x_out[i] = a.x_pct();
+            // The stops limit what the position shows; with none (±∞) the value is unchanged
+            // (`max`/`min`, not `clamp`, which panics on crossed bounds).
+            x_out[i] = a.x_pct().max(self.x_stop_low_pct).min(self.x_stop_high_pct);
             p_out[i] = a.p_act_kpa();
             let inputs = self.inputs_at(io, k);
             if mechanics {
@@ -436,6 +447,10 @@ pub(super) fn bounds(name: &str) -> (f64, f64) {
         "dahl_x_pct" => (0.01, 10.0),
         "backlash_pct" => (0.0, 40.0),
         "duty_delay_s" => (0.0, DUTY_DELAY_MAX_S),
+        // A stop inside the stroke: below the top's lowest and above the bottom's highest
+        // plausible rest, each within the logged range's ±5 % margin.
+        "x_stop_low_pct" => (-5.0, 60.0),
+        "x_stop_high_pct" => (40.0, 105.0),
         _ => (f64::NEG_INFINITY, f64::INFINITY),
     }
 }
