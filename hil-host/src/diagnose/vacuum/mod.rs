@@ -255,6 +255,7 @@ impl VacuumFamily {
             (lo.min(x), hi.max(x))
         });
         let clamp_to = |v: f64, name: &str| v.max(bounds(name).0).min(bounds(name).1);
+        let beside = start.x_stop_low_pct.is_finite() || start.x_stop_high_pct.is_finite();
         if !start.x_stop_low_pct.is_finite() {
             start.x_stop_low_pct = clamp_to(low, "x_stop_low_pct");
         }
@@ -263,7 +264,19 @@ impl VacuumFamily {
         }
         let mut names = start.parameter_names(effects)?;
         names.extend(["x_stop_low_pct", "x_stop_high_pct"]);
-        let c = self.calibrate_from(&data, start, &names, true)?;
+        let mut c = self.calibrate_from(&data, start, &names, true)?;
+        if beside && !effects.is_empty() {
+            // A selection beside the probe: also the effects fitted from every start of the
+            // family's own fit, the stops held at the parent's, then all refitted together;
+            // the lower estimation cost is kept. Friction's multimodal cost needs that grid:
+            // from the one start a stop unit's friction stopped at twice the floor and a
+            // clearance took its place (coulomb-friction + travel-stop, seeds 32676, 56433).
+            let from_grid = self.calibrate(est, effects, Some(parent))?.0;
+            let other = self.calibrate_from(&data, from_grid, &names, true)?;
+            if other.4.cost < c.4.cost {
+                c = other;
+            }
+        }
         self.record(&format!("probe: {}", PROBES[1].name), c, Some(parent), val)
     }
 
@@ -673,7 +686,7 @@ pub const PROBES: [Probe; 2] = [
     },
     Probe {
         name: "travel-stop",
-        what: "a travel that ends inside the stroke: the measured position stops at a level the pressure would carry it past (a linkage, flap or wastegate stop, or a position sensor at the end of its range)",
+        what: "a travel that ends inside the stroke: the measured position stops at a level the pressure would carry it past, or rests above the stroke's start (a linkage, flap or wastegate stop, a rod that does not return to rest, or a position sensor with an offset or at the end of its range)",
         min_samples: None,
         // A stop changes nothing where the model already reaches the floor.
         only_above_floor: true,
