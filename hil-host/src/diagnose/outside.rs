@@ -36,6 +36,20 @@ pub(super) fn probe_step(
     // it was computed on (on a 400 000-row EHVVA pair it is five simulations of the
     // validation events, 0.3 s).
     let mut input_floor_of_current: Option<Option<(f64, String)>> = None;
+    // An output that does not vary on the validation data leaves nothing to diagnose (the
+    // report says so): a probe would meet it exactly (the vacuum's travel stop at the constant
+    // level, a z without bound) and name physics where the data hold none.
+    let y = &s.current.measured;
+    if y.first().is_some_and(|y0| y.iter().all(|v| v == y0)) {
+        s.evidence.push(format!(
+            "probes not fitted: {} does not vary on the validation data",
+            family.output()
+        ));
+        return Ok(Outside {
+            found: Vec::new(),
+            input_floor_of_current,
+        });
+    }
     let probe_floor = if family.probes().iter().any(|p| p.only_above_floor)
         && s.current.rmse > rules.explained_ratio * s.floor.rmse
     {

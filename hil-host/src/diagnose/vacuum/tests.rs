@@ -481,38 +481,25 @@ fn a_duty_delay_is_found_by_its_probe_and_not_named_as_friction() {
     let (case, d) = diagnosed("duty-delay", 111_866);
     assert!(d.causes.is_empty(), "{:?}", d.causes);
     assert_eq!(d.verdict, "unexplained");
-    let said = d.remainder.evidence.join("\n");
     let delay = truth(&case, "duty_delay_s");
-    let fitted: f64 = said
-        .split("duty_delay_s = ")
-        .nth(1)
-        .and_then(|t| t.split(')').next())
-        .and_then(|v| v.parse().ok())
-        .unwrap_or_else(|| panic!("no fitted delay in: {said}"));
+    // The evidence says what is missing, with the fitted delay.
+    let fitted = probe_value(&d, "a transport delay of the duty", "duty_delay_s");
     assert!((fitted / delay - 1.0).abs() < 0.1, "{fitted} s against {delay} s");
-    assert!(said.contains("transport delay of the duty"), "{said}");
 }
 
 /// Outside the catalogue: the rod's travel ends at a stop inside the stroke (seed 2024: at
 /// 77.4 %). The position stays flat while the chamber pressure goes on, which a clearance's
-/// dead band half mimics: `backlash` was named (40 % gain, the remainder still 40x the floor).
-/// The travel-stop probe finds the stop; beside it the clearance gains nothing, so no
+/// dead band half mimics: `backlash` was named (27 % gain, z 11.6, the remainder still 31x the
+/// floor). The travel-stop probe finds the stop; beside it the clearance gains nothing, so no
 /// catalogue effect is named, and the verdict says what is missing and where the stop is.
 #[test]
 fn a_travel_stop_is_found_by_its_probe_and_not_named_as_a_clearance() {
     let (case, d) = diagnosed("travel-stop", 2024);
     assert!(d.causes.is_empty(), "{:?}", d.causes);
     assert_eq!(d.verdict, "unexplained");
-    let said = d.remainder.evidence.join("\n");
     let stop = truth(&case, "x_stop_high_pct");
-    let fitted: f64 = said
-        .split("x_stop_high_pct = ")
-        .nth(1)
-        .and_then(|t| t.split(')').next())
-        .and_then(|v| v.parse().ok())
-        .unwrap_or_else(|| panic!("no fitted stop in: {said}"));
+    let fitted = probe_value(&d, "a travel that ends inside the stroke", "x_stop_high_pct");
     assert!((fitted - stop).abs() < 0.5, "{fitted} % against {stop} %");
-    assert!(said.contains("travel that ends inside the stroke"), "{said}");
 }
 
 /// A cause added first whose effect the final model fitted back to neutral is not named
