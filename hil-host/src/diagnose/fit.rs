@@ -146,6 +146,12 @@ impl Fit {
         }
         self
     }
+    /// Whether the measured output is the same at every validation sample: no excitation,
+    /// nothing a model can be judged on (the report's warning, the probes not fitted).
+    pub fn measured_is_constant(&self) -> bool {
+        self.measured.iter().all(|v| *v == self.measured[0])
+    }
+
     /// Is anything about this calibration not good (a bound, an impossible value, a direction
     /// the data cannot see)?
     pub fn flags(&self) -> Vec<String> {

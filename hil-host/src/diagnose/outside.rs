@@ -39,8 +39,7 @@ pub(super) fn probe_step(
     // An output that does not vary on the validation data leaves nothing to diagnose (the
     // report says so): a probe would meet it exactly (the vacuum's travel stop at the constant
     // level, a z without bound) and name physics where the data hold none.
-    let y = &s.current.measured;
-    if y.first().is_some_and(|y0| y.iter().all(|v| v == y0)) {
+    if s.current.measured_is_constant() {
         s.evidence.push(format!(
             "probes not fitted: {} does not vary on the validation data",
             family.output()

@@ -59,9 +59,7 @@ struct Why {
 }
 
 fn why(d: &Diagnosis) -> Why {
-    let y = &d.baseline.measured;
-    let constant_output = y.iter().all(|v| *v == y[0]);
-    let fit = constant_output.then(|| {
+    let fit = d.baseline.measured_is_constant().then(|| {
         let mut s = format!("{} does not vary on the validation data", d.output);
         if !d.unexcited.is_empty() {
             s += &format!(": no excitation in {}", d.unexcited.join(", "));

@@ -447,8 +447,8 @@ pub(super) fn bounds(name: &str) -> (f64, f64) {
         "dahl_x_pct" => (0.01, 10.0),
         "backlash_pct" => (0.0, 40.0),
         "duty_delay_s" => (0.0, DUTY_DELAY_MAX_S),
-        // A stop inside the stroke: below the top's lowest and above the bottom's highest
-        // plausible rest, each within the logged range's ±5 % margin.
+        // A stop inside the stroke: the lower one in its lower part, the upper one in its
+        // upper part, each free to sit on its end (the columns' range is -5..105 %).
         "x_stop_low_pct" => (-5.0, 60.0),
         "x_stop_high_pct" => (40.0, 105.0),
         _ => (f64::NEG_INFINITY, f64::INFINITY),
