@@ -287,7 +287,16 @@ fn evvt(logs: &[Log], out: &mut Outcome, progress: &mut dyn FnMut(&str)) -> Resu
         files.join(", ")
     ));
     out.notes.push(evvt_coverage(&table));
-    out.notes.push(evvt_loop(&out.calibration)?);
+    let designed_rad_s = out.calibration.evvt_crossover_rad_s;
+    out.notes.push(evvt_loop(&mut out.calibration)?);
+    if out.calibration.evvt_crossover_rad_s != designed_rad_s {
+        set_source_exact(
+            out,
+            "evvt.crossover_rad_s",
+            &files,
+            "derived: the paper defaults' crossover on this unit (faster than the design, kept)",
+        );
+    }
     for name in [
         "evvt.engine_speed_rpm",
         "evvt.battery_voltage_v",
@@ -321,18 +330,20 @@ fn evvt_coverage(t: &model_core::evvt::EvvtLpvTable) -> String {
     )
 }
 
-/// How the EVVT loop runs on this unit with its own image, next to the paper defaults: the
-/// image's kp gives the designed crossover on the identified α/β, while the paper's kp runs a
-/// unit faster than the paper's at a higher crossover (tighter tracking, less phase margin)
-/// and a slower one at a lower one. The calibration keeps the design; the note tells the
-/// engineer what that trades, and which value to raise for a tighter loop.
-fn evvt_loop(cal: &EcuCalibration) -> Result<String, String> {
+/// The EVVT loop's crossover for this unit, and a note on how it runs next to the paper
+/// defaults. The paper defaults' kp was designed for the paper's α/β; on a slower unit it
+/// runs the loop below the designed crossover, on a faster one above it. The image restores
+/// the design on a slower unit and, on a faster one, keeps the speed the defaults already
+/// run it at (the largest crossover the paper's kp gives at any of the identified table
+/// points): a calibration must not detune a loop that the ECU it replaces runs faster,
+/// since the phase tracking is what the engineer is after (docs/calibration.md measures both
+/// choices). The schedule's phase-margin floor still lowers the crossover where β is small.
+fn evvt_loop(cal: &mut EcuCalibration) -> Result<String, String> {
     use model_core::control::evvt_phase::{p_loop_crossover_and_margin, EvvtPhaseController};
-    let own_kp = cal.implied_kp().map_err(|e| e.to_string())?;
     let paper = EvvtPhaseController::<f64>::new(&EcuCalibration::paper_defaults().evvt_controller())
         .map_err(|_| "EVVT: the paper-default controller refused its own tables".to_string())?;
-    let t = &cal.evvt_lpv;
-    let (mut own, mut by_paper, mut pm_paper) = (Vec::new(), Vec::new(), Vec::new());
+    let t = cal.evvt_lpv;
+    let (mut by_paper, mut pm_paper) = (Vec::new(), Vec::new());
     for i in 0..3 {
         for j in 0..3 {
             let (a, b) = (t.alpha_deg_per_s2_rpm[i][j], t.beta_per_s[i][j]);
@@ -340,7 +351,6 @@ fn evvt_loop(cal: &EcuCalibration) -> Result<String, String> {
             let (wc, pm) = p_loop_crossover_and_margin(kp_paper, a, b);
             by_paper.push(wc);
             pm_paper.push(pm);
-            own.push(p_loop_crossover_and_margin(own_kp[i][j], a, b).0);
         }
     }
     let range = |v: &[f64]| {
@@ -348,25 +358,43 @@ fn evvt_loop(cal: &EcuCalibration) -> Result<String, String> {
         let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
         (lo, hi)
     };
-    let ((o_lo, o_hi), (p_lo, p_hi), (m_lo, m_hi)) = (range(&own), range(&by_paper), range(&pm_paper));
-    let ratio: Vec<f64> = by_paper.iter().zip(&own).map(|(p, o)| p / o).collect();
-    let (r_lo, r_hi) = range(&ratio);
-    let mut sorted = ratio.clone();
-    sorted.sort_by(f64::total_cmp);
-    let median = sorted[sorted.len() / 2];
-    let verdict = if median > 1.1 {
+    let ((p_lo, p_hi), (m_lo, m_hi)) = (range(&by_paper), range(&pm_paper));
+    let median = |v: &[f64]| {
+        let mut sorted = v.to_vec();
+        sorted.sort_by(f64::total_cmp);
+        sorted[sorted.len() / 2]
+    };
+    if !(p_lo.is_finite() && p_hi.is_finite()) {
+        return Err(format!(
+            "EVVT: the identified table gives the paper's loop no crossover (crossovers {by_paper:?}): the identification failed"
+        ));
+    }
+    let designed = cal.evvt_crossover_rad_s;
+    // Within 5 % of the design is the identification's own scatter, not a faster unit.
+    let faster = p_hi > 1.05 * designed;
+    if faster {
+        cal.evvt_crossover_rad_s = p_hi;
+    }
+    let own_kp = cal.implied_kp().map_err(|e| e.to_string())?;
+    let own: Vec<f64> = (0..9)
+        .map(|k| {
+            let (i, j) = (k / 3, k % 3);
+            p_loop_crossover_and_margin(own_kp[i][j], t.alpha_deg_per_s2_rpm[i][j], t.beta_per_s[i][j]).0
+        })
+        .collect();
+    let (o_lo, o_hi) = range(&own);
+    let verdict = if faster {
         format!(
-            "the paper's gains run this unit's loop faster than designed: with this image its steps settle as designed and track less tightly than with the paper's gains (raise `evvt.crossover_rad_s`, now {:.1} rad/s, for a tighter loop)",
+            "the paper's gains run this unit's loop faster than the designed {designed:.1} rad/s: this image keeps that speed (`evvt.crossover_rad_s` {:.2} rad/s, the fastest the defaults run it at any table point) rather than detune it",
             cal.evvt_crossover_rad_s
         )
-    } else if median < 0.9 {
-        "the paper's gains run this unit's loop slower than designed: this image restores the designed response"
-            .to_string()
+    } else if median(&by_paper) < 0.9 * designed {
+        format!("the paper's gains run this unit's loop slower than designed: this image restores the designed {designed:.1} rad/s")
     } else {
         "the paper's gains run this unit's loop about as designed".to_string()
     };
     Ok(format!(
-        "EVVT: this image runs the unit's loop at a crossover of {o_lo:.2}-{o_hi:.2} rad/s over the table; the paper defaults would run it at {p_lo:.2}-{p_hi:.2} rad/s ({r_lo:.2}-{r_hi:.2}x, phase margin {m_lo:.0}-{m_hi:.0} deg): {verdict}"
+        "EVVT: this image runs the unit's loop at a crossover of {o_lo:.2}-{o_hi:.2} rad/s over the table; the paper defaults would run it at {p_lo:.2}-{p_hi:.2} rad/s (phase margin {m_lo:.0}-{m_hi:.0} deg): {verdict}"
     ))
 }
 
