@@ -303,6 +303,15 @@ fn a_log_without_excitation_is_reported_as_not_computable() {
     assert!(why.contains("x_pct does not vary") && why.contains("duty_pct"), "{why}");
     assert_eq!(r["cause"], "none");
     assert_eq!(r["gain_pct"], 0.0);
+    // The verdict says why nothing can be judged; it does not claim physics outside the
+    // catalogue against a floor of 0.
+    assert_eq!(r["verdict"], "unexplained");
+    let rest = r["remainder"]["evidence"].to_string();
+    assert!(rest.contains("does not vary on the validation data"), "{rest}");
+    assert!(
+        !stdout.contains("physics outside the catalogue") && !stdout.contains("not comparable"),
+        "{stdout}"
+    );
     std::fs::remove_dir_all(&d).ok();
 }
 

@@ -80,8 +80,16 @@ pub(super) fn verdict(
     };
     let material = rest.material_failures();
     let explained = ratio <= rules.explained_ratio && material.is_empty() && probes_found.is_empty();
+    // An output that never moves on the validation data: the floor estimated from it is 0 and
+    // no model can be judged on it, so nothing about missing physics can be said either.
+    let flat = extended.measured_is_constant();
     let mut where_ = Vec::new();
-    if !explained {
+    if flat {
+        where_.push(format!(
+            "{} does not vary on the validation data: nothing can be judged from it, inside the catalogue or outside it; record a log where the inputs move the actuator",
+            family.output()
+        ));
+    } else if !explained {
         where_ = probes_found.iter().map(|f| f.sentence.clone()).collect();
         where_.extend(locate(&rest, &e_ext, floor.rmse, dt_res));
         if where_.is_empty() {
@@ -91,7 +99,9 @@ pub(super) fn verdict(
         }
     }
     let verdict = if explained { "explained" } else { "unexplained" }.to_string();
-    evidence.push(if explained {
+    evidence.push(if flat {
+        format!("verdict unexplained: {}", where_[0])
+    } else if explained {
         format!(
             "verdict explained: the remainder (RMSE {:.4}) is {ratio_txt} the noise floor {:.4}, without material structure",
             extended.rmse, floor.rmse
