@@ -287,8 +287,19 @@ fn evvt(logs: &[Log], out: &mut Outcome, progress: &mut dyn FnMut(&str)) -> Resu
         files.join(", ")
     ));
     out.notes.push(evvt_coverage(&table));
-    let designed_rad_s = out.calibration.evvt_crossover_rad_s;
+    let (designed_rad_s, designed_margin_deg) = (
+        out.calibration.evvt_crossover_rad_s,
+        out.calibration.evvt_min_phase_margin_deg,
+    );
     out.notes.push(evvt_loop(&mut out.calibration)?);
+    if out.calibration.evvt_min_phase_margin_deg != designed_margin_deg {
+        set_source_exact(
+            out,
+            "evvt.min_phase_margin_deg",
+            &files,
+            "derived: the least phase margin the paper defaults run this unit at (below the design's, kept; at least 45 deg)",
+        );
+    }
     if out.calibration.evvt_crossover_rad_s != designed_rad_s {
         set_source_exact(
             out,
@@ -330,6 +341,9 @@ fn evvt_coverage(t: &model_core::evvt::EvvtLpvTable) -> String {
     )
 }
 
+/// The least phase-margin floor `calibrate` lowers the EVVT schedule's to (deg).
+const LEAST_PHASE_MARGIN_DEG: f64 = 45.0;
+
 /// The EVVT loop's crossover for this unit, and a note on how it runs next to the paper
 /// defaults. The paper defaults' kp was designed for the paper's α/β; on a slower unit it
 /// runs the loop below the designed crossover, on a faster one above it. The image restores
@@ -337,7 +351,9 @@ fn evvt_coverage(t: &model_core::evvt::EvvtLpvTable) -> String {
 /// run it at (the largest crossover the paper's kp gives at any of the identified table
 /// points): a calibration must not detune a loop that the ECU it replaces runs faster,
 /// since the phase tracking is what the engineer is after (docs/calibration.md measures both
-/// choices). The schedule's phase-margin floor still lowers the crossover where β is small.
+/// choices). The schedule's phase-margin floor, which lowers the crossover where β is small,
+/// is likewise lowered to the least margin the defaults run the unit at (not below
+/// [`LEAST_PHASE_MARGIN_DEG`]).
 fn evvt_loop(cal: &mut EcuCalibration) -> Result<String, String> {
     use model_core::control::evvt_phase::{p_loop_crossover_and_margin, EvvtPhaseController};
     let paper = EvvtPhaseController::<f64>::new(&EcuCalibration::paper_defaults().evvt_controller())
@@ -375,6 +391,14 @@ fn evvt_loop(cal: &mut EcuCalibration) -> Result<String, String> {
     if faster {
         cal.evvt_crossover_rad_s = p_hi;
     }
+    // The same on the margin side: where β is small the floor lowers the crossover, and a
+    // floor above the margin the defaults already run this unit at would make the image the
+    // slower loop there (again beyond the identification's 5 % scatter); never below 45 deg,
+    // the usual least margin of a position loop.
+    let designed_margin_deg = cal.evvt_min_phase_margin_deg;
+    if m_lo < 0.95 * designed_margin_deg {
+        cal.evvt_min_phase_margin_deg = m_lo.max(LEAST_PHASE_MARGIN_DEG);
+    }
     let own_kp = cal.implied_kp().map_err(|e| e.to_string())?;
     let own: Vec<f64> = (0..9)
         .map(|k| {
@@ -383,6 +407,19 @@ fn evvt_loop(cal: &mut EcuCalibration) -> Result<String, String> {
         })
         .collect();
     let (o_lo, o_hi) = range(&own);
+    let margin = if cal.evvt_min_phase_margin_deg < designed_margin_deg {
+        format!(
+            "; its phase-margin floor lowered from {designed_margin_deg:.0} to {:.1} deg, the least the defaults run it at{}",
+            cal.evvt_min_phase_margin_deg,
+            if m_lo < LEAST_PHASE_MARGIN_DEG {
+                format!(" ({m_lo:.1} deg) held at {LEAST_PHASE_MARGIN_DEG:.0}")
+            } else {
+                String::new()
+            }
+        )
+    } else {
+        String::new()
+    };
     let verdict = if faster {
         format!(
             "the paper's gains run this unit's loop faster than the designed {designed:.1} rad/s: this image keeps that speed (`evvt.crossover_rad_s` {:.2} rad/s, the fastest the defaults run it at any table point) rather than detune it",
@@ -394,7 +431,7 @@ fn evvt_loop(cal: &mut EcuCalibration) -> Result<String, String> {
         "the paper's gains run this unit's loop about as designed".to_string()
     };
     Ok(format!(
-        "EVVT: this image runs the unit's loop at a crossover of {o_lo:.2}-{o_hi:.2} rad/s over the table; the paper defaults would run it at {p_lo:.2}-{p_hi:.2} rad/s (phase margin {m_lo:.0}-{m_hi:.0} deg): {verdict}"
+        "EVVT: this image runs the unit's loop at a crossover of {o_lo:.2}-{o_hi:.2} rad/s over the table; the paper defaults would run it at {p_lo:.2}-{p_hi:.2} rad/s (phase margin {m_lo:.0}-{m_hi:.0} deg): {verdict}{margin}"
     ))
 }
 
