@@ -702,3 +702,94 @@ fn a_cause_beside_a_probe_that_the_final_model_switches_off_is_not_named() {
     // The model reported is friction's alone.
     assert_eq!(d.extended.effects, ["friction"]);
 }
+
+/// A family whose probe (`stop`, outside the catalogue) sits beside a catalogue effect
+/// (`voltage`), and whose `voltage` fitted beside the probe from the probe's model without it
+/// ends in a valley (60 % of the voltage signal) that `friction` on top partly fills (90 %),
+/// while the probe fitted on the selection's `voltage` model reaches it whole: the vacuum's
+/// supply voltage beside a travel stop. The re-selection beside the probe must keep the
+/// known better point of the same model, and not name `friction` for the valley's gap.
+struct ValleyBesideProbe;
+
+impl ValleyBesideProbe {
+    const PROBES: [Probe; 1] = [Probe {
+        name: "stop",
+        what: "a stop",
+        min_samples: None,
+        only_above_floor: false,
+    }];
+}
+
+impl Family for ValleyBesideProbe {
+    written_family_basics!();
+    fn effects(&self) -> &'static [&'static str] {
+        &["voltage", "friction"]
+    }
+    fn fit(&self, effects: &[&str], _parent: Option<&Fit>, _est: &Log, _val: &Log) -> Result<Fit, String> {
+        // Without the probe: `voltage` reproduces the voltage signal, `friction` a tenth of it.
+        let w = if effects.contains(&"voltage") {
+            1.0
+        } else if effects.contains(&"friction") {
+            0.1
+        } else {
+            0.0
+        };
+        let params = effects.iter().map(|e| (format!("{e}_gain"), 1.0)).collect();
+        Ok(StandInBesideProbe::written(params, effects, w, 0.0))
+    }
+    fn probes(&self) -> &'static [Probe] {
+        &Self::PROBES
+    }
+    fn fit_probe(&self, _probe: &str, effects: &[&str], parent: &Fit, _est: &Log, _val: &Log) -> Result<Fit, String> {
+        let from_voltage = parent.effects.iter().any(|e| e == "voltage");
+        let w = match (effects.contains(&"voltage"), effects.contains(&"friction")) {
+            (true, _) if from_voltage => 1.0,
+            (true, true) => 0.9,
+            (true, false) => 0.6,
+            (false, true) => 0.1,
+            _ => 0.0,
+        };
+        let mut params: Vec<(String, f64)> = effects.iter().map(|e| (format!("{e}_gain"), 1.0)).collect();
+        params.push(("stop_pct".into(), 80.0));
+        Ok(StandInBesideProbe::written(params, effects, w, 1.0))
+    }
+    fn selects_beside_probes(&self) -> bool {
+        true
+    }
+    fn is_off(&self, effect: &str, fit: &Fit) -> bool {
+        let name = format!("{effect}_gain");
+        fit.params.iter().any(|(n, v)| *n == name && *v == 0.0)
+    }
+}
+
+/// Beside a probe found on the selected causes, the same causes fitted again from the probe's
+/// model keep the probe's own fit where that ends lower on the estimation data: no effect is
+/// named to fill the gap of a worse valley of the same model.
+#[test]
+fn beside_a_probe_the_selected_causes_keep_the_probes_own_fit_when_it_is_better() {
+    let log = two_row_log();
+    let d = diagnose(&ValleyBesideProbe, &log, &log, false, &Rules::default(), &mut |_| {}).unwrap();
+    assert_eq!(d.verdict, "unexplained", "{:#?}", d.evidence);
+    assert!(
+        d.remainder.evidence.iter().any(|e| e.starts_with("a stop")),
+        "{:#?}",
+        d.remainder.evidence
+    );
+    assert_eq!(d.causes, ["voltage"], "{:#?}", d.evidence);
+    // The premise: friction beside the valley's `voltage` would gain (60 % -> 90 % of the
+    // signal); beside the kept fit it gains nothing.
+    assert!(
+        d.evidence
+            .iter()
+            .any(|e| e.contains("beside the probe `stop`, `voltage` lowers")),
+        "{:#?}",
+        d.evidence
+    );
+    assert!(
+        !d.evidence
+            .iter()
+            .any(|e| e.contains("beside the probe `stop`, `friction` lowers")),
+        "{:#?}",
+        d.evidence
+    );
+}
