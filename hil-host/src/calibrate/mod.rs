@@ -389,7 +389,12 @@ fn evvt_loop(cal: &mut EcuCalibration) -> Result<String, String> {
     // Within 5 % of the design is the identification's own scatter, not a faster unit.
     let faster = p_hi > 1.05 * designed;
     if faster {
-        cal.evvt_crossover_rad_s = p_hi;
+        // Within the value's A2L limits, so an odd identification gives a usable image.
+        let max = CHARACTERISTICS
+            .iter()
+            .find(|c| c.name == "evvt.crossover_rad_s")
+            .map_or(f64::INFINITY, |c| f64::from(c.max));
+        cal.evvt_crossover_rad_s = p_hi.min(max);
     }
     // The same on the margin side: where β is small the floor lowers the crossover, and a
     // floor above the margin the defaults already run this unit at would make the image the
