@@ -597,6 +597,12 @@ fn an_estimation_confirmed_gain_is_checked_against_the_parent_refitted_from_the_
     );
 }
 
+/// Whether `effect` is switched off in a written-out family's fit: its `<effect>_gain` is 0.
+fn gain_is_zero(effect: &str, fit: &Fit) -> bool {
+    let name = format!("{effect}_gain");
+    fit.params.iter().any(|(n, v)| *n == name && *v == 0.0)
+}
+
 /// A family whose probe (`lag`, physics outside the catalogue) hides which of two effects
 /// that stand in for each other is the truth, as a duty delay beside friction does: with the
 /// probe, `clearance` alone reproduces 80 % of the friction signal and `friction` alone half
@@ -673,8 +679,7 @@ impl Family for StandInBesideProbe {
         true
     }
     fn is_off(&self, effect: &str, fit: &Fit) -> bool {
-        let name = format!("{effect}_gain");
-        fit.params.iter().any(|(n, v)| *n == name && *v == 0.0)
+        gain_is_zero(effect, fit)
     }
 }
 
@@ -757,8 +762,7 @@ impl Family for ValleyBesideProbe {
         true
     }
     fn is_off(&self, effect: &str, fit: &Fit) -> bool {
-        let name = format!("{effect}_gain");
-        fit.params.iter().any(|(n, v)| *n == name && *v == 0.0)
+        gain_is_zero(effect, fit)
     }
 }
 
