@@ -882,3 +882,59 @@ fn a_bench_recording_with_its_own_column_names_calibrates_through_a_channel_map(
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The EVVT gain over many units (ignored; `CAL_SWEEP_SEEDS=n`, default 12): for each EVVT
+/// class, units of seeds 1..=n calibrated from their one-file recording alone, each run on
+/// `calibration-sweep.toml` with the paper defaults and with its own image. Prints one row
+/// per class for docs/calibration.md: how many units track better with their own image, the
+/// median change of the RMS phase error and the worst unit's change, with its seed and the
+/// margins the defaults run it at (the note's). Fails on a run that raises a fault.
+#[test]
+#[ignore = "a sweep of 60 units (about 1 min); run with --ignored --nocapture for the docs' table"]
+fn evvt_calibration_gain_sweep() {
+    let n: u64 = std::env::var("CAL_SWEEP_SEEDS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(12);
+    println!("| class | units better | median change | worst unit |");
+    println!("|---|---|---|---|");
+    for effect in ["none", "supply-voltage", "direction", "engine-speed", "belt-vibration"] {
+        let mut changes: Vec<(f64, u64, String)> = Vec::new();
+        for seed in 1..=n {
+            let dir = workdir(&format!("evvt-gain-{effect}-{seed}"));
+            let case = generate::generate(Plant::Evvt, effect, seed).unwrap();
+            let (est, truth) = write_case(&case, &dir.join("unit"));
+            let outcome = calibrate::calibrate(std::slice::from_ref(&est), &mut |_| {}).unwrap();
+            let unit = calibrate::unit_from_truth(&truth).unwrap();
+            let before = run_unit(&sweep(), None, EcuCoreConfig::default(), unit).unwrap();
+            let after = run_unit(&sweep(), None, outcome.calibration.config(), unit).unwrap();
+            assert!(
+                before.fault_events.is_empty() && after.fault_events.is_empty(),
+                "{effect} seed {seed}: {:?} {:?}",
+                before.fault_events,
+                after.fault_events
+            );
+            let change = 100.0 * (after.evvt_rms_error_deg / before.evvt_rms_error_deg - 1.0);
+            let margins = outcome
+                .notes
+                .iter()
+                .find_map(|n| n.split("(phase margin ").nth(1))
+                .and_then(|r| r.split(')').next())
+                .unwrap_or("?")
+                .to_string();
+            changes.push((change, seed, margins));
+            let _ = std::fs::remove_dir_all(&dir);
+        }
+        let better = changes.iter().filter(|c| c.0 < 0.0).count();
+        let mut sorted: Vec<f64> = changes.iter().map(|c| c.0).collect();
+        sorted.sort_by(f64::total_cmp);
+        let worst = changes.iter().max_by(|a, b| a.0.total_cmp(&b.0)).unwrap();
+        println!(
+            "| {effect} | {better}/{n} | {:+.0} % | {:+.1} % (seed {}; the defaults' phase margin {}) |",
+            sorted[sorted.len() / 2],
+            worst.0,
+            worst.1,
+            worst.2
+        );
+    }
+}
