@@ -289,6 +289,46 @@ pub fn unexcited_inputs(est: &Log, val: &Log) -> Vec<String> {
         .collect()
 }
 
+/// Where the validation log's output stays well inside the span the estimation log's covers
+/// (its 0.5-99.5 % quantiles short by more than a tenth of the estimation's span at either
+/// end), a line saying so: the verdict judges the validation data, so physics that acts only
+/// beyond their span (a travel stop the validation never reaches, a regime it never enters)
+/// is fitted on the estimation data and cannot show in the verdict.
+pub fn output_coverage(output: &str, est: &Log, val: &Log) -> Option<String> {
+    let span = |log: &Log| {
+        let mut v: Vec<f64> = log.col(output)?.iter().copied().filter(|x| x.is_finite()).collect();
+        if v.len() < 2 {
+            return None;
+        }
+        v.sort_by(f64::total_cmp);
+        let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
+        Some((at(0.005), at(0.995)))
+    };
+    let ((e_lo, e_hi), (v_lo, v_hi)) = (span(est)?, span(val)?);
+    let width = e_hi - e_lo;
+    if !(width > 0.0) {
+        return None;
+    }
+    let short_above = e_hi - v_hi > 0.1 * width;
+    let short_below = v_lo - e_lo > 0.1 * width;
+    if !(short_above || short_below) {
+        return None;
+    }
+    let sig = |x: f64| crate::numbers::sig(x, 3);
+    Some(format!(
+        "validation coverage: {output} spans {}..{} in the validation data and {}..{} in the estimation data (0.5-99.5 % of the samples): what acts only {} the validation's span (a stop, a regime) is fitted on the estimation data but not judged by the verdict; validate on a log that covers the estimation's span",
+        sig(v_lo),
+        sig(v_hi),
+        sig(e_lo),
+        sig(e_hi),
+        match (short_below, short_above) {
+            (true, true) => "on either side of",
+            (false, true) => "above",
+            _ => "below",
+        }
+    ))
+}
+
 /// Splits a borrowed log into estimation head and validation tail (`tail` fraction held out).
 /// It copies the samples; a caller that owns the log uses [`Log::split_tail`], which moves them.
 pub fn split_tail(log: &Log, tail: f64) -> (Log, Log) {
@@ -368,6 +408,7 @@ fn diagnose_in(
         )
     });
     let val: &Log = val_part.as_ref().unwrap_or(val);
+    let coverage = output_coverage(family.output(), &est, val);
     let est = RefCell::new(Some(est));
     let start = Instant::now();
     let (tx, rx) = mpsc::channel::<Tick>();
@@ -436,6 +477,9 @@ fn diagnose_in(
         );
         drop(tx);
         let mut d = result.map_err(|e| locate_error(e, &est_id.0, est.borrow().as_deref(), val))?;
+        if let Some(line) = coverage {
+            d.evidence.insert(0, line);
+        }
         if let Some(s) = scope {
             d.evidence.insert(0, format!("validation scope: {}", s.reason));
             d.validation_scope = Some(s);

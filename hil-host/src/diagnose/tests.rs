@@ -797,3 +797,29 @@ fn beside_a_probe_the_selected_causes_keep_the_probes_own_fit_when_it_is_better(
         d.evidence
     );
 }
+
+/// The validation-coverage line: only where the validation's output stays well inside the
+/// estimation's span, saying on which side.
+#[test]
+fn a_validation_log_short_of_the_estimations_span_is_said_to_be() {
+    let log = |name: &str, lo: f64, hi: f64| {
+        let mut text = String::from("# plant: positioner\nt_s,force_N,pos_m\n");
+        for k in 0..1000 {
+            let x = lo + (hi - lo) * (k as f64 / 999.0);
+            text += &format!("{},{},{x}\n", k as f64 * 0.001, (k as f64 * 0.1).sin());
+        }
+        crate::log::parse_log(name, &text, None).unwrap()
+    };
+    let est = log("est.csv", 0.0, 1.0);
+    assert_eq!(output_coverage("pos_m", &est, &log("val.csv", 0.0, 0.95)), None);
+    assert_eq!(output_coverage("pos_m", &est, &log("val.csv", -0.2, 1.2)), None);
+    let above = output_coverage("pos_m", &est, &log("val.csv", 0.0, 0.6)).unwrap();
+    assert!(
+        above.contains("only above the validation's span") && above.contains("..0.597 in the validation"),
+        "{above}"
+    );
+    let below = output_coverage("pos_m", &est, &log("val.csv", 0.3, 1.0)).unwrap();
+    assert!(below.contains("only below the validation's span"), "{below}");
+    let both = output_coverage("pos_m", &est, &log("val.csv", 0.3, 0.6)).unwrap();
+    assert!(both.contains("on either side of the validation's span"), "{both}");
+}
